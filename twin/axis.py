@@ -1,0 +1,178 @@
+"""Physical description of the linear-axis testbed (the paper's section III) and its derived figures.
+
+Everything here is a plain parameter with an SI unit; the scenario file (µm, mm/s, hours at the
+edge) is converted into these dataclasses by :mod:`twin.scenario`. The MuJoCo model is built from
+them by :mod:`twin.model`.
+
+Sources of the default figures:
+- Pandhare et al., "Ball Screw Health Monitoring with Inertial Sensors", section III: 450 mm travel,
+  10 mm lead, four trucks on two rails, 100 kg of steel load.
+- reference/methods.md §4 (THK/HIWIN-style catalogue rules): nut stiffness
+  K_N = 0.8·K·(F_a0 / (0.1·C_a))^(1/3), shaft stiffness K_S = A·E/L, series total 1/K = Σ 1/K_i.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+GRAVITY = 9.80665  # m/s², standard gravity
+
+
+@dataclass(frozen=True)
+class ScrewDrive:
+    """Ball screw, nut and support bearings.
+
+    Attributes:
+        lead: screw lead in m (10 mm nominal).
+        pitch_diameter: ball pitch-circle diameter D_pw in m (25×10 screw: 25.5 mm).
+        root_diameter: screw root diameter in m, for the shaft's axial stiffness.
+        shaft_length: distance from the fixed bearing to the nut at mid-stroke in m; the shaft
+            stiffness is evaluated there (fixed–free support, K_S = A·E/L).
+        young_modulus: Pa (steel 2.06e11).
+        rated_dynamic_load: C_a in N (catalogue).
+        preload: nominal nut preload F_a0 in N when new.
+        nut_stiffness_catalogue: catalogue nut stiffness K at 0.1·C_a in N/m.
+        bearing_stiffness: axial stiffness of the support bearings K_B in N/m.
+        screw_inertia: screw rotational inertia in kg·m².
+        screw_mass: screw mass in kg (for visualisation only).
+        no_load_torque: seal/viscous drag torque of the nut without preload, N·m.
+        drag_viscous: viscous drag coefficient on the screw hinge, N·m·s/rad.
+        contact_damping_ratio: damping ratio of the axial ball-nut mode (structural damping).
+        radial_stiffness: radial nut stiffness through which screw runout pushes the carriage, N/m.
+    """
+
+    lead: float = 0.010
+    pitch_diameter: float = 0.0255
+    root_diameter: float = 0.0215
+    shaft_length: float = 0.50
+    young_modulus: float = 2.06e11
+    rated_dynamic_load: float = 21_000.0
+    preload: float = 1_500.0
+    nut_stiffness_catalogue: float = 400e6
+    bearing_stiffness: float = 750e6
+    screw_inertia: float = 1.8e-4
+    screw_mass: float = 2.3
+    no_load_torque: float = 0.05
+    drag_viscous: float = 2.0e-4
+    contact_damping_ratio: float = 0.03
+    radial_stiffness: float = 100e6
+
+    @property
+    def radius_per_rad(self) -> float:
+        """R = lead / 2π in m/rad: carriage travel per screw radian."""
+        return self.lead / (2.0 * math.pi)
+
+    @property
+    def shaft_stiffness(self) -> float:
+        """Axial shaft stiffness K_S = A·E/L in N/m (fixed–free, methods.md §4)."""
+        area = math.pi * self.root_diameter**2 / 4.0
+        return area * self.young_modulus / self.shaft_length
+
+    def nut_stiffness(self, preload_N: float, min_fraction: float = 0.1) -> float:
+        """Nut contact stiffness K_N(F) = 0.8·K·(F/(0.1·C_a))^(1/3) in N/m (catalogue Hertz rule).
+
+        A nut that has lost its preload still carries load through ball contact, so the stiffness
+        is floored at ``min_fraction`` of its new-nut value (a modelling choice, documented in the
+        README)."""
+        ref = 0.1 * self.rated_dynamic_load
+        new = 0.8 * self.nut_stiffness_catalogue * (self.preload / ref) ** (1.0 / 3.0)
+        k = 0.8 * self.nut_stiffness_catalogue * (max(preload_N, 0.0) / ref) ** (1.0 / 3.0)
+        return max(k, min_fraction * new)
+
+    def axial_stiffness(self, preload_N: float) -> float:
+        """Total axial stiffness 1/K = 1/K_S + 1/K_N + 1/K_B in N/m (methods.md §4)."""
+        return 1.0 / (1.0 / self.shaft_stiffness + 1.0 / self.nut_stiffness(preload_N)
+                      + 1.0 / self.bearing_stiffness)
+
+    @property
+    def lead_angle(self) -> float:
+        """Lead angle β = atan(lead / (π·D_pw)) in rad."""
+        return math.atan(self.lead / (math.pi * self.pitch_diameter))
+
+    def drag_torque(self, preload_N: float) -> float:
+        """Nut drag torque in N·m: no-load torque + preload dynamic torque.
+
+        Catalogue formula (THK/NSK ball-screw catalogues): T_p = 0.05·(tan β)^(-1/2)·F_a0·l/(2π).
+        """
+        kp = 0.05 / math.sqrt(math.tan(self.lead_angle))
+        return self.no_load_torque + kp * max(preload_N, 0.0) * self.lead / (2.0 * math.pi)
+
+
+@dataclass(frozen=True)
+class Carriage:
+    """Carriage, load and guideway.
+
+    Attributes:
+        mass: carriage plate + nut housing + the paper's 100 kg steel load, kg.
+        inertia: principal inertia (Ixx, Iyy, Izz) about the centre of mass, kg·m².
+        truck_spacing: along-axis distance between front and rear trucks a, m.
+        rail_spacing: distance between the two rails w, m.
+        truck_stiffness_vertical / truck_stiffness_lateral: per-truck contact stiffness when new, N/m.
+        truck_damping_ratio: damping ratio of the carriage's suspension modes on the trucks.
+        rail_friction: Coulomb friction force of the four trucks and seals, N.
+        com_height: height of the centre of mass above the rail plane, m.
+        imu_height: height of the IMU (on top of the steel load) above the rail plane, m.
+        nut_height: height of the screw axis (and nut accelerometers) above the rail plane, m
+            (negative: below the rail plane is not used here; the screw sits between the rails).
+    """
+
+    mass: float = 120.0
+    inertia: tuple[float, float, float] = (2.4, 2.0, 3.6)
+    truck_spacing: float = 0.12
+    rail_spacing: float = 0.20
+    truck_stiffness_vertical: float = 300e6
+    truck_stiffness_lateral: float = 200e6
+    truck_damping_ratio: float = 0.05
+    rail_friction: float = 12.0
+    com_height: float = 0.08
+    imu_height: float = 0.20
+    nut_height: float = 0.03
+
+
+@dataclass(frozen=True)
+class Servo:
+    """Position/velocity cascade of the servo drive (P position loop, PI velocity loop).
+
+    tau = Kv·[Kp·(θc − θ) + (ωc − ω)] + Ki·∫[Kp·(θc − θ) + (ωc − ω)] + τ_ff, which is exactly a PID
+    on the motor angle with k_p = Kv·Kp + Ki, k_i = Ki·Kp, k_d = Kv and velocity feed-forward; this
+    maps onto MuJoCo's ``<pid input="pos vel ff">`` actuator.
+
+    Attributes:
+        motor_inertia: rotor inertia, kg·m².
+        position_bandwidth_hz: position-loop gain Kp / 2π, Hz.
+        velocity_bandwidth_hz: velocity-loop crossover Kv / (2π·J_total), Hz.
+        velocity_integral_time: velocity-loop integral time Kv/Ki, s.
+        torque_feedforward: fraction of the inertial feed-forward torque J_total·α_cmd applied.
+        torque_limit: peak motor torque, N·m.
+    """
+
+    motor_inertia: float = 1.5e-4
+    position_bandwidth_hz: float = 20.0
+    velocity_bandwidth_hz: float = 60.0
+    velocity_integral_time: float = 0.01
+    torque_feedforward: float = 1.0
+    torque_limit: float = 20.0
+
+
+@dataclass(frozen=True)
+class Axis:
+    """The whole testbed: travel, drive, carriage, servo and simulation settings."""
+
+    travel: float = 0.450
+    screw: ScrewDrive = field(default_factory=ScrewDrive)
+    carriage: Carriage = field(default_factory=Carriage)
+    servo: Servo = field(default_factory=Servo)
+
+    def total_inertia(self) -> float:
+        """Rotational inertia seen by the motor: J_m + J_s + m·R², kg·m²."""
+        r = self.screw.radius_per_rad
+        return self.servo.motor_inertia + self.screw.screw_inertia + self.carriage.mass * r * r
+
+    def servo_gains(self) -> tuple[float, float, float]:
+        """(k_p N·m/rad, k_i N·m/(rad·s), k_d N·m·s/rad) of the equivalent PID, see :class:`Servo`."""
+        s = self.servo
+        kv = 2.0 * math.pi * s.velocity_bandwidth_hz * self.total_inertia()
+        kpos = 2.0 * math.pi * s.position_bandwidth_hz
+        ki_v = kv / s.velocity_integral_time
+        return kv * kpos + ki_v, ki_v * kpos, kv

@@ -1,0 +1,257 @@
+"""A run-to-failure campaign: the plan of captures and sessions over operating hours, the state of
+the axis at each of them, and the resumable, parallel runner that writes the dataset.
+
+Determinism: every random draw comes from ``numpy.random.SeedSequence([seed, kind, index...])``,
+so a unit of work gives the same arrays whichever process, executor or order runs it.
+
+Resuming: each finished unit is stored as its own part file (atomic rename, see
+:class:`analysis.dataset.PartStore`); a rerun skips the parts that exist and assembles
+``measurements.h5`` and ``truth.h5`` from all parts at the end.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from analysis import dataset as ds
+from twin import degradation as deg
+from twin import geometry as geo
+from twin.model import MechanicalState, stiffness_of
+from twin.scenario import Scenario, from_dict, nominal_axis_description, to_axis
+from twin.sensors import instruments as ins
+from twin.simulate import (Condition, Simulator, World, dial_indicator, phase1_capture,
+                           phase2_measure, phase2_trajectory, true_error_motions)
+
+KIND_WORLD, KIND_PHASE1, KIND_PHASE2, KIND_DIAL, KIND_ORIGIN = range(5)
+MICRO_G = 9.80665e-6
+
+
+def rng_for(seed: int, kind: int, *index: int) -> np.random.Generator:
+    """The generator of one unit of work: a pure function of the seed, the kind and the index."""
+    return np.random.default_rng(np.random.SeedSequence([seed, kind, *index]))
+
+
+# ---------------------------------------------------------------------------------------------
+# The world and the state of the axis over hours
+
+
+def make_world(s: Scenario) -> World:
+    """Draw the campaign's fixed imperfections (rails, screw phases) from the scenario seed."""
+    axis = to_axis(s)
+    g, se = s.geometry, s.sensors
+    rng = rng_for(s.seed, KIND_WORLD)
+    rail_spec = geo.RailSpec(
+        straightness_rms_vertical_m=g.straightness_rms_um * 1e-6,
+        straightness_rms_lateral_m=g.lateral_straightness_rms_um * 1e-6,
+        spectrum_exponent=g.spectrum_exponent, bolt_pitch_m=g.bolt_pitch_mm * 1e-3,
+        bolt_amplitude_vertical_m=g.bolt_amplitude_um * 1e-6,
+        bolt_amplitude_lateral_m=0.6 * g.bolt_amplitude_um * 1e-6)
+    margin = 0.1 + s.phase2.origin_offset_max_mm * 1e-3
+    rails = geo.make_rail_profiles(rail_spec, length_m=axis.travel + 2 * margin, rng=rng,
+                                   u_start_m=-margin)
+    carriage = geo.CarriageGeometry(
+        truck_spacing_m=axis.carriage.truck_spacing, rail_spacing_m=axis.carriage.rail_spacing,
+        reference_height_m=axis.carriage.imu_height, screw_height_m=axis.carriage.nut_height)
+    screw = geo.draw_screw_phases(geo.ScrewSpec(
+        lead_m=axis.screw.lead, cumulative_lead_error_m_per_m=g.cumulative_lead_error_um_per_m * 1e-6,
+        cyclic_lead_error_m=tuple(a * 1e-6 for a in g.cyclic_lead_error_um),
+        cyclic_lead_phase_rad=tuple(0.0 for _ in g.cyclic_lead_error_um),
+        runout_m=g.runout_um * 1e-6, pitch_diameter_m=axis.screw.pitch_diameter,
+        ball_diameter_m=g.ball_diameter_mm * 1e-3, contact_angle_rad=math.radians(g.contact_angle_deg),
+        ball_pass_amplitude_m=g.ball_pass_amplitude_um * 1e-6), rng)
+    mis = np.zeros((3, 3))
+    m = [v * 1e-6 for v in se.imu_misalignment_urad]
+    # Small rotation (roll, pitch, yaw) of the IMU case: skew-symmetric cross-axis matrix.
+    mis[0, 1], mis[1, 0] = -m[2], m[2]
+    mis[0, 2], mis[2, 0] = m[1], -m[1]
+    mis[1, 2], mis[2, 1] = -m[0], m[0]
+    imu_acc = ins.AnalogAccelerometerSpec(
+        fs_hz=se.imu_acc_fs_hz, bandwidth_hz=se.imu_acc_bandwidth_hz,
+        noise_density=se.imu_acc_noise_ug_per_rthz * MICRO_G,
+        error=ins.ErrorModel(bias=tuple(b * MICRO_G for b in se.imu_acc_bias_ug),
+                             scale_error=tuple(se.imu_acc_scale_error),
+                             misalignment=tuple(map(tuple, mis))))
+    imu_gyro = ins.DigitalGyroSpec(
+        fs_hz=se.imu_gyro_fs_hz, bandwidth_hz=se.imu_gyro_bandwidth_hz,
+        noise_density=se.imu_gyro_noise_urad_s_per_rthz * 1e-6,
+        error=ins.ErrorModel(bias=tuple(b * 1e-6 for b in se.imu_gyro_bias_urad_s),
+                             misalignment=tuple(map(tuple, mis))))
+    nut_acc = ins.NutAccelerometerSpec(fs_hz=se.nut_acc_fs_hz,
+                                       noise_density=se.nut_acc_noise_ug_per_rthz * MICRO_G)
+    return World(axis=axis, rails=rails, carriage=carriage, screw=screw,
+                 ripple_torque=s.axis.torque_ripple_Nm, ripple_per_rev=s.axis.torque_ripple_per_rev,
+                 ripple_phase=float(rng.uniform(0, 2 * math.pi)),
+                 thermal_expansion=s.degradation.thermal_expansion_per_K,
+                 imu_acc=imu_acc, imu_gyro=imu_gyro, nut_acc=nut_acc,
+                 controller_fs=se.controller_fs_hz, encoder_counts_per_rev=se.encoder_counts_per_rev,
+                 torque_noise=se.torque_noise_Nm, position_cmd_fs=se.position_cmd_fs_hz)
+
+
+def wear_law(s: Scenario) -> deg.WearLaw:
+    d = s.degradation
+    return deg.WearLaw(onset_hours=d.onset_hours, interference_um=d.interference_um,
+                       wear_rate_um_per_kh=d.wear_rate_um_per_kh, scatter_um=d.scatter_um,
+                       backlash_gain=d.backlash_gain)
+
+
+def degradation_at(s: Scenario, hours) -> tuple[np.ndarray, np.ndarray]:
+    """(preload fraction (n,), backlash µm (n,)) at operating ``hours`` (n,)."""
+    h = np.atleast_1d(np.asarray(hours, dtype=float))
+    d = s.degradation
+    if d.law == "table":
+        th = np.asarray(d.table_hours, dtype=float)
+        order = np.argsort(th)
+        pf = np.interp(h, th[order], np.asarray(d.table_preload_fraction)[order])
+        bl = np.interp(h, th[order], np.asarray(d.table_backlash_um)[order])
+        return pf, bl
+    law = wear_law(s)
+    return deg.preload_fraction(h, law), deg.backlash_um(h, law)
+
+
+def onset_hours(s: Scenario) -> float:
+    """The injected onset of degradation, h (NaN if the scenario never degrades)."""
+    d = s.degradation
+    if d.law == "wear":
+        return float(d.onset_hours) if d.wear_rate_um_per_kh > 0 else math.nan
+    th = np.asarray(d.table_hours)
+    bad = (np.asarray(d.table_preload_fraction) < 1.0) | (np.asarray(d.table_backlash_um) > 0.0)
+    return float(th[np.argmax(bad)]) if bad.any() else math.nan
+
+
+def resume_hours(s: Scenario) -> list[float]:
+    return [p.hours for p in s.campaign.pauses]
+
+
+def temperature_at(s: Scenario, hours) -> np.ndarray:
+    d = s.degradation
+    since = deg.hours_since_resume(np.atleast_1d(np.asarray(hours, float)), resume_hours(s))
+    return deg.temperature_rise_K(since, d.thermal_rise_K, d.thermal_time_constant_hours)
+
+
+def condition_at(s: Scenario, hours: float, origin_offset: float = 0.0) -> Condition:
+    pf, bl = degradation_at(s, hours)
+    coupling = s.degradation.truck_wear_coupling
+    mech = MechanicalState(preload=float(pf[0]) * s.axis.preload_N, backlash=float(bl[0]) * 1e-6,
+                           truck_preload_fraction=1.0 - coupling * (1.0 - float(pf[0])))
+    return Condition(mech=mech, temperature_rise=float(temperature_at(s, hours)[0]),
+                     origin_offset=origin_offset)
+
+
+def origin_offset(s: Scenario, session: int) -> float:
+    """Origin set against the wooden block before a Phase II session: uniform within ±max, m."""
+    lim = s.phase2.origin_offset_max_mm * 1e-3
+    return float(rng_for(s.seed, KIND_ORIGIN, session).uniform(-lim, lim)) if lim > 0 else 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# The plan
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One unit of work. kind: "phase1" | "phase2" | "dial"; name: part name; index: capture or
+    session index; sample: Phase I sample index (−1 otherwise); hours: operating hours."""
+
+    kind: str
+    name: str
+    index: int
+    hours: float
+    sample: int = -1
+
+
+def session_hours(s: Scenario) -> list[float]:
+    p2 = s.phase2
+    if p2.session_hours:
+        return sorted(float(h) for h in p2.session_hours)
+    out, h = [], p2.session_interval_hours / 2.0
+    while h <= s.campaign.total_hours:
+        out.append(h)
+        h += p2.session_interval_hours
+    return out
+
+
+def plan(s: Scenario) -> list[Unit]:
+    """Every unit of the campaign, in time order within each kind."""
+    units: list[Unit] = []
+    if s.campaign.phase1:
+        p1 = s.phase1
+        h, sample, idx = s.campaign.warmup_hours, 0, 0
+        step = p1.capture_interval_minutes / 60.0
+        while h + (p1.captures_per_sample - 1) * step <= s.campaign.total_hours:
+            for j in range(p1.captures_per_sample):
+                units.append(Unit("phase1", f"c{idx:06d}", idx, h + j * step, sample))
+                idx += 1
+            sample += 1
+            h += p1.sample_interval_hours
+    if s.campaign.phase2:
+        for i, h in enumerate(session_hours(s)):
+            units.append(Unit("phase2", f"s{i:04d}", i, h))
+            if i % s.dial_indicator.every_n_sessions == 0:
+                units.append(Unit("dial", f"d{i:04d}", i, h))
+    return units
+
+
+# ---------------------------------------------------------------------------------------------
+# Work done in a worker process
+
+_SIMULATORS: dict[tuple[str, float], Simulator] = {}
+
+
+def _simulator(s: Scenario, key: str, timestep: float) -> Simulator:
+    sim = _SIMULATORS.get((key, timestep))
+    if sim is None:
+        if len(_SIMULATORS) > 8:
+            _SIMULATORS.clear()
+        sim = Simulator(make_world(s), timestep)
+        _SIMULATORS[(key, timestep)] = sim
+    return sim
+
+
+def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
+    """Simulate one unit and store it as a part. Returns the unit's name."""
+    import json
+
+    s = from_dict(json.loads(scenario_json))
+    store = ds.PartStore(out_dir)
+    if unit.kind == "phase1":
+        sim = _simulator(s, scenario_json, s.phase1.timestep_s)
+        cond = condition_at(s, unit.hours)
+        sig = phase1_capture(sim, s.phase1, cond, rng_for(s.seed, KIND_PHASE1, unit.index))
+        store.write("phase1", unit.name,
+                    attrs={"hours": unit.hours, "sample": unit.sample, "fs_hz": sig["fs_hz"]},
+                    datasets={k: sig[k] for k in ("speed", "torque", "acc1", "acc2")})
+    elif unit.kind == "phase2":
+        sim = _simulator(s, scenario_json, s.phase2.timestep_s)
+        cond = condition_at(s, unit.hours, origin_offset(s, unit.index))
+        traj = phase2_trajectory(sim, s.phase2, cond)
+        datasets, dattrs = {}, {}
+        for r in range(s.phase2.runs_per_session):
+            m = phase2_measure(sim, traj, rng_for(s.seed, KIND_PHASE2, unit.index, r))
+            for key in ("imu_acc", "imu_gyro", "position_cmd"):
+                datasets[f"r{r:04d}/{key}"] = m[key]
+                dattrs[f"r{r:04d}/{key}"] = {"fs_hz": m[f"{key}_fs_hz"]}
+        x, e = true_error_motions(sim.world, s.phase2, cond)
+        datasets["truth/x_m"], datasets["truth/E"] = x, e
+        store.write("phase2", unit.name,
+                    attrs={"hours": unit.hours, "backlash_um": cond.mech.backlash * 1e6,
+                           "origin_offset_m": cond.origin_offset, "preload_N": cond.mech.preload,
+                           "temperature_rise_K": cond.temperature_rise},
+                    datasets=datasets, dataset_attrs=dattrs)
+    elif unit.kind == "dial":
+        sim = _simulator(s, scenario_json, s.phase2.timestep_s)
+        cond = condition_at(s, unit.hours)
+        res = dial_indicator(sim, s.dial_indicator, cond, rng_for(s.seed, KIND_DIAL, unit.index))
+        store.write("dial", unit.name,
+                    attrs={"hours": unit.hours, "backlash_um": res.backlash_um,
+                           "elastic_um": res.elastic_um, "true_backlash_um": cond.mech.backlash * 1e6},
+                    datasets={"repeats_um": np.asarray(res.repeats_um)})
+    else:
+        raise ValueError(f"unknown unit kind {unit.kind!r}")
+    return unit.name

@@ -1,0 +1,266 @@
+"""The MuJoCo model of the linear axis: MJCF text built from :class:`twin.axis.Axis`.
+
+Degrees of freedom (9):
+- ``screw``: hinge of the motor rotor and screw about X (the servo acts here);
+- the carriage with its steel load, as one rigid body on six joints at its centre of mass:
+  ``carriage_x`` (travel), ``carriage_y``, ``carriage_z``, ``carriage_roll`` (about X),
+  ``carriage_pitch`` (about Y) and ``carriage_yaw`` (about Z).
+
+Couplings, all fixed tendons (linear in the joint coordinates, exact for the µm/µrad motions here):
+- ``ballnut``: L = x + z_n·pitch − R·θ with R = lead/2π (z_n: nut axis height below the centre of
+  mass). Its stiffness is the series axial stiffness of shaft, nut contact and support bearings,
+  which follows the nut preload (Hertz, k ∝ F^(1/3)). Its ``springlength`` is a dead band
+  [−b/2, +b/2]: the backlash b, with the contact stiffness at both ends.
+- ``truck_v<i>`` / ``truck_l<i>`` (i = 0..3, FL, FR, RL, RR): vertical and lateral contact of each
+  truck on its rail, L = z + y_i·roll − x_i·pitch and L = y + x_i·yaw + h·roll.
+
+Geometric errors enter as prescribed displacements e inside these springs. A spring with a
+displacement error, F = −K·(L − e), is exactly the unperturbed spring plus a force pair K·e along the
+tendon, so each error is applied by a ``motor`` actuator on its tendon with control K·e(t):
+rail waviness under each truck, lead error and ball passing in the ball nut. Screw runout pushes
+the carriage radially at the nut through the nut's radial stiffness (two site actuators).
+The one approximation: inside the backlash gap the lead-error force pair K·e (a few tens of N for
+sub-µm errors) still acts; the gap is crossed in milliseconds at reversals.
+
+The servo is MuJoCo's ``<pid input="pos vel ff">`` actuator on the screw hinge (see
+:class:`twin.axis.Servo`); a second motor on the hinge carries the torque ripple of the motor,
+which the controller does not know. Nut drag torque is Coulomb friction (``frictionloss``) plus
+viscous damping on the hinge; rail and seal friction is ``frictionloss`` on ``carriage_x``.
+
+Models in different degradation states differ only in float fields (``tendon_stiffness``,
+``tendon_damping``, ``tendon_lengthspring``, ``dof_frictionloss``), see :func:`apply_state`, so
+that any number of them can run in one ``mujoco.rollout`` call.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from twin.axis import GRAVITY, Axis
+
+TRUCKS = ("FL", "FR", "RL", "RR")
+
+# Control layout (indices into data.ctrl): the pid actuator takes three inputs.
+CTRL_POS, CTRL_VEL, CTRL_FF = 0, 1, 2
+CTRL_RIPPLE = 3
+CTRL_BALLNUT = 4
+CTRL_TRUCK_V = slice(5, 9)
+CTRL_TRUCK_L = slice(9, 13)
+CTRL_RUNOUT = slice(13, 15)
+NCTRL = 15
+
+# Sensor layout (indices into data.sensordata).
+SENS_IMU_ACC = slice(0, 3)
+SENS_IMU_GYRO = slice(3, 6)
+SENS_NUT1_ACC = slice(6, 9)
+SENS_NUT2_ACC = slice(9, 12)
+SENS_SERVO_FORCE = 12
+SENS_RIPPLE_FORCE = 13
+NSENS = 14
+
+# qpos / qvel indices.
+Q_SCREW, Q_X, Q_Y, Q_Z, Q_ROLL, Q_PITCH, Q_YAW = range(7)
+
+
+@dataclass(frozen=True)
+class TruckLayout:
+    """Truck contact positions relative to the centre of mass, m: x_i (4,), y_i (4,), h (scalar)."""
+
+    x: tuple[float, float, float, float]
+    y: tuple[float, float, float, float]
+    height_below_com: float
+
+    @classmethod
+    def of(cls, axis: Axis) -> "TruckLayout":
+        a = axis.carriage.truck_spacing / 2.0
+        w = axis.carriage.rail_spacing / 2.0
+        # FL, FR, RL, RR: front = +X, left = −Y (rail 0), right = +Y (rail 1).
+        return cls(x=(a, a, -a, -a), y=(-w, w, -w, w), height_below_com=axis.carriage.com_height)
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def build_mjcf(axis: Axis, timestep: float) -> str:
+    """MJCF text of the axis in its new (healthy, zero-backlash) state; floats are set later by
+    :func:`apply_state`. ``timestep`` in s."""
+    c, s = axis.carriage, axis.screw
+    r = s.radius_per_rad
+    layout = TruckLayout.of(axis)
+    zn = c.nut_height - c.com_height  # nut axis relative to the centre of mass (m, negative)
+    zi = c.imu_height - c.com_height
+    kp, ki, kd = axis.servo_gains()
+    half_travel = axis.travel / 2.0
+
+    truck_tendons = []
+    for i, name in enumerate(TRUCKS):
+        xi, yi, h = layout.x[i], layout.y[i], layout.height_below_com
+        truck_tendons.append(
+            f'    <fixed name="truck_v{i}" springlength="0 0" stiffness="1" damping="0">\n'
+            f'      <joint joint="carriage_z" coef="1"/>\n'
+            f'      <joint joint="carriage_roll" coef="{_fmt(yi)}"/>\n'
+            f'      <joint joint="carriage_pitch" coef="{_fmt(-xi)}"/>\n'
+            f'    </fixed>\n'
+            f'    <fixed name="truck_l{i}" springlength="0 0" stiffness="1" damping="0">\n'
+            f'      <joint joint="carriage_y" coef="1"/>\n'
+            f'      <joint joint="carriage_yaw" coef="{_fmt(xi)}"/>\n'
+            f'      <joint joint="carriage_roll" coef="{_fmt(h)}"/>\n'
+            f'    </fixed>\n')
+    truck_motors = "".join(
+        f'    <motor name="rail_v{i}" tendon="truck_v{i}" gear="1"/>\n' for i in range(4))
+    truck_motors += "".join(
+        f'    <motor name="rail_l{i}" tendon="truck_l{i}" gear="1"/>\n' for i in range(4))
+    truck_sites = "".join(
+        f'      <site name="truck_{n}" pos="{_fmt(layout.x[i])} {_fmt(layout.y[i])} '
+        f'{_fmt(-layout.height_below_com)}" size="0.01"/>\n' for i, n in enumerate(TRUCKS))
+    ix, iy, iz = c.inertia
+
+    return f"""<mujoco model="ballscrew_linear_axis">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{_fmt(timestep)}" integrator="implicitfast" gravity="0 0 {_fmt(-GRAVITY)}"/>
+  <worldbody>
+    <geom name="base" type="box" pos="{_fmt(half_travel)} 0 -0.06" size="{_fmt(half_travel + 0.1)} 0.2 0.02"
+          contype="0" conaffinity="0" rgba="0.5 0.5 0.5 1"/>
+    <body name="screw" pos="0 0 {_fmt(c.nut_height)}">
+      <joint name="screw" type="hinge" axis="1 0 0" armature="{_fmt(axis.servo.motor_inertia)}"
+             damping="{_fmt(s.drag_viscous)}" frictionloss="{_fmt(s.drag_torque(s.preload))}"/>
+      <inertial pos="{_fmt(half_travel)} 0 0" mass="{_fmt(s.screw_mass)}"
+                diaginertia="{_fmt(s.screw_inertia)} 0.05 0.05"/>
+      <geom type="cylinder" fromto="0 0 0 {_fmt(axis.travel)} 0 0" size="{_fmt(s.root_diameter / 2)}"
+            contype="0" conaffinity="0" mass="0" rgba="0.7 0.7 0.75 1"/>
+    </body>
+    <body name="carriage" pos="0 0 {_fmt(c.com_height)}">
+      <joint name="carriage_x" type="slide" axis="1 0 0" frictionloss="{_fmt(c.rail_friction)}"/>
+      <joint name="carriage_y" type="slide" axis="0 1 0"/>
+      <joint name="carriage_z" type="slide" axis="0 0 1"/>
+      <joint name="carriage_roll" type="hinge" axis="1 0 0"/>
+      <joint name="carriage_pitch" type="hinge" axis="0 1 0"/>
+      <joint name="carriage_yaw" type="hinge" axis="0 0 1"/>
+      <inertial pos="0 0 0" mass="{_fmt(c.mass)}" diaginertia="{_fmt(ix)} {_fmt(iy)} {_fmt(iz)}"/>
+      <geom type="box" size="0.1 0.13 0.02" pos="0 0 {_fmt(-c.com_height + 0.02)}" contype="0"
+            conaffinity="0" mass="0" rgba="0.3 0.4 0.8 1"/>
+      <geom type="box" size="0.08 0.08 0.06" pos="0 0 {_fmt(zi - 0.07)}" contype="0" conaffinity="0"
+            mass="0" rgba="0.25 0.25 0.25 1"/>
+      <site name="imu" pos="0 0 {_fmt(zi)}" size="0.01"/>
+      <site name="nut" pos="0 0 {_fmt(zn)}" size="0.01"/>
+      <site name="nut_acc1" pos="0.02 0.025 {_fmt(zn + 0.02)}" size="0.005"/>
+      <site name="nut_acc2" pos="-0.02 -0.025 {_fmt(zn - 0.02)}" size="0.005"/>
+{truck_sites}    </body>
+  </worldbody>
+  <tendon>
+    <fixed name="ballnut" springlength="0 0" stiffness="1" damping="0">
+      <joint joint="carriage_x" coef="1"/>
+      <joint joint="carriage_pitch" coef="{_fmt(zn)}"/>
+      <joint joint="screw" coef="{_fmt(-r)}"/>
+    </fixed>
+{''.join(truck_tendons)}  </tendon>
+  <actuator>
+    <pid name="servo" joint="screw" input="pos vel ff" kp="{_fmt(kp)}" kv="{_fmt(kd)}" ki="{_fmt(ki)}"
+         forcerange="{_fmt(-axis.servo.torque_limit)} {_fmt(axis.servo.torque_limit)}"/>
+    <motor name="ripple" joint="screw" gear="1"/>
+    <motor name="ballnut_error" tendon="ballnut" gear="1"/>
+{truck_motors}    <motor name="runout_y" site="nut" gear="0 1 0 0 0 0"/>
+    <motor name="runout_z" site="nut" gear="0 0 1 0 0 0"/>
+  </actuator>
+  <sensor>
+    <accelerometer name="imu_acc" site="imu"/>
+    <gyro name="imu_gyro" site="imu"/>
+    <accelerometer name="nut1_acc" site="nut_acc1"/>
+    <accelerometer name="nut2_acc" site="nut_acc2"/>
+    <actuatorfrc name="servo_torque" actuator="servo"/>
+    <actuatorfrc name="ripple_torque" actuator="ripple"/>
+  </sensor>
+</mujoco>
+"""
+
+
+def build_model(axis: Axis, timestep: float) -> mujoco.MjModel:
+    """Compile the axis model; see :func:`build_mjcf`."""
+    model = mujoco.MjModel.from_xml_string(build_mjcf(axis, timestep))
+    assert model.nu == NCTRL and model.actuator_ctrlnum[0] == 3, "control layout changed"
+    assert model.nsensordata == NSENS, "sensor layout changed"
+    return model
+
+
+@dataclass(frozen=True)
+class MechanicalState:
+    """The float fields that change with degradation, in SI units.
+
+    Attributes:
+        preload: nut preload in N.
+        backlash: axial clearance of the ball nut in m (dead band width).
+        truck_preload_fraction: truck preload relative to new (1 = new), scales truck stiffness by
+            the Hertz rule fraction^(1/3).
+        drag_scale: multiplier on the nut drag torque (e.g. thermal viscosity change), 1 = nominal.
+        lead_stretch: relative deviation of the effective lead from nominal (dimensionless): the
+            cumulative lead error per unit travel plus thermal growth α·ΔT. It is put into the
+            ball-nut tendon's screw coefficient −R·(1 + lead_stretch), so this part of the lead
+            error is exact kinematics (it can reach tens of µm over the stroke and must not act
+            as a force inside the backlash gap).
+    """
+
+    preload: float
+    backlash: float = 0.0
+    truck_preload_fraction: float = 1.0
+    drag_scale: float = 1.0
+    lead_stretch: float = 0.0
+
+
+def stiffness_of(axis: Axis, state: MechanicalState) -> dict[str, float]:
+    """Physical stiffnesses for a state: axial (N/m), truck vertical and lateral (N/m each)."""
+    hertz = max(state.truck_preload_fraction, 0.1) ** (1.0 / 3.0)
+    return {
+        "axial": axis.screw.axial_stiffness(state.preload),
+        "truck_vertical": axis.carriage.truck_stiffness_vertical * hertz,
+        "truck_lateral": axis.carriage.truck_stiffness_lateral * hertz,
+    }
+
+
+def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> None:
+    """Write a degradation state into the model's float fields (in place)."""
+    k = stiffness_of(axis, state)
+    c = axis.carriage
+    r = axis.screw.radius_per_rad
+    # Effective mass of the axial mode with the screw held by the servo: the carriage.
+    m_axial = c.mass
+    ballnut = model.tendon("ballnut").id
+    model.tendon_stiffness[ballnut] = k["axial"]
+    model.tendon_damping[ballnut] = 2.0 * axis.screw.contact_damping_ratio * math.sqrt(
+        k["axial"] * m_axial)
+    half = state.backlash / 2.0
+    model.tendon_lengthspring[ballnut] = (-half, half)
+    sag = c.mass * GRAVITY / (4.0 * k["truck_vertical"])  # static truck deflection under weight
+    for i in range(4):
+        tv, tl = model.tendon(f"truck_v{i}").id, model.tendon(f"truck_l{i}").id
+        model.tendon_stiffness[tv] = k["truck_vertical"]
+        model.tendon_stiffness[tl] = k["truck_lateral"]
+        model.tendon_damping[tv] = 2.0 * c.truck_damping_ratio * math.sqrt(
+            k["truck_vertical"] * c.mass / 4.0)
+        model.tendon_damping[tl] = 2.0 * c.truck_damping_ratio * math.sqrt(
+            k["truck_lateral"] * c.mass / 4.0)
+        # The rest length carries the weight, so the equilibrium is at carriage_z = 0.
+        model.tendon_lengthspring[tv] = (sag, sag)
+        model.tendon_lengthspring[tl] = (0.0, 0.0)
+    screw = model.joint("screw").dofadr[0]
+    model.dof_frictionloss[screw] = axis.screw.drag_torque(state.preload) * state.drag_scale
+    # The screw is the last joint of the ball-nut tendon (see build_mjcf).
+    wrap = model.tendon_adr[ballnut] + model.tendon_num[ballnut] - 1
+    assert model.wrap_objid[wrap] == model.joint("screw").id
+    model.wrap_prm[wrap] = -r * (1.0 + state.lead_stretch)
+
+
+def initial_state(model: mujoco.MjModel, x0: float, theta0: float) -> np.ndarray:
+    """Full physics state at rest with the carriage at ``x0`` m and the screw at ``theta0`` rad."""
+    data = mujoco.MjData(model)
+    data.qpos[Q_SCREW] = theta0
+    data.qpos[Q_X] = x0
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    mujoco.mj_forward(model, data)
+    state = np.empty(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, state, spec)
+    return state

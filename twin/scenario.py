@@ -1,0 +1,370 @@
+"""Scenarios: TOML files describing the axis, its sensors, its degradation, the routines and the
+campaign, validated with errors that name the key, the value and what is allowed.
+
+Units at this edge carry their name (``_mm``, ``_um``, ``_hours``, ``_hz``...); :func:`to_axis`
+and friends convert to the SI dataclasses used inside.
+
+Overrides (``--set KEY=VALUE`` on the CLI) use dotted keys, e.g. ``phase2.runs_per_session=10``;
+the value is parsed as TOML (``1e-3``, ``[20, 100]``, ``"table"``) and falls back to a string.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from twin.axis import Axis, Carriage, ScrewDrive, Servo
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be used; the message is one paragraph naming key, value, allowed."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class AxisConfig(_Section):
+    travel_mm: float = Field(450.0, gt=0, le=5000)
+    lead_mm: float = Field(10.0, gt=0, le=100)
+    pitch_diameter_mm: float = Field(25.5, gt=0, le=200)
+    root_diameter_mm: float = Field(21.5, gt=0, le=200)
+    shaft_length_mm: float = Field(500.0, gt=0, le=6000)
+    rated_dynamic_load_N: float = Field(21000.0, gt=0)
+    preload_N: float = Field(1500.0, gt=0, description="nominal preload when new; at most 10 % of rated_dynamic_load_N")
+    nut_stiffness_N_per_um: float = Field(400.0, gt=0, description="catalogue nut stiffness at 10 % C_a")
+    bearing_stiffness_N_per_um: float = Field(750.0, gt=0)
+    screw_inertia_kg_m2: float = Field(1.8e-4, gt=0)
+    no_load_torque_Nm: float = Field(0.05, ge=0)
+    drag_viscous_Nm_s_per_rad: float = Field(2.0e-4, ge=0)
+    contact_damping_ratio: float = Field(0.03, gt=0, lt=1)
+    radial_stiffness_N_per_um: float = Field(100.0, gt=0)
+    carriage_mass_kg: float = Field(120.0, gt=0)
+    truck_spacing_mm: float = Field(120.0, gt=0)
+    rail_spacing_mm: float = Field(200.0, gt=0)
+    truck_stiffness_vertical_N_per_um: float = Field(300.0, gt=0)
+    truck_stiffness_lateral_N_per_um: float = Field(200.0, gt=0)
+    truck_damping_ratio: float = Field(0.05, gt=0, lt=1)
+    rail_friction_N: float = Field(12.0, ge=0)
+    imu_height_mm: float = Field(200.0, ge=0)
+    motor_inertia_kg_m2: float = Field(1.5e-4, gt=0)
+    position_bandwidth_hz: float = Field(20.0, gt=0)
+    velocity_bandwidth_hz: float = Field(60.0, gt=0)
+    velocity_integral_time_s: float = Field(0.01, gt=0)
+    torque_ripple_Nm: float = Field(0.01, ge=0, description="motor torque ripple amplitude")
+    torque_ripple_per_rev: int = Field(8, ge=1)
+
+    @model_validator(mode="after")
+    def _preload_rated(self) -> "AxisConfig":
+        limit = 0.1 * self.rated_dynamic_load_N
+        if self.preload_N > limit:
+            raise ValueError(
+                f"preload_N = {self.preload_N:g} is beyond the rated range: allowed 0 < preload_N "
+                f"<= {limit:g} N (10 % of rated_dynamic_load_N = {self.rated_dynamic_load_N:g} N)")
+        return self
+
+
+class GeometryConfig(_Section):
+    straightness_rms_um: float = Field(1.0, ge=0, le=100)
+    lateral_straightness_rms_um: float = Field(1.0, ge=0, le=100)
+    spectrum_exponent: float = Field(2.0, ge=0, le=4)
+    bolt_pitch_mm: float = Field(60.0, gt=0)
+    bolt_amplitude_um: float = Field(0.5, ge=0, le=20)
+    cumulative_lead_error_um_per_m: float = Field(8.0, ge=-200, le=200)
+    cyclic_lead_error_um: list[float] = Field(default_factory=lambda: [0.3, 0.15, 0.1])
+    runout_um: float = Field(0.3, ge=0, le=50)
+    ball_pass_amplitude_um: float = Field(0.03, ge=0, le=5)
+    ball_diameter_mm: float = Field(3.969, gt=0)
+    contact_angle_deg: float = Field(45.0, gt=0, lt=90)
+
+
+class SensorsConfig(_Section):
+    imu_acc_fs_hz: float = Field(1613.0, gt=0)
+    imu_acc_bandwidth_hz: float = Field(300.0, gt=0)
+    imu_acc_noise_ug_per_rthz: float = Field(7.0, ge=0)
+    imu_gyro_fs_hz: float = Field(1000.0, gt=0)
+    imu_gyro_bandwidth_hz: float = Field(200.0, gt=0)
+    imu_gyro_noise_urad_s_per_rthz: float = Field(35.0, ge=0)
+    imu_acc_bias_ug: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    imu_acc_scale_error: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    imu_gyro_bias_urad_s: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    imu_misalignment_urad: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    nut_acc_fs_hz: float = Field(10000.0, gt=0)
+    nut_acc_noise_ug_per_rthz: float = Field(30.0, ge=0)
+    controller_fs_hz: float = Field(10000.0, gt=0)
+    encoder_counts_per_rev: int = Field(2**20, ge=16)
+    torque_noise_Nm: float = Field(0.005, ge=0)
+    position_cmd_fs_hz: float = Field(1000.0, gt=0)
+
+
+class DegradationConfig(_Section):
+    law: Literal["wear", "table"] = "wear"
+    onset_hours: float = Field(2500.0, ge=0)
+    interference_um: float = Field(4.0, gt=0, le=100)
+    wear_rate_um_per_kh: float = Field(1.4, ge=0, le=1000)
+    scatter_um: float = Field(2.0, ge=0, le=100)
+    backlash_gain: float = Field(2.83, gt=0, le=20)
+    truck_wear_coupling: float = Field(0.0, ge=0, le=1, description="fraction of the nut's preload loss that the trucks share")
+    table_hours: list[float] = Field(default_factory=list)
+    table_preload_fraction: list[float] = Field(default_factory=list)
+    table_backlash_um: list[float] = Field(default_factory=list)
+    thermal_rise_K: float = Field(3.0, ge=0, le=50)
+    thermal_time_constant_hours: float = Field(1.5, gt=0)
+    thermal_expansion_per_K: float = Field(11.5e-6, ge=0)
+
+    @model_validator(mode="after")
+    def _table(self) -> "DegradationConfig":
+        if self.law == "table":
+            n = len(self.table_hours)
+            if n == 0 or len(self.table_preload_fraction) != n or len(self.table_backlash_um) != n:
+                raise ValueError(
+                    "law = 'table' needs table_hours, table_preload_fraction and table_backlash_um "
+                    f"of equal, non-zero length (got {n}, {len(self.table_preload_fraction)}, "
+                    f"{len(self.table_backlash_um)})")
+            if any(b < 0 for b in self.table_backlash_um):
+                raise ValueError(f"table_backlash_um = {self.table_backlash_um} has a negative "
+                                 "backlash: allowed values are >= 0 µm")
+            if any(not 0 < p <= 1 for p in self.table_preload_fraction):
+                raise ValueError(f"table_preload_fraction = {self.table_preload_fraction}: "
+                                 "allowed 0 < value <= 1")
+        return self
+
+
+class Phase1Config(_Section):
+    speed_mm_s: float = Field(400.0, gt=0, le=2000)
+    accel_mm_s2: float = Field(4087.44, gt=0, le=100000)
+    start_mm: float = Field(110.0, ge=0)
+    end_mm: float = Field(330.0, ge=0)
+    dwell_s: float = Field(1.0, ge=0)
+    capture_s: float = Field(10.0, gt=0, le=120)
+    fs_hz: float = Field(10000.0, gt=0)
+    captures_per_sample: int = Field(10, ge=1)
+    capture_interval_minutes: float = Field(30.0, gt=0)
+    sample_interval_hours: float = Field(84.0, gt=0)
+    timestep_s: float = Field(1e-4, gt=0, le=1e-3)
+
+
+class Phase2Config(_Section):
+    speeds_mm_s: list[float] = Field(default_factory=lambda: [20.0, 100.0, 500.0])
+    accel_mm_s2: float = Field(19600.0, gt=0, le=100000)
+    start_mm: float = Field(0.0, ge=0)
+    end_mm: float = Field(450.0, ge=0)
+    dwell_s: float = Field(10.0, ge=0)
+    runs_per_session: int = Field(90, ge=1)
+    session_interval_hours: float = Field(84.0, gt=0)
+    timestep_s: float = Field(2e-4, gt=0, le=1e-3)
+    origin_offset_max_mm: float = Field(2.0, ge=0, le=20)
+    session_hours: list[float] = Field(default_factory=list, description="explicit session hours; overrides the interval")
+
+    @model_validator(mode="after")
+    def _speeds(self) -> "Phase2Config":
+        if not self.speeds_mm_s or any(not 0 < s <= 2000 for s in self.speeds_mm_s):
+            raise ValueError(f"speeds_mm_s = {self.speeds_mm_s}: allowed a non-empty list of "
+                             "speeds with 0 < speed <= 2000 mm/s")
+        return self
+
+
+class DialConfig(_Section):
+    gradation_um: float = Field(12.7, gt=0)
+    reading_noise_um: float = Field(1.5, ge=0, description="1-sigma error of a by-eye sub-gradation reading")
+    step_um: float = Field(1.0, gt=0)
+    repeats: int = Field(3, ge=1)
+    every_n_sessions: int = Field(1, ge=1)
+
+
+class PauseConfig(_Section):
+    hours: float = Field(ge=0)
+    days: float = Field(gt=0)
+
+
+class CampaignConfig(_Section):
+    total_hours: float = Field(8693.0, gt=0)
+    warmup_hours: float = Field(2.0, ge=0)
+    pauses: list[PauseConfig] = Field(default_factory=lambda: [
+        PauseConfig(hours=855.5, days=78.0), PauseConfig(hours=4033.0, days=122.0)])
+    phase1: bool = True
+    phase2: bool = True
+
+
+class Scenario(_Section):
+    name: str = "unnamed"
+    description: str = ""
+    seed: int = Field(0, ge=0)
+    axis: AxisConfig = Field(default_factory=AxisConfig)
+    geometry: GeometryConfig = Field(default_factory=GeometryConfig)
+    sensors: SensorsConfig = Field(default_factory=SensorsConfig)
+    degradation: DegradationConfig = Field(default_factory=DegradationConfig)
+    phase1: Phase1Config = Field(default_factory=Phase1Config)
+    phase2: Phase2Config = Field(default_factory=Phase2Config)
+    dial_indicator: DialConfig = Field(default_factory=DialConfig)
+    campaign: CampaignConfig = Field(default_factory=CampaignConfig)
+
+    @model_validator(mode="after")
+    def _strokes(self) -> "Scenario":
+        travel = self.axis.travel_mm
+        for key, val in (("phase1.start_mm", self.phase1.start_mm), ("phase1.end_mm", self.phase1.end_mm),
+                         ("phase2.start_mm", self.phase2.start_mm), ("phase2.end_mm", self.phase2.end_mm)):
+            if val > travel:
+                raise ValueError(f"{key} = {val:g} is a stroke beyond the travel: allowed "
+                                 f"0 <= {key.split('.')[1]} <= axis.travel_mm = {travel:g} mm")
+        for key, (a, b) in (("phase1", (self.phase1.start_mm, self.phase1.end_mm)),
+                            ("phase2", (self.phase2.start_mm, self.phase2.end_mm))):
+            if a == b:
+                raise ValueError(f"{key}.start_mm = {a:g} equals {key}.end_mm: the stroke must "
+                                 "have a non-zero length")
+        return self
+
+    def to_json(self) -> str:
+        return json.dumps(self.model_dump(mode="json"), sort_keys=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# Loading with readable errors
+
+
+def _format_loc(loc: tuple[Any, ...]) -> str:
+    return ".".join(str(p) for p in loc if not str(p).startswith("function-")) or "(top level)"
+
+
+def _allowed_keys(loc: tuple[Any, ...]) -> list[str]:
+    model: type[BaseModel] = Scenario
+    for part in loc[:-1]:
+        field = model.model_fields.get(str(part))
+        ann = getattr(field, "annotation", None) if field else None
+        if isinstance(ann, type) and issubclass(ann, BaseModel):
+            model = ann
+        else:
+            return []
+    return sorted(model.model_fields)
+
+
+def _explain(err: dict[str, Any], source: str) -> str:
+    loc = tuple(err.get("loc", ()))
+    key = _format_loc(loc)
+    value = err.get("input")
+    kind = err.get("type", "")
+    ctx = err.get("ctx") or {}
+    if kind == "extra_forbidden":
+        allowed = ", ".join(_allowed_keys(loc))
+        section = _format_loc(loc[:-1])
+        where = f"in [{section}]" if len(loc) > 1 else "at the top level"
+        return (f"{source}: unknown key `{key}` (value {value!r}); allowed keys {where}: {allowed}.")
+    bounds = []
+    for name, sym in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
+        if name in ctx:
+            bounds.append(f"{sym} {ctx[name]}")
+    if bounds:
+        return (f"{source}: key `{key}` = {value!r} is out of range; allowed: value "
+                f"{' and '.join(bounds)}.")
+    if kind == "value_error":
+        msg = str(ctx.get("error", err.get("msg", "")))
+        return f"{source}: key `{key}`: {msg}."
+    if kind == "missing":
+        return f"{source}: key `{key}` is required but missing."
+    return f"{source}: key `{key}` = {value!r} is not valid: {err.get('msg')}."
+
+
+def _set_dotted(data: dict[str, Any], key: str, value: Any) -> None:
+    parts = key.split(".")
+    node = data
+    for p in parts[:-1]:
+        nxt = node.setdefault(p, {})
+        if not isinstance(nxt, dict):
+            raise ScenarioError(f"--set {key}: `{p}` is a value, not a section")
+        node = nxt
+    node[parts[-1]] = value
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse ``KEY=VALUE`` (VALUE as TOML, else a plain string)."""
+    if "=" not in text:
+        raise ScenarioError(f"--set {text!r}: expected KEY=VALUE, e.g. phase2.runs_per_session=10")
+    key, raw = text.split("=", 1)
+    key = key.strip()
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return key, value
+
+
+def from_dict(data: dict[str, Any], source: str = "scenario") -> Scenario:
+    """Validate a scenario dict; raises :class:`ScenarioError` with one paragraph per problem."""
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as exc:
+        lines = [_explain(e, source) for e in exc.errors()]
+        raise ScenarioError(" ".join(lines)) from None
+
+
+def load(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Scenario:
+    """Read a TOML scenario and apply ``KEY=VALUE`` overrides."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read the scenario file ({exc.strerror}).") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}.") from None
+    data = copy.deepcopy(data)
+    for item in overrides:
+        key, value = parse_override(item)
+        _set_dotted(data, key, value)
+    return from_dict(data, source=str(path))
+
+
+# ---------------------------------------------------------------------------------------------
+# Conversion to the SI dataclasses
+
+
+def to_axis(s: Scenario) -> Axis:
+    a = s.axis
+    screw = ScrewDrive(
+        lead=a.lead_mm * 1e-3, pitch_diameter=a.pitch_diameter_mm * 1e-3,
+        root_diameter=a.root_diameter_mm * 1e-3, shaft_length=a.shaft_length_mm * 1e-3,
+        rated_dynamic_load=a.rated_dynamic_load_N, preload=a.preload_N,
+        nut_stiffness_catalogue=a.nut_stiffness_N_per_um * 1e6,
+        bearing_stiffness=a.bearing_stiffness_N_per_um * 1e6, screw_inertia=a.screw_inertia_kg_m2,
+        no_load_torque=a.no_load_torque_Nm, drag_viscous=a.drag_viscous_Nm_s_per_rad,
+        contact_damping_ratio=a.contact_damping_ratio,
+        radial_stiffness=a.radial_stiffness_N_per_um * 1e6)
+    carriage = Carriage(
+        mass=a.carriage_mass_kg, truck_spacing=a.truck_spacing_mm * 1e-3,
+        rail_spacing=a.rail_spacing_mm * 1e-3,
+        truck_stiffness_vertical=a.truck_stiffness_vertical_N_per_um * 1e6,
+        truck_stiffness_lateral=a.truck_stiffness_lateral_N_per_um * 1e6,
+        truck_damping_ratio=a.truck_damping_ratio, rail_friction=a.rail_friction_N,
+        imu_height=a.imu_height_mm * 1e-3)
+    servo = Servo(motor_inertia=a.motor_inertia_kg_m2, position_bandwidth_hz=a.position_bandwidth_hz,
+                  velocity_bandwidth_hz=a.velocity_bandwidth_hz,
+                  velocity_integral_time=a.velocity_integral_time_s)
+    return Axis(travel=a.travel_mm * 1e-3, screw=screw, carriage=carriage, servo=servo)
+
+
+def nominal_axis_description(s: Scenario) -> dict[str, Any]:
+    """What a machine owner knows of the axis (no degradation state): goes into measurements.h5."""
+    a, se = s.axis, s.sensors
+    return {
+        "travel_mm": a.travel_mm, "lead_mm": a.lead_mm, "screw": f"{a.pitch_diameter_mm:g}x{a.lead_mm:g}",
+        "carriage_mass_kg": a.carriage_mass_kg, "truck_spacing_mm": a.truck_spacing_mm,
+        "rail_spacing_mm": a.rail_spacing_mm,
+        "sensors": {
+            "nut_accelerometers": {"count": 2, "axes": 3, "sensitivity_mV_per_g": 100.0,
+                                   "fs_hz": se.nut_acc_fs_hz},
+            "imu_accelerometer": {"sensitivity_mV_per_g": 2000.0, "bandwidth_hz": se.imu_acc_bandwidth_hz,
+                                  "noise_ug_per_rthz": se.imu_acc_noise_ug_per_rthz, "fs_hz": se.imu_acc_fs_hz},
+            "imu_gyroscope": {"bandwidth_hz": se.imu_gyro_bandwidth_hz,
+                              "noise_urad_s_per_rthz": se.imu_gyro_noise_urad_s_per_rthz,
+                              "fs_hz": se.imu_gyro_fs_hz},
+            "controller": {"fs_hz": se.controller_fs_hz, "encoder_counts_per_rev": se.encoder_counts_per_rev},
+        },
+        "phase1_routine": s.phase1.model_dump(include={"speed_mm_s", "accel_mm_s2", "start_mm", "end_mm", "dwell_s"}),
+        "phase2_routine": s.phase2.model_dump(include={"speeds_mm_s", "accel_mm_s2", "start_mm", "end_mm", "dwell_s"}),
+    }

@@ -1,0 +1,367 @@
+"""Running the MuJoCo axis through the paper's routines and turning the motion into sensor streams.
+
+- :class:`World`: what is fixed for a whole campaign (the axis, its rails, its screw) drawn once
+  from the scenario seed.
+- :class:`Condition`: the axis at one moment of the campaign (preload, backlash, temperature,
+  origin set by the operator).
+- :class:`Simulator`: one compiled model per time step; :meth:`Simulator.run` rolls it out with
+  ``mujoco.rollout`` under a commanded profile.
+- :func:`phase1_capture`, :func:`phase2_session`, :func:`dial_indicator`: the three measurement
+  procedures of the paper (section III).
+
+Rail waviness follows the carriage's TRUE position. The axial dynamics (screw, ball nut,
+carriage travel) do not depend on the rail forces (they act on other joints, through separate
+linear tendons), so a first rollout with the rails looked up at the commanded position gives the
+true travel x(t), and a second rollout with the rails looked up at that x(t) is the exact
+fixed point to first order (the axial trajectories of the two passes agree to well below a
+nanometre, see ``tests/test_twin_physics.py``). Phase II, where the micrometre shift between the
+forward and reverse traces is the measured quantity, always does both passes. Phase I does one
+pass with the rails at the commanded position plus the known backlash lag: the residual error in
+the rail input is (slope of the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm,
+far below anything the nut accelerometers see.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+from twin import geometry as geo
+from twin.axis import Axis
+from twin.drive import Move, Profile, command_profile, reciprocating
+from twin.model import (CTRL_BALLNUT, CTRL_FF, CTRL_POS, CTRL_RIPPLE, CTRL_RUNOUT, CTRL_TRUCK_L,
+                        CTRL_TRUCK_V, CTRL_VEL, NCTRL, Q_PITCH, Q_ROLL, Q_SCREW, Q_X, Q_Y, Q_YAW,
+                        Q_Z, SENS_IMU_ACC, SENS_IMU_GYRO, SENS_NUT1_ACC, SENS_NUT2_ACC,
+                        SENS_SERVO_FORCE, MechanicalState, apply_state, build_model,
+                        initial_state, stiffness_of)
+from twin.sensors import instruments as ins
+
+
+CYCLIC_GATE_SPEED = 0.005  # m/s: below it the cyclic lead-error force pair fades out
+
+
+@dataclass(frozen=True)
+class World:
+    """Everything fixed over a campaign.
+
+    Attributes:
+        axis: physical parameters (SI).
+        rails: rail deviation profiles (rail coordinate = world X, m).
+        carriage: carriage layout for the kinematic error motions.
+        screw: lead error, runout and ball-pass geometry with their (seeded) phases.
+        ripple_torque: amplitude of the motor torque ripple, N·m; ripple_per_rev: its order;
+        ripple_phase: rad.
+        thermal_expansion: screw expansion coefficient, 1/K.
+        sensors: instrument specifications.
+    """
+
+    axis: Axis
+    rails: geo.RailProfiles
+    carriage: geo.CarriageGeometry
+    screw: geo.ScrewSpec
+    ripple_torque: float = 0.01
+    ripple_per_rev: int = 8
+    ripple_phase: float = 0.0
+    thermal_expansion: float = 11.5e-6
+    imu_acc: ins.AnalogAccelerometerSpec = field(default_factory=ins.AnalogAccelerometerSpec)
+    imu_gyro: ins.DigitalGyroSpec = field(default_factory=ins.DigitalGyroSpec)
+    nut_acc: ins.NutAccelerometerSpec = field(default_factory=ins.NutAccelerometerSpec)
+    controller_fs: float = 10_000.0
+    encoder_counts_per_rev: int = 2**20
+    torque_noise: float = 0.005
+    torque_resolution: float = 0.001
+    position_cmd_fs: float = 1000.0
+
+
+@dataclass(frozen=True)
+class Condition:
+    """The axis at one moment of a campaign.
+
+    Attributes:
+        mech: preload (N), backlash (m) and truck preload.
+        temperature_rise: screw temperature above its reference, K (thermal growth of the lead).
+        origin_offset: rail coordinate of the controller's zero, m (set by the operator).
+    """
+
+    mech: MechanicalState
+    temperature_rise: float = 0.0
+    origin_offset: float = 0.0
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A rollout. t (n,) s; qpos (n, 7) [screw rad, x y z m, roll pitch yaw rad]; qvel (n, 7);
+    sens (n, 14) MuJoCo sensors (see :mod:`twin.model`); cmd: the commanded profile (controller
+    frame); theta_cmd (n,) rad."""
+
+    t: np.ndarray
+    qpos: np.ndarray
+    qvel: np.ndarray
+    sens: np.ndarray
+    cmd: Profile
+    theta_cmd: np.ndarray
+
+    @property
+    def x(self) -> np.ndarray:
+        """True carriage position (rail coordinate), m."""
+        return self.qpos[:, Q_X]
+
+
+class Simulator:
+    """A compiled axis model at one time step, reused for every rollout of a worker."""
+
+    def __init__(self, world: World, timestep: float):
+        self.world = world
+        self.timestep = timestep
+        self.model = build_model(world.axis, timestep)
+        self.data = mujoco.MjData(self.model)
+        self._state_size = mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+
+    def lead_stretch(self, cond: Condition) -> float:
+        """Relative lead deviation: cumulative lead error + thermal growth α·ΔT (m/m)."""
+        w = self.world
+        return w.screw.cumulative_lead_error_m_per_m + w.thermal_expansion * cond.temperature_rise
+
+    @property
+    def fs(self) -> float:
+        return 1.0 / self.timestep
+
+    def controls(self, cond: Condition, cmd: Profile, x_rail: np.ndarray) -> np.ndarray:
+        """(n, NCTRL) control array: servo set-points, torque ripple and the geometric errors
+        as force pairs K·e (see :mod:`twin.model`), rails looked up at ``x_rail`` (n,) m."""
+        w, ax = self.world, self.world.axis
+        r = ax.screw.radius_per_rad
+        k = stiffness_of(ax, cond.mech)
+        theta = (cmd.x + cond.origin_offset) / r
+        ctrl = np.zeros((cmd.t.size, NCTRL))
+        ctrl[:, CTRL_POS] = theta
+        ctrl[:, CTRL_VEL] = cmd.v / r
+        ctrl[:, CTRL_FF] = ax.servo.torque_feedforward * ax.total_inertia() * cmd.a / r
+        ctrl[:, CTRL_RIPPLE] = w.ripple_torque * np.sin(w.ripple_per_rev * theta + w.ripple_phase)
+        # Cyclic lead error and ball pass (sub-µm) as a force pair; the cumulative and thermal
+        # parts are in the tendon's lead coefficient (see MechanicalState.lead_stretch).
+        # The pair acts whatever the flank, also inside the backlash gap, where it should not;
+        # it is therefore faded out below CYCLIC_GATE_SPEED, so that at rest and in the
+        # quasi-static dial-indicator steps the carriage settles on the flank the physics
+        # chooses. In motion the nut is in contact on one flank, where the pair is exact.
+        cyclic = (geo.nut_axial_deviation(theta, w.screw)
+                  - w.screw.cumulative_lead_error_m_per_m * r * theta)
+        gate = np.clip(np.abs(cmd.v) / CYCLIC_GATE_SPEED, 0.0, 1.0)
+        ctrl[:, CTRL_BALLNUT] = k["axial"] * cyclic * gate
+        disp = geo.truck_displacements(w.rails, w.carriage, x_rail)
+        ctrl[:, CTRL_TRUCK_V] = k["truck_vertical"] * disp["vertical"].T
+        ctrl[:, CTRL_TRUCK_L] = k["truck_lateral"] * disp["lateral"].T
+        ctrl[:, CTRL_RUNOUT] = ax.screw.radial_stiffness * geo.runout(theta, w.screw)
+        return ctrl
+
+    def run(self, cond: Condition, cmd: Profile, passes: int = 2) -> Trajectory:
+        """Roll the model out under ``cmd`` in condition ``cond``.
+
+        ``passes`` = 2 looks the rails up at the true carriage position of a first pass (see the
+        module docstring); 1 looks them up at the commanded position shifted by the backlash lag.
+        """
+        mech = replace(cond.mech, lead_stretch=self.lead_stretch(cond))
+        apply_state(self.model, self.world.axis, mech)
+        r = self.world.axis.screw.radius_per_rad
+        x_cmd_rail = cmd.x + cond.origin_offset
+        # First guess of the true position: the carriage trails the screw by half the clearance.
+        stretch = 1.0 + mech.lead_stretch
+        lag = 0.5 * cond.mech.backlash * np.sign(cmd.v)
+        x_rail = stretch * x_cmd_rail - lag
+        # Start at rest, in contact on the flank of the first motion.
+        first_dir = np.sign(cmd.v[np.flatnonzero(cmd.v)[0]]) if np.any(cmd.v) else 1.0
+        theta0 = x_cmd_rail[0] / r
+        x0 = stretch * x_cmd_rail[0] - 0.5 * cond.mech.backlash * first_dir
+        s0 = initial_state(self.model, x0, theta0)
+        for _ in range(max(passes, 1)):
+            ctrl = self.controls(cond, cmd, x_rail)
+            state, sens = rollout.rollout(self.model, self.data, s0, ctrl)
+            state, sens = state[0], sens[0]
+            nq, nv = self.model.nq, self.model.nv
+            qpos = state[:, 1:1 + nq]
+            x_rail = qpos[:, Q_X]
+        qvel = state[:, 1 + nq:1 + nq + nv]
+        # Row k of a rollout is the state after step k, at time (k+1)·dt.
+        t = (np.arange(cmd.t.size) + 1) * self.timestep
+        return Trajectory(t=t, qpos=qpos, qvel=qvel, sens=sens, cmd=cmd,
+                          theta_cmd=(cmd.x + cond.origin_offset) / r)
+
+
+# ---------------------------------------------------------------------------------------------
+# Phase I: ten 10-s captures of the 400 mm/s reciprocating routine per sample
+
+
+PHASE1_LEAD_IN = 0.3  # s of standstill simulated (and discarded) before a capture starts
+
+
+def phase1_profile(cfg, fs: float, rng: np.random.Generator) -> Profile:
+    """Command of one Phase I capture: the reciprocating routine of Table I entered at a random
+    moment of a dwell (captures are taken every 30 min of continuous operation, at no particular
+    phase of the motion). ``cfg`` is a :class:`twin.scenario.Phase1Config`."""
+    start, end = cfg.start_mm * 1e-3, cfg.end_mm * 1e-3
+    one = Move(start, end, cfg.speed_mm_s * 1e-3, cfg.accel_mm_s2 * 1e-3, cfg.dwell_s)
+    cycles = int(math.ceil(cfg.capture_s / (2.0 * one.duration))) + 1
+    moves = reciprocating(start, end, one.speed, one.accel, one.dwell, cycles)
+    lead_in = PHASE1_LEAD_IN + float(rng.uniform(0.0, cfg.dwell_s))
+    return command_profile(moves, fs, lead_in=lead_in, duration=PHASE1_LEAD_IN + cfg.capture_s)
+
+
+def phase1_capture(sim: Simulator, cfg, cond: Condition, rng: np.random.Generator) -> dict:
+    """Simulate one Phase I capture and measure it.
+
+    Returns a dict of the eight signals at the controller/DAQ rate: ``speed`` (n,) rad/s,
+    ``torque`` (n,) N·m, ``acc1``/``acc2`` (n, 3) m/s² (float32), and ``fs_hz``."""
+    w = sim.world
+    cmd = phase1_profile(cfg, sim.fs, rng)
+    traj = sim.run(cond, cmd, passes=1)
+    fs = sim.fs
+    _, acc1 = ins.measure_nut_accelerometer(traj.sens[:, SENS_NUT1_ACC], fs, w.nut_acc, rng)
+    _, acc2 = ins.measure_nut_accelerometer(traj.sens[:, SENS_NUT2_ACC], fs, w.nut_acc, rng)
+    _, speed = ins.measure_speed(traj.qpos[:, Q_SCREW], fs, w.encoder_counts_per_rev,
+                                 w.controller_fs, rng)
+    _, torque = ins.measure_torque(traj.sens[:, SENS_SERVO_FORCE], fs, w.torque_noise,
+                                   w.torque_resolution, w.controller_fs, rng)
+    skip = int(round(PHASE1_LEAD_IN * w.controller_fs))
+    n = int(round(cfg.capture_s * w.controller_fs))
+    sl = slice(skip, skip + n)
+    return {"speed": speed[sl].astype(np.float32), "torque": torque[sl].astype(np.float32),
+            "acc1": acc1[sl].astype(np.float32), "acc2": acc2[sl].astype(np.float32),
+            "fs_hz": float(w.controller_fs)}
+
+
+# ---------------------------------------------------------------------------------------------
+# Phase II: IMU runs over the full stroke at three speeds
+
+
+PHASE2_LEAD_IN = 2.0  # s of standstill before the first move (bias estimation needs it)
+
+
+def phase2_moves(cfg) -> list[Move]:
+    """One Phase II run (Table I): forward and back at each speed, dwell after each motion."""
+    start, end = cfg.start_mm * 1e-3, cfg.end_mm * 1e-3
+    acc = cfg.accel_mm_s2 * 1e-3
+    moves = []
+    for v in cfg.speeds_mm_s:
+        moves += reciprocating(start, end, v * 1e-3, acc, cfg.dwell_s, 1)
+    return moves
+
+
+def phase2_trajectory(sim: Simulator, cfg, cond: Condition) -> Trajectory:
+    """The deterministic motion of one Phase II run (two passes, see module docstring)."""
+    cmd = command_profile(phase2_moves(cfg), sim.fs, lead_in=PHASE2_LEAD_IN)
+    return sim.run(cond, cmd, passes=2)
+
+
+def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -> dict:
+    """Sensor streams of one run from the motion ``traj``: ``imu_acc`` (n,3) m/s², ``imu_gyro``
+    (m,3) rad/s, ``position_cmd`` (k,) m, each with its rate ``*_fs_hz``.
+
+    The runs of a session share the mechanical state, and the simulator is deterministic, so the
+    90 runs of a session share one simulated motion and differ by their sensor noise (drawn
+    independently per run from ``rng``), exactly as 90 simulations would."""
+    w = sim.world
+    fs = sim.fs
+    _, acc = ins.measure_imu_accelerometer(traj.sens[:, SENS_IMU_ACC], fs, w.imu_acc, rng)
+    _, gyro = ins.measure_gyroscope(traj.sens[:, SENS_IMU_GYRO], fs, w.imu_gyro, rng)
+    n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
+    t_cmd = np.arange(n_cmd) / w.position_cmd_fs
+    pos = np.interp(t_cmd, traj.cmd.t, traj.cmd.x)
+    return {"imu_acc": acc.astype(np.float32), "imu_acc_fs_hz": float(w.imu_acc.fs_hz),
+            "imu_gyro": gyro.astype(np.float32), "imu_gyro_fs_hz": float(w.imu_gyro.fs_hz),
+            "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
+
+
+def true_error_motions(world: World, cfg, cond: Condition, dx: float = 0.05e-3
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Kinematic truth of a session: grid x_m (n,) of true carriage positions over the stroke
+    and E (6, n) (E_XX, E_YX, E_ZX m; E_AX, E_BX, E_CX rad) at the IMU, quasi-static, including
+    the thermal lead growth of the condition."""
+    start = cfg.start_mm * 1e-3 + cond.origin_offset
+    end = cfg.end_mm * 1e-3 + cond.origin_offset
+    x = np.arange(start, end + 0.5 * dx, dx)
+    r = world.axis.screw.radius_per_rad
+    theta = x / r
+    e = geo.true_error_motions(world.rails, world.carriage, world.screw, x, theta)
+    e[0] += world.thermal_expansion * cond.temperature_rise * x
+    return x, e
+
+
+# ---------------------------------------------------------------------------------------------
+# The dial indicator: first contact forward, last contact in reverse, 1 µm steps
+
+
+@dataclass(frozen=True)
+class DialResult:
+    """backlash_um: the reading a technician reports (mean over repeats), µm; elastic_um: the
+    elastic part of the lost motion at the measuring friction, 2·F_rail/K_axial, µm (what the
+    procedure adds to the clearance by physics, not by error)."""
+
+    backlash_um: float
+    elastic_um: float
+    repeats_um: tuple[float, ...]
+
+
+def dial_indicator(sim: Simulator, cfg, cond: Condition, rng: np.random.Generator,
+                   position: float = 0.225, settle: float = 0.03) -> DialResult:
+    """The paper's dial-indicator procedure (section III.C), simulated.
+
+    The lever tip is fixed against the steel load at rail coordinate ``position``. The screw is
+    commanded in steps of ``cfg.step_um`` (held ``settle`` s each, quasi-static) through the
+    contact point forward, then back. The technician reads the dial by eye: reading = true tip
+    deflection + N(0, reading_noise), rounded to a tenth of the gradation, and takes the first
+    step with a non-zero reading forward and the last one in reverse. The difference of the two
+    displayed (encoder) positions, averaged over ``cfg.repeats`` repetitions (each from a random sub-step
+    starting point), is the "experimental" backlash. ``cfg`` is a DialConfig."""
+    step = cfg.step_um * 1e-6
+    margin = 8e-6 + 4.0 * cfg.reading_noise_um * 1e-6
+    b = cond.mech.backlash
+    # Steps through the clearance and a margin on each side, then back (2·(b + margin) of
+    # travel); the tip is set where the carriage will touch it half-way up.
+    nsteps = int(math.ceil(2.0 * (b + margin) / step)) + 1
+    per = max(int(round(settle * sim.fs)), 2)
+    k_axial = stiffness_of(sim.world.axis, cond.mech)["axial"]
+    elastic = 2.0 * sim.world.axis.carriage.rail_friction / k_axial
+    resolution = cfg.gradation_um * 1e-6 / 10.0
+    stretch = 1.0 + sim.lead_stretch(cond)
+    results = []
+    for _ in range(cfg.repeats):
+        base = position - cond.origin_offset + float(rng.uniform(0.0, step))
+        # The technician brings the lever to the load with the carriage parked on its forward
+        # flank at ``base``; the tip ends up b + margin ahead of the load.
+        tip = stretch * (base + cond.origin_offset) - b / 2.0 + b + margin
+        up = base + step * np.arange(nsteps)
+        stair = np.concatenate([up, up[::-1]])
+        x_cmd = np.concatenate([np.full(per * 4, base), np.repeat(stair, per)])
+        t = np.arange(x_cmd.size) / sim.fs
+        # A vanishing first velocity tells the simulator which flank the carriage starts on.
+        v = np.zeros_like(x_cmd)
+        v[0] = 1e-12
+        cmd_start = Profile(t=t, x=x_cmd, v=v, a=np.zeros_like(x_cmd),
+                            segment=np.zeros(x_cmd.size, np.int32))
+        traj = sim.run(cond, cmd_start, passes=1)
+        ends = per * 4 + per * (np.arange(2 * nsteps) + 1) - 1
+        x_true = traj.x[ends]
+        deflection = np.maximum(x_true - tip, 0.0)
+        # A needle at rest reads exactly zero; once the tip is pushed, the by-eye estimate of
+        # the sub-gradation deflection carries the reading error.
+        noise = rng.normal(0.0, cfg.reading_noise_um * 1e-6, size=deflection.size)
+        reading = np.where(deflection > 0.0, np.maximum(deflection + noise, 0.0), 0.0)
+        reading = np.round(reading / resolution) * resolution
+        touched = reading > 0.0
+        fwd, rev = touched[:nsteps], touched[nsteps:]
+        # The technician notes the position display: the encoder's actual position (nominal
+        # lead), not the command, which the stiction of the drive leaves a fraction of a µm away.
+        shown = traj.qpos[ends, Q_SCREW] * sim.world.axis.screw.radius_per_rad - cond.origin_offset
+        cmd_steps_fwd, cmd_steps_rev = shown[:nsteps], shown[nsteps:]
+        if not fwd.any() or not rev.any():
+            raise RuntimeError("dial indicator: no contact within the stepped range")
+        first_fwd = cmd_steps_fwd[np.argmax(fwd)]
+        # Reverse: the last step (in time) at which the tip is still touched.
+        last_rev = cmd_steps_rev[len(rev) - 1 - np.argmax(rev[::-1])]
+        results.append((first_fwd - last_rev) * 1e6)
+    return DialResult(backlash_um=float(np.mean(results)), elastic_um=elastic * 1e6,
+                      repeats_um=tuple(results))
