@@ -255,3 +255,104 @@ def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
     else:
         raise ValueError(f"unknown unit kind {unit.kind!r}")
     return unit.name
+
+
+# ---------------------------------------------------------------------------------------------
+# The runner
+
+
+def _timeline(s: Scenario, units: list[Unit]) -> dict[str, np.ndarray]:
+    """Truth timeline: the injected state every 12 h and at every unit's hours."""
+    grid = np.arange(0.0, s.campaign.total_hours + 1e-9, 12.0)
+    hours = np.unique(np.concatenate([grid, [u.hours for u in units]]))
+    pf, bl = degradation_at(s, hours)
+    axis = to_axis(s)
+    preload = pf * s.axis.preload_N
+    coupling = s.degradation.truck_wear_coupling
+    stiff = np.array([stiffness_of(axis, MechanicalState(
+        preload=p, truck_preload_fraction=1.0 - coupling * (1.0 - f)))["axial"]
+        for p, f in zip(preload, pf)])
+    return {"hours": hours, "preload_N": preload, "backlash_um": bl,
+            "axial_stiffness_N_per_m": stiff,
+            "drag_torque_Nm": np.array([axis.screw.drag_torque(p) for p in preload]),
+            "temperature_rise_K": temperature_at(s, hours)}
+
+
+def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
+    """Write measurements.h5 and truth.h5 from the stored parts."""
+    store = ds.PartStore(out_dir)
+    by_kind = {k: [u for u in units if u.kind == k] for k in ("phase1", "phase2", "dial")}
+
+    def phase1_items():
+        for u in by_kind["phase1"]:
+            attrs, data, _ = store.read("phase1", u.name)
+            yield u.name, attrs, data
+
+    def phase2_items():
+        for u in by_kind["phase2"]:
+            attrs, data, dattrs = store.read("phase2", u.name)
+            runs = sorted({k.split("/")[0] for k in data if k.startswith("r")})
+            yield (u.name, {"hours": attrs["hours"]},
+                   [(r, {"speeds_mm_s": list(s.phase2.speeds_mm_s)},
+                     {k.split("/")[1]: data[k] for k in data if k.startswith(r + "/")},
+                     {k.split("/")[1]: dattrs.get(k, {}) for k in data if k.startswith(r + "/")})
+                    for r in runs])
+
+    dial_h, dial_b = [], []
+    for u in by_kind["dial"]:
+        attrs, _, _ = store.read("dial", u.name)
+        dial_h.append(attrs["hours"])
+        dial_b.append(attrs["backlash_um"])
+    ds.assemble_measurements(out_dir / "measurements.h5", nominal_axis_description(s),
+                             phase1_items(), phase2_items(),
+                             (np.asarray(dial_h), np.asarray(dial_b)) if dial_h else None)
+
+    def sessions():
+        for u in by_kind["phase2"]:
+            attrs, data, _ = store.read("phase2", u.name)
+            yield u.name, attrs, data["truth/x_m"], data["truth/E"]
+
+    ds.assemble_truth(out_dir / "truth.h5", s.to_json(), onset_hours(s), _timeline(s, units),
+                      sessions(), effects={})
+
+
+def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = None,
+                      on_progress: Callable[[int, int, str], None] | None = None) -> dict:
+    """Simulate every unit of the campaign not yet stored, then assemble the two files.
+
+    Args:
+        s: the scenario. out_dir: campaign directory (created).
+        workers: processes (default: all local cores; 1 runs in this process).
+        on_progress: called as (done, total, unit name) after each unit.
+    Returns:
+        {"units": n, "simulated": n_new, "skipped": n_existing}.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    store = ds.PartStore(out)
+    store.remove_temporaries()
+    units = plan(s)
+    todo = [u for u in units if not store.has(u.kind, u.name)]
+    done = len(units) - len(todo)
+    if on_progress:
+        on_progress(done, len(units), "")
+    workers = workers or os.cpu_count() or 1
+    payload = s.to_json()
+    if workers == 1 or len(todo) <= 1:
+        for u in todo:
+            run_unit(payload, u, str(out))
+            done += 1
+            if on_progress:
+                on_progress(done, len(units), u.name)
+    else:
+        # Phase II sessions first: they are the longest units.
+        todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(run_unit, payload, u, str(out)) for u in todo]
+            for fut in as_completed(futures):
+                name = fut.result()
+                done += 1
+                if on_progress:
+                    on_progress(done, len(units), name)
+    assemble(s, out, units)
+    return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo)}

@@ -1,0 +1,26 @@
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+TWIN = [sys.executable, "-m", "twin.cli"]
+# A small but complete campaign: every kind of unit, a few seconds of simulation.
+SMALL = ["--set", "phase1.capture_s=2.0", "--set", "phase1.sample_interval_hours=250",
+         "--set", "phase2.runs_per_session=2", "--set", "phase2.dwell_s=0.5",
+         "--set", "phase2.speeds_mm_s=[100.0, 500.0]", "--set", "phase2.session_hours=[50.0, 550.0]"]
+
+
+def run_twin(*args, check=True, **kw):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    return subprocess.run([*TWIN, *map(str, args)], cwd=REPO, env=env, capture_output=True,
+                          text=True, check=check, **kw)
+
+
+@pytest.fixture(scope="session")
+def small_campaign(tmp_path_factory):
+    out = tmp_path_factory.mktemp("small")
+    run_twin("simulate", REPO / "scenarios/quick.toml", "-o", out, *SMALL)
+    return out

