@@ -79,7 +79,7 @@ def demo(
     with open_measurements(out / "measurements.h5") as m, open_truth(out / "truth.h5") as t:
         tl = t.timeline()
         table = Table(title=f"quick campaign in {out}")
-        for col in ("what", "count", "hours"):
+        for col in ("what", "count", "values"):
             table.add_column(col)
         caps = m.phase1_captures()
         sessions = m.phase2_sessions()

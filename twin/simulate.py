@@ -183,7 +183,7 @@ class Simulator:
             state, sens = state[0], sens[0]
             nq, nv = self.model.nq, self.model.nv
             qpos = state[:, 1:1 + nq]
-            x_rail = qpos[:, Q_X]
+            x_rail = np.concatenate(([x0], qpos[:-1, Q_X]))  # rails at x(t_k) for step k (row k is t_{k+1})
         qvel = state[:, 1 + nq:1 + nq + nv]
         # Row k of a rollout is the state after step k, at time (k+1)·dt.
         t = (np.arange(cmd.t.size) + 1) * self.timestep
