@@ -98,6 +98,25 @@ def demo(
     console.print(f"done in {summary['seconds']:.1f} s")
 
 
+@app.command("export-model")
+def export_model(
+    scenario: Optional[Path] = typer.Argument(None, help="scenario TOML (default: the paper's axis)"),
+    out: Path = typer.Option(Path("models/linear_axis.xml"), "-o", "--out"),
+    timestep: float = typer.Option(1e-4, help="simulation time step, s"),
+) -> None:
+    """Write the MJCF of the axis (new, healthy state), e.g. to open it in MuJoCo's viewer."""
+    from twin.model import build_mjcf
+    from twin.scenario import Scenario, to_axis
+
+    try:
+        s = load(scenario) if scenario else Scenario()
+    except ScenarioError as exc:
+        _fail(str(exc))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(build_mjcf(to_axis(s), timestep))
+    console.print(f"wrote {out}")
+
+
 def main() -> None:
     try:
         app()
