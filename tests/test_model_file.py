@@ -12,4 +12,4 @@ def test_models_file_matches_builder():
     assert shipped == build_mjcf(to_axis(Scenario()), 1e-4), \
         "models/linear_axis.xml is stale: run `twin export-model`"
     model = mujoco.MjModel.from_xml_path(str(REPO / "models/linear_axis.xml"))
-    assert model.nu == NCTRL and model.nv == 7 and model.ntendon == 9
+    assert model.nu == NCTRL and model.nv == 8 and model.ntendon == 9

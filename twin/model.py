@@ -1,13 +1,14 @@
 """The MuJoCo model of the linear axis: MJCF text built from :class:`twin.axis.Axis`.
 
-Degrees of freedom (9):
+Degrees of freedom (8):
 - ``screw``: hinge of the motor rotor and screw about X (the servo acts here);
 - the carriage with its steel load, as one rigid body on six joints at its centre of mass:
   ``carriage_x`` (travel), ``carriage_y``, ``carriage_z``, ``carriage_roll`` (about X),
-  ``carriage_pitch`` (about Y) and ``carriage_yaw`` (about Z).
+  ``carriage_pitch`` (about Y) and ``carriage_yaw`` (about Z);
+- ``lead_flank``: the prescribed cyclic lead error of the nut flanks (see below).
 
 Couplings, all fixed tendons (linear in the joint coordinates, exact for the µm/µrad motions here):
-- ``ballnut``: L = x + z_n·pitch − R·θ with R = lead/2π (z_n: nut axis height below the centre of
+- ``ballnut``: L = x + z_n·pitch − R·θ − ε with R = lead/2π, ε the lead flank (z_n: nut axis height below the centre of
   mass). Its stiffness is the series axial stiffness of shaft, nut contact and support bearings,
   which follows the nut preload (Hertz, k ∝ F^(1/3)). Its ``springlength`` is a dead band
   [−b/2, +b/2]: the backlash b, with the contact stiffness at both ends.
@@ -16,11 +17,15 @@ Couplings, all fixed tendons (linear in the joint coordinates, exact for the µm
 
 Geometric errors enter as prescribed displacements e inside these springs. A spring with a
 displacement error, F = −K·(L − e), is exactly the unperturbed spring plus a force pair K·e along the
-tendon, so each error is applied by a ``motor`` actuator on its tendon with control K·e(t):
-rail waviness under each truck, lead error and ball passing in the ball nut. Screw runout pushes
-the carriage radially at the nut through the nut's radial stiffness (two site actuators).
-The one approximation: inside the backlash gap the lead-error force pair K·e (a few tens of N for
-sub-µm errors) still acts; the gap is crossed in milliseconds at reversals.
+tendon, so the rail waviness under each truck is applied by a ``motor`` actuator on the truck's
+tendon with control K·e(t), and screw runout pushes the carriage radially at the nut through the
+nut's radial stiffness (two site actuators). The ball nut has a backlash gap, where a force pair
+would wrongly keep acting, so its cyclic lead error and ball passing move the flanks instead: a
+tenth coordinate ``lead_flank`` (a slide in the ball-nut tendon, L = ... − ε) is driven along the
+prescribed e(t) by a very stiff ``<pid>`` with position, velocity and acceleration
+(feed-forward M·ë) inputs. Its mass M = 1e5 kg only makes that drive stiff (kp = M·(0.5/dt)²,
+about 1e12 N/m: 1 nm under a 1 kN nut force) while it stays explicit-stable (ω·dt = 0.5); it
+never carries the carriage's load, which the drive passes to the ground.
 
 The servo is MuJoCo's ``<pid input="pos vel ff">`` actuator on the screw hinge (see
 :class:`twin.axis.Servo`); a second motor on the hinge carries the torque ripple of the motor,
@@ -44,14 +49,15 @@ from twin.axis import GRAVITY, Axis
 
 TRUCKS = ("FL", "FR", "RL", "RR")
 
-# Control layout (indices into data.ctrl): the pid actuator takes three inputs.
+# Control layout (indices into data.ctrl): the pid actuators take three inputs each.
 CTRL_POS, CTRL_VEL, CTRL_FF = 0, 1, 2
 CTRL_RIPPLE = 3
-CTRL_BALLNUT = 4
-CTRL_TRUCK_V = slice(5, 9)
-CTRL_TRUCK_L = slice(9, 13)
-CTRL_RUNOUT = slice(13, 15)
-NCTRL = 15
+CTRL_FLANK_POS, CTRL_FLANK_VEL, CTRL_FLANK_FF = 4, 5, 6
+CTRL_TRUCK_V = slice(7, 11)
+CTRL_TRUCK_L = slice(11, 15)
+CTRL_RUNOUT = slice(15, 17)
+NCTRL = 17
+FLANK_MASS = 1e5  # kg, see the module docstring
 
 # Sensor layout (indices into data.sensordata).
 SENS_IMU_ACC = slice(0, 3)
@@ -63,7 +69,7 @@ SENS_RIPPLE_FORCE = 13
 NSENS = 14
 
 # qpos / qvel indices.
-Q_SCREW, Q_X, Q_Y, Q_Z, Q_ROLL, Q_PITCH, Q_YAW = range(7)
+Q_SCREW, Q_X, Q_Y, Q_Z, Q_ROLL, Q_PITCH, Q_YAW, Q_FLANK = range(8)
 
 
 @dataclass(frozen=True)
@@ -96,6 +102,8 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
     zi = c.imu_height - c.com_height
     kp, ki, kd = axis.servo_gains()
     half_travel = axis.travel / 2.0
+    flank_kp = FLANK_MASS * (0.5 / timestep) ** 2
+    flank_kv = 2.0 * math.sqrt(flank_kp * FLANK_MASS)
 
     truck_tendons = []
     for i, name in enumerate(TRUCKS):
@@ -151,19 +159,25 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
       <site name="nut_acc1" pos="0.02 0.025 {_fmt(zn + 0.02)}" size="0.005"/>
       <site name="nut_acc2" pos="-0.02 -0.025 {_fmt(zn - 0.02)}" size="0.005"/>
 {truck_sites}    </body>
+    <body name="lead_flank">
+      <joint name="lead_flank" type="slide" axis="1 0 0"/>
+      <inertial pos="0 0 0" mass="{_fmt(FLANK_MASS)}" diaginertia="1 1 1"/>
+    </body>
   </worldbody>
   <tendon>
     <fixed name="ballnut" springlength="0 0" stiffness="1" damping="0">
       <joint joint="carriage_x" coef="1"/>
       <joint joint="carriage_pitch" coef="{_fmt(zn)}"/>
       <joint joint="screw" coef="{_fmt(-r)}"/>
+      <joint joint="lead_flank" coef="-1"/>
     </fixed>
 {''.join(truck_tendons)}  </tendon>
   <actuator>
     <pid name="servo" joint="screw" input="pos vel ff" kp="{_fmt(kp)}" kv="{_fmt(kd)}" ki="{_fmt(ki)}"
          forcerange="{_fmt(-axis.servo.torque_limit)} {_fmt(axis.servo.torque_limit)}"/>
     <motor name="ripple" joint="screw" gear="1"/>
-    <motor name="ballnut_error" tendon="ballnut" gear="1"/>
+    <pid name="lead_flank" joint="lead_flank" input="pos vel ff" kp="{_fmt(flank_kp)}"
+         kv="{_fmt(flank_kv)}"/>
 {truck_motors}    <motor name="runout_y" site="nut" gear="0 1 0 0 0 0"/>
     <motor name="runout_z" site="nut" gear="0 0 1 0 0 0"/>
   </actuator>
@@ -182,7 +196,7 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
 def build_model(axis: Axis, timestep: float) -> mujoco.MjModel:
     """Compile the axis model; see :func:`build_mjcf`."""
     model = mujoco.MjModel.from_xml_string(build_mjcf(axis, timestep))
-    assert model.nu == NCTRL and model.actuator_ctrlnum[0] == 3, "control layout changed"
+    assert model.nu == NCTRL and model.actuator_ctrlnum[2] == 3, "control layout changed"
     assert model.nsensordata == NSENS, "sensor layout changed"
     return model
 
@@ -248,17 +262,20 @@ def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> No
         model.tendon_lengthspring[tl] = (0.0, 0.0)
     screw = model.joint("screw").dofadr[0]
     model.dof_frictionloss[screw] = axis.screw.drag_torque(state.preload) * state.drag_scale
-    # The screw is the last joint of the ball-nut tendon (see build_mjcf).
-    wrap = model.tendon_adr[ballnut] + model.tendon_num[ballnut] - 1
+    # The screw is the third joint of the ball-nut tendon (see build_mjcf).
+    wrap = model.tendon_adr[ballnut] + 2
     assert model.wrap_objid[wrap] == model.joint("screw").id
     model.wrap_prm[wrap] = -r * (1.0 + state.lead_stretch)
 
 
-def initial_state(model: mujoco.MjModel, x0: float, theta0: float) -> np.ndarray:
-    """Full physics state at rest with the carriage at ``x0`` m and the screw at ``theta0`` rad."""
+def initial_state(model: mujoco.MjModel, x0: float, theta0: float, flank0: float = 0.0
+                  ) -> np.ndarray:
+    """Full physics state at rest: carriage at ``x0`` m, screw at ``theta0`` rad, lead flank at
+    ``flank0`` m."""
     data = mujoco.MjData(model)
     data.qpos[Q_SCREW] = theta0
     data.qpos[Q_X] = x0
+    data.qpos[Q_FLANK] = flank0
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     mujoco.mj_forward(model, data)
     state = np.empty(mujoco.mj_stateSize(model, spec))

@@ -33,15 +33,12 @@ from mujoco import rollout
 from twin import geometry as geo
 from twin.axis import Axis
 from twin.drive import Move, Profile, command_profile, reciprocating
-from twin.model import (CTRL_BALLNUT, CTRL_FF, CTRL_POS, CTRL_RIPPLE, CTRL_RUNOUT, CTRL_TRUCK_L,
+from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, FLANK_MASS, CTRL_POS, CTRL_RIPPLE, CTRL_RUNOUT, CTRL_TRUCK_L,
                         CTRL_TRUCK_V, CTRL_VEL, NCTRL, Q_PITCH, Q_ROLL, Q_SCREW, Q_X, Q_Y, Q_YAW,
                         Q_Z, SENS_IMU_ACC, SENS_IMU_GYRO, SENS_NUT1_ACC, SENS_NUT2_ACC,
                         SENS_SERVO_FORCE, MechanicalState, apply_state, build_model,
                         initial_state, stiffness_of)
 from twin.sensors import instruments as ins
-
-
-CYCLIC_GATE_SPEED = 0.005  # m/s: below it the cyclic lead-error force pair fades out
 
 
 @dataclass(frozen=True)
@@ -126,6 +123,15 @@ class Simulator:
         w = self.world
         return w.screw.cumulative_lead_error_m_per_m + w.thermal_expansion * cond.temperature_rise
 
+    def flank_motion(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Prescribed flank displacement ε (n,) m, its velocity and acceleration, for the screw
+        angles ``theta`` (n,) rad sampled at the simulation rate: cyclic lead error + ball pass."""
+        w = self.world
+        r = w.axis.screw.radius_per_rad
+        eps = geo.nut_axial_deviation(theta, w.screw) - w.screw.cumulative_lead_error_m_per_m * r * theta
+        vel = np.gradient(eps, self.timestep)
+        return eps, vel, np.gradient(vel, self.timestep)
+
     @property
     def fs(self) -> float:
         return 1.0 / self.timestep
@@ -142,16 +148,12 @@ class Simulator:
         ctrl[:, CTRL_VEL] = cmd.v / r
         ctrl[:, CTRL_FF] = ax.servo.torque_feedforward * ax.total_inertia() * cmd.a / r
         ctrl[:, CTRL_RIPPLE] = w.ripple_torque * np.sin(w.ripple_per_rev * theta + w.ripple_phase)
-        # Cyclic lead error and ball pass (sub-µm) as a force pair; the cumulative and thermal
-        # parts are in the tendon's lead coefficient (see MechanicalState.lead_stretch).
-        # The pair acts whatever the flank, also inside the backlash gap, where it should not;
-        # it is therefore faded out below CYCLIC_GATE_SPEED, so that at rest and in the
-        # quasi-static dial-indicator steps the carriage settles on the flank the physics
-        # chooses. In motion the nut is in contact on one flank, where the pair is exact.
-        cyclic = (geo.nut_axial_deviation(theta, w.screw)
-                  - w.screw.cumulative_lead_error_m_per_m * r * theta)
-        gate = np.clip(np.abs(cmd.v) / CYCLIC_GATE_SPEED, 0.0, 1.0)
-        ctrl[:, CTRL_BALLNUT] = k["axial"] * cyclic * gate
+        # Cyclic lead error and ball pass move the nut's flanks (the lead_flank coordinate);
+        # the cumulative and thermal parts are in the tendon's lead coefficient.
+        flank, flank_v, flank_a = self.flank_motion(theta)
+        ctrl[:, CTRL_FLANK_POS] = flank
+        ctrl[:, CTRL_FLANK_VEL] = flank_v
+        ctrl[:, CTRL_FLANK_FF] = FLANK_MASS * flank_a
         disp = geo.truck_displacements(w.rails, w.carriage, x_rail)
         ctrl[:, CTRL_TRUCK_V] = k["truck_vertical"] * disp["vertical"].T
         ctrl[:, CTRL_TRUCK_L] = k["truck_lateral"] * disp["lateral"].T
@@ -176,7 +178,8 @@ class Simulator:
         first_dir = np.sign(cmd.v[np.flatnonzero(cmd.v)[0]]) if np.any(cmd.v) else 1.0
         theta0 = x_cmd_rail[0] / r
         x0 = stretch * x_cmd_rail[0] - 0.5 * cond.mech.backlash * first_dir
-        s0 = initial_state(self.model, x0, theta0)
+        flank0 = self.flank_motion(np.array([theta0, theta0]))[0][0]
+        s0 = initial_state(self.model, x0 + flank0, theta0, flank0)
         for _ in range(max(passes, 1)):
             ctrl = self.controls(cond, cmd, x_rail)
             state, sens = rollout.rollout(self.model, self.data, s0, ctrl)
