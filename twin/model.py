@@ -20,8 +20,8 @@ displacement error, F = −K·(L − e), is exactly the unperturbed spring plus 
 tendon, so the rail waviness under each truck is applied by a ``motor`` actuator on the truck's
 tendon with control K·e(t), and screw runout pushes the carriage radially at the nut through the
 nut's radial stiffness (two site actuators). The ball nut has a backlash gap, where a force pair
-would wrongly keep acting, so its cyclic lead error and ball passing move the flanks instead: a
-tenth coordinate ``lead_flank`` (a slide in the ball-nut tendon, L = ... − ε) is driven along the
+would wrongly keep acting, so its cyclic lead error and ball passing move the flanks instead: an
+eighth coordinate ``lead_flank`` (a slide in the ball-nut tendon, L = ... − ε) is driven along the
 prescribed e(t) by a very stiff ``<pid>`` with position, velocity and acceleration
 (feed-forward M·ë) inputs. Its mass M = 1e5 kg only makes that drive stiff (kp = M·(0.5/dt)²,
 about 1e12 N/m: 1 nm under a 1 kN nut force) while it stays explicit-stable (ω·dt = 0.5); it
@@ -31,6 +31,12 @@ The servo is MuJoCo's ``<pid input="pos vel ff">`` actuator on the screw hinge (
 :class:`twin.axis.Servo`); a second motor on the hinge carries the torque ripple of the motor,
 which the controller does not know. Nut drag torque is Coulomb friction (``frictionloss``) plus
 viscous damping on the hinge; rail and seal friction is ``frictionloss`` on ``carriage_x``.
+
+Known simplifications: tendon damping (the contact's structural damping, ζ = 3 %) also acts
+inside the backlash gap, where it adds a drag c·v_rel (about 55 N for the ~9 mm/s at which a
+10 µm gap is crossed at a 400 mm/s reversal); the clearance is the wear law's average over the
+balls and may coexist with the remaining preload of the others; the shaft stiffness is taken at
+mid-stroke.
 
 Models in different degradation states differ only in float fields (``tendon_stiffness``,
 ``tendon_damping``, ``tendon_lengthspring``, ``dof_frictionloss``), see :func:`apply_state`, so
@@ -130,7 +136,9 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
 
     return f"""<mujoco model="ballscrew_linear_axis">
   <compiler angle="radian" autolimits="true"/>
-  <option timestep="{_fmt(timestep)}" integrator="implicitfast" gravity="0 0 {_fmt(-GRAVITY)}"/>
+  <option timestep="{_fmt(timestep)}" integrator="implicitfast" gravity="0 0 {_fmt(-GRAVITY)}">
+    <flag contact="disable"/>
+  </option>
   <worldbody>
     <geom name="base" type="box" pos="{_fmt(half_travel)} 0 -0.06" size="{_fmt(half_travel + 0.1)} 0.2 0.02"
           contype="0" conaffinity="0" rgba="0.5 0.5 0.5 1"/>
