@@ -23,6 +23,7 @@ far below anything the nut accelerometers see.
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 from dataclasses import dataclass, field, replace
@@ -37,7 +38,7 @@ from twin.drive import Move, Profile, command_profile, reciprocating
 from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, FLANK_MASS, CTRL_POS, CTRL_RIPPLE, CTRL_RUNOUT, CTRL_TRUCK_L,
                         CTRL_TRUCK_V, CTRL_VEL, NCTRL, Q_PITCH, Q_ROLL, Q_SCREW, Q_X, Q_Y, Q_YAW,
                         Q_Z, SENS_IMU_ACC, SENS_IMU_GYRO, SENS_NUT1_ACC, SENS_NUT2_ACC,
-                        SENS_SERVO_FORCE, MechanicalState, apply_state, build_mjcf, build_model,
+                        SENS_SERVO_FORCE, MechanicalState, apply_state, build_model,
                         initial_state, stiffness_of)
 from twin.sensors import instruments as ins
 
@@ -170,33 +171,7 @@ class Simulator:
         ``passes`` = 2 looks the rails up at the true carriage position of a first pass (see the
         module docstring); 1 looks them up at the commanded position shifted by the backlash lag.
         """
-        mech = replace(cond.mech, lead_stretch=self.lead_stretch(cond))
-        apply_state(self.model, self.world.axis, mech)
-        r = self.world.axis.screw.radius_per_rad
-        x_cmd_rail = cmd.x + cond.origin_offset
-        # First guess of the true position: the carriage trails the screw by half the clearance.
-        stretch = 1.0 + mech.lead_stretch
-        lag = 0.5 * cond.mech.backlash * np.sign(cmd.v)
-        x_rail = stretch * x_cmd_rail - lag
-        # Start at rest, in contact on the flank of the first motion.
-        first_dir = np.sign(cmd.v[np.flatnonzero(cmd.v)[0]]) if np.any(cmd.v) else 1.0
-        theta0 = x_cmd_rail[0] / r
-        x0 = stretch * x_cmd_rail[0] - 0.5 * cond.mech.backlash * first_dir
-        flank0 = self.flank_motion(np.array([theta0, theta0]))[0][0]
-        s0 = initial_state(self.model, x0 + flank0, theta0, flank0)
-        for _ in range(max(passes, 1)):
-            ctrl = self.controls(cond, cmd, x_rail)
-            state, sens = rollout.rollout(self.model, self.data, s0, ctrl)
-            state, sens = state[0], sens[0]
-            nq, nv = self.model.nq, self.model.nv
-            qpos = state[:, 1:1 + nq]
-            x_rail = np.concatenate(([x0], qpos[:-1, Q_X]))  # rails at x(t_k) for step k (row k is t_{k+1})
-        qvel = state[:, 1 + nq:1 + nq + nv]
-        # Row k of a rollout is the state after step k, at time (k+1)·dt.
-        t = (np.arange(cmd.t.size) + 1) * self.timestep
-        return Trajectory(t=t, qpos=qpos, qvel=qvel, sens=sens, cmd=cmd,
-                          theta_cmd=(cmd.x + cond.origin_offset) / r)
-
+        return self.run_batch([cond], cmd, passes)[0]
 
     def run_batch(self, conds: list[Condition], cmd: Profile, passes: int = 2,
                   nthread: int | None = None) -> list[Trajectory]:
@@ -204,42 +179,39 @@ class Simulator:
 
         The models of different conditions differ only in float fields (see
         :func:`twin.model.apply_state`), so they batch; ``nthread`` threads share the work (the
-        GIL is released). Gives the same trajectories as :meth:`run` for each condition."""
+        GIL is released). The first condition uses this simulator's model, the others copies.
+        Row k of a trajectory is the state after step k, at time (k+1)·dt."""
         r = self.world.axis.screw.radius_per_rad
+        x_cmd = [cmd.x + c.origin_offset for c in conds]
+        first_dir = np.sign(cmd.v[np.flatnonzero(cmd.v)[0]]) if np.any(cmd.v) else 1.0
         models, s0s, x_rails, x0s = [], [], [], []
-        for cond in conds:
-            model = mujoco.MjModel.from_xml_string(build_mjcf(self.world.axis, self.timestep)) \
-                if not models else _copy_model(models[0])
+        for cond, xc in zip(conds, x_cmd):
+            model = self.model if not models else copy.deepcopy(self.model)
             mech = replace(cond.mech, lead_stretch=self.lead_stretch(cond))
             apply_state(model, self.world.axis, mech)
-            x_cmd_rail = cmd.x + cond.origin_offset
             stretch = 1.0 + mech.lead_stretch
-            first_dir = np.sign(cmd.v[np.flatnonzero(cmd.v)[0]]) if np.any(cmd.v) else 1.0
-            theta0 = x_cmd_rail[0] / r
-            x0 = stretch * x_cmd_rail[0] - 0.5 * cond.mech.backlash * first_dir
+            # Start at rest, in contact on the flank of the first motion; first guess of the
+            # true position: the carriage trails the screw by half the clearance.
+            theta0 = xc[0] / r
+            x0 = stretch * xc[0] - 0.5 * cond.mech.backlash * first_dir
             flank0 = self.flank_motion(np.array([theta0, theta0]))[0][0]
             models.append(model)
             s0s.append(initial_state(model, x0 + flank0, theta0, flank0))
-            x_rails.append(stretch * x_cmd_rail - 0.5 * cond.mech.backlash * np.sign(cmd.v))
+            x_rails.append(stretch * xc - 0.5 * cond.mech.backlash * np.sign(cmd.v))
             x0s.append(x0)
         nthread = nthread or min(len(conds), os.cpu_count() or 1)
-        datas = [mujoco.MjData(models[0]) for _ in range(nthread)]
+        datas = [self.data] + [mujoco.MjData(self.model) for _ in range(nthread - 1)]
         nq, nv = self.model.nq, self.model.nv
         for _ in range(max(passes, 1)):
             ctrl = np.stack([self.controls(c, cmd, xr) for c, xr in zip(conds, x_rails)])
             state, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+            # Step k uses the rails at x(t_k): the previous row.
             x_rails = [np.concatenate(([x0], st[:-1, 1 + Q_X])) for x0, st in zip(x0s, state)]
         t = (np.arange(cmd.t.size) + 1) * self.timestep
         return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
-                           cmd=cmd, theta_cmd=(cmd.x + c.origin_offset) / r)
-                for st, se, c in zip(state, sens, conds)]
+                           cmd=cmd, theta_cmd=xc / r)
+                for st, se, xc in zip(state, sens, x_cmd)]
 
-
-def _copy_model(model: mujoco.MjModel) -> mujoco.MjModel:
-    """An independent copy of a compiled model (its float fields can then differ)."""
-    import copy
-
-    return copy.deepcopy(model)
 
 # ---------------------------------------------------------------------------------------------
 # Phase I: ten 10-s captures of the 400 mm/s reciprocating routine per sample
