@@ -103,3 +103,12 @@ def test_killed_simulation_resumes_without_redoing(small_campaign, tmp_path):
     assert a.keys() == b.keys()
     for k in a:
         np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+def test_resume_refuses_another_scenario(small_campaign):
+    res = run_twin("simulate", REPO / "scenarios/quick.toml", "-o", small_campaign, *SMALL,
+                   "--set", "seed=5", check=False)
+    text = " ".join(res.stderr.split())
+    print(text)
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    assert "holds a campaign of another scenario (differing keys: seed)" in text

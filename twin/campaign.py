@@ -316,6 +316,43 @@ def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
                       sessions(), effects={})
 
 
+class CampaignDirectoryError(ValueError):
+    """The output directory holds the parts of a different scenario."""
+
+
+def _claim(out: Path, s: Scenario) -> None:
+    """Record the scenario in ``out/.parts/scenario.json``; refuse to mix with another one.
+
+    Resuming reuses stored parts, which is only right for the very same scenario (all keys,
+    overrides and seed)."""
+    import json
+
+    manifest = out / ".parts" / "scenario.json"
+    mine = json.loads(s.to_json())
+    if manifest.exists():
+        theirs = json.loads(manifest.read_text())
+        if theirs != mine:
+            diff = sorted(_diff_keys(theirs, mine))
+            raise CampaignDirectoryError(
+                f"{out} holds a campaign of another scenario (differing keys: "
+                f"{', '.join(diff[:8])}{' ...' if len(diff) > 8 else ''}); its finished parts "
+                "cannot be reused. Choose a new output directory, or delete this one.")
+        return
+    manifest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = manifest.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(mine, sort_keys=True, indent=1))
+    os.replace(tmp, manifest)
+
+
+def _diff_keys(a, b, prefix: str = "") -> list[str]:
+    if isinstance(a, dict) and isinstance(b, dict):
+        out = []
+        for k in set(a) | set(b):
+            out += _diff_keys(a.get(k), b.get(k), f"{prefix}{k}.")
+        return out
+    return [] if a == b else [prefix.rstrip(".")]
+
+
 def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = None,
                       on_progress: Callable[[int, int, str], None] | None = None) -> dict:
     """Simulate every unit of the campaign not yet stored, then assemble the two files.
@@ -329,6 +366,7 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    _claim(out, s)
     store = ds.PartStore(out)
     store.remove_temporaries()
     units = plan(s)

@@ -27,7 +27,7 @@ def _fail(message: str, code: int = 2) -> None:
 
 
 def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: Optional[int]) -> dict:
-    from twin.campaign import plan, simulate_campaign
+    from twin.campaign import CampaignDirectoryError, plan, simulate_campaign
 
     try:
         s = load(scenario, overrides)
@@ -46,7 +46,11 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: Op
         def on_progress(done: int, total: int, name: str) -> None:
             progress.update(task, completed=done, description=f"simulating {name}")
 
-        summary = simulate_campaign(s, out, workers=workers, on_progress=on_progress)
+        try:
+            summary = simulate_campaign(s, out, workers=workers, on_progress=on_progress)
+        except CampaignDirectoryError as exc:
+            progress.stop()
+            _fail(str(exc))
     summary["seconds"] = time.perf_counter() - t0
     summary["scenario"] = s
     return summary
