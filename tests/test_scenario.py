@@ -46,3 +46,18 @@ def test_shipped_scenarios_load():
     for name in ("quick", "paper-rtf", "paper-reference"):
         s = load(REPO / f"scenarios/{name}.toml")
         assert s.name == name
+
+
+def test_reduced_scale_is_one_override():
+    from twin.campaign import plan
+
+    full = load(REPO / "scenarios/paper-rtf.toml")
+    reduced = load(REPO / "scenarios/paper-rtf.toml", ["campaign.scale=0.1"])
+    assert (full.captures_per_sample, full.runs_per_session) == (10, 90)
+    assert (reduced.captures_per_sample, reduced.runs_per_session) == (1, 9)
+    n_full = sum(u.kind == "phase1" for u in plan(full))
+    n_reduced = sum(u.kind == "phase1" for u in plan(reduced))
+    assert n_full == 10 * n_reduced
+    # the same timeline: the same sessions and samples
+    assert [u.hours for u in plan(full) if u.kind == "phase2"] == \
+        [u.hours for u in plan(reduced) if u.kind == "phase2"]

@@ -184,8 +184,8 @@ def plan(s: Scenario) -> list[Unit]:
         p1 = s.phase1
         h, sample, idx = s.campaign.warmup_hours, 0, 0
         step = p1.capture_interval_minutes / 60.0
-        while h + (p1.captures_per_sample - 1) * step <= s.campaign.total_hours:
-            for j in range(p1.captures_per_sample):
+        while h + (s.captures_per_sample - 1) * step <= s.campaign.total_hours:
+            for j in range(s.captures_per_sample):
                 units.append(Unit("phase1", f"c{idx:06d}", idx, h + j * step, sample))
                 idx += 1
             sample += 1
@@ -232,7 +232,7 @@ def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
         cond = condition_at(s, unit.hours, origin_offset(s, unit.index))
         traj = phase2_trajectory(sim, s.phase2, cond)
         datasets, dattrs = {}, {}
-        for r in range(s.phase2.runs_per_session):
+        for r in range(s.runs_per_session):
             m = phase2_measure(sim, traj, rng_for(s.seed, KIND_PHASE2, unit.index, r))
             for key in ("imu_acc", "imu_gyro", "position_cmd"):
                 datasets[f"r{r:04d}/{key}"] = m[key]

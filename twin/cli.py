@@ -37,7 +37,7 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: Op
     n1 = sum(u.kind == "phase1" for u in units)
     n2 = sum(u.kind == "phase2" for u in units)
     console.print(f"scenario [bold]{s.name}[/]: {n1} Phase I captures, {n2} Phase II sessions "
-                  f"x {s.phase2.runs_per_session} runs, {s.campaign.total_hours:g} h -> {out}")
+                  f"x {s.runs_per_session} runs, {s.campaign.total_hours:g} h -> {out}")
     t0 = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console, transient=False) as progress:

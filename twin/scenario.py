@@ -183,6 +183,7 @@ class PauseConfig(_Section):
 
 
 class CampaignConfig(_Section):
+    scale: float = Field(1.0, gt=0, le=1, description="reduced scale: multiplies captures per sample and runs per session")
     total_hours: float = Field(8693.0, gt=0)
     warmup_hours: float = Field(2.0, ge=0)
     pauses: list[PauseConfig] = Field(default_factory=lambda: [
@@ -218,6 +219,16 @@ class Scenario(_Section):
                 raise ValueError(f"{key}.start_mm = {a:g} equals {key}.end_mm: the stroke must "
                                  "have a non-zero length")
         return self
+
+    @property
+    def captures_per_sample(self) -> int:
+        """Phase I captures per sample after ``campaign.scale`` (at least 1)."""
+        return max(1, round(self.phase1.captures_per_sample * self.campaign.scale))
+
+    @property
+    def runs_per_session(self) -> int:
+        """Phase II runs per session after ``campaign.scale`` (at least 1)."""
+        return max(1, round(self.phase2.runs_per_session * self.campaign.scale))
 
     def to_json(self) -> str:
         return json.dumps(self.model_dump(mode="json"), sort_keys=True)
