@@ -49,7 +49,7 @@ ZN = AXIS.carriage.nut_height - AXIS.carriage.com_height  # nut axis below the c
 RAIL_START, RAIL_LENGTH = -0.2, 0.85  # covers the travel ± truck spacing ± origin offsets
 
 DT_SLOW = SCEN.phase2.timestep_s  # 0.2 ms, the Phase II / dial time step
-DT_FAST = SCEN.phase1.timestep_s  # 0.1 ms, the Phase I time step
+DT_FAST = 1e-4  # 0.1 ms, the finest step in use (Phase I at the DAQ rate)
 
 
 # ---------------------------------------------------------------------------------------------

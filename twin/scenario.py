@@ -146,7 +146,7 @@ class Phase1Config(_Section):
     captures_per_sample: int = Field(10, ge=1)
     capture_interval_minutes: float = Field(30.0, gt=0)
     sample_interval_hours: float = Field(84.0, gt=0)
-    timestep_s: float = Field(1e-4, gt=0, le=1e-3)
+    timestep_s: float = Field(2e-4, gt=0, le=1e-3, description="simulation step; the nut accelerometers are upsampled to their DAQ rate when it is coarser")
 
 
 class Phase2Config(_Section):

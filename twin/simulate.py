@@ -31,6 +31,7 @@ from dataclasses import dataclass, field, replace
 import mujoco
 import numpy as np
 from mujoco import rollout
+from scipy import signal
 
 from twin import geometry as geo
 from twin.axis import Axis
@@ -218,6 +219,7 @@ class Simulator:
 
 
 PHASE1_LEAD_IN = 0.3  # s of standstill simulated (and discarded) before a capture starts
+PHASE1_LEAD_OUT = 0.005  # s simulated (and discarded) after a capture ends
 
 
 def phase1_profile(cfg, fs: float, rng: np.random.Generator) -> Profile:
@@ -229,7 +231,10 @@ def phase1_profile(cfg, fs: float, rng: np.random.Generator) -> Profile:
     cycles = int(math.ceil(cfg.capture_s / (2.0 * one.duration))) + 1
     moves = reciprocating(start, end, one.speed, one.accel, one.dwell, cycles)
     lead_in = PHASE1_LEAD_IN + float(rng.uniform(0.0, cfg.dwell_s))
-    return command_profile(moves, fs, lead_in=lead_in, duration=PHASE1_LEAD_IN + cfg.capture_s)
+    # A few ms past the capture so that instruments resampling to their own clock have samples
+    # on both sides of the last instant.
+    return command_profile(moves, fs, lead_in=lead_in,
+                           duration=PHASE1_LEAD_IN + cfg.capture_s + PHASE1_LEAD_OUT)
 
 
 def phase1_capture(sim: Simulator, cfg, cond: Condition, rng: np.random.Generator) -> dict:
@@ -241,8 +246,16 @@ def phase1_capture(sim: Simulator, cfg, cond: Condition, rng: np.random.Generato
     cmd = phase1_profile(cfg, sim.fs, rng)
     traj = sim.run(cond, cmd, passes=1)
     fs = sim.fs
-    _, acc1 = ins.measure_nut_accelerometer(traj.sens[:, SENS_NUT1_ACC], fs, w.nut_acc, rng)
-    _, acc2 = ins.measure_nut_accelerometer(traj.sens[:, SENS_NUT2_ACC], fs, w.nut_acc, rng)
+    nut = traj.sens[:, np.r_[SENS_NUT1_ACC, SENS_NUT2_ACC]]
+    fs_nut = fs
+    if fs < w.nut_acc.fs_hz:
+        # A coarser simulation step (phase1.timestep_s > 1/10 kHz) is band-limited upsampled to
+        # the DAQ rate: the motion then has no content above fs/2.
+        up = int(math.ceil(w.nut_acc.fs_hz / fs))
+        nut = signal.resample_poly(nut, up, 1, axis=0)
+        fs_nut = fs * up
+    _, acc1 = ins.measure_nut_accelerometer(nut[:, :3], fs_nut, w.nut_acc, rng)
+    _, acc2 = ins.measure_nut_accelerometer(nut[:, 3:], fs_nut, w.nut_acc, rng)
     _, speed = ins.measure_speed(traj.qpos[:, Q_SCREW], fs, w.encoder_counts_per_rev,
                                  w.controller_fs, rng)
     _, torque = ins.measure_torque(traj.sens[:, SENS_SERVO_FORCE], fs, w.torque_noise,
