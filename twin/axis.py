@@ -16,6 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from twin import degradation as deg
+
 GRAVITY = 9.80665  # m/s², standard gravity
 
 
@@ -69,34 +71,33 @@ class ScrewDrive:
         area = math.pi * self.root_diameter**2 / 4.0
         return area * self.young_modulus / self.shaft_length
 
-    def nut_stiffness(self, preload_N: float, min_fraction: float = 0.1) -> float:
-        """Nut contact stiffness K_N(F) = 0.8·K·(F/(0.1·C_a))^(1/3) in N/m (catalogue Hertz rule).
-
-        A nut that has lost its preload still carries load through ball contact, so the stiffness
-        is floored at ``min_fraction`` of its new-nut value (a modelling choice, documented in the
-        README)."""
+    @property
+    def nut_stiffness_new(self) -> float:
+        """Nut contact stiffness at the nominal preload, N/m: the catalogue rule
+        K_N = 0.8·K·(F_a0/(0.1·C_a))^(1/3) (methods.md §4)."""
         ref = 0.1 * self.rated_dynamic_load
-        new = 0.8 * self.nut_stiffness_catalogue * (self.preload / ref) ** (1.0 / 3.0)
-        k = 0.8 * self.nut_stiffness_catalogue * (max(preload_N, 0.0) / ref) ** (1.0 / 3.0)
-        return max(k, min_fraction * new)
+        return 0.8 * self.nut_stiffness_catalogue * (self.preload / ref) ** (1.0 / 3.0)
+
+    def nut_stiffness(self, preload_N: float) -> float:
+        """Nut contact stiffness at preload ``preload_N``, N/m: Hertz k ∝ F^(1/3) from the new
+        nut's value, floored (see :func:`twin.degradation.contact_stiffness`)."""
+        return float(deg.contact_stiffness(self.nut_stiffness_new, preload_N, self.preload))
 
     def axial_stiffness(self, preload_N: float) -> float:
         """Total axial stiffness 1/K = 1/K_S + 1/K_N + 1/K_B in N/m (methods.md §4)."""
-        return 1.0 / (1.0 / self.shaft_stiffness + 1.0 / self.nut_stiffness(preload_N)
-                      + 1.0 / self.bearing_stiffness)
+        return float(deg.series_stiffness(self.shaft_stiffness, self.nut_stiffness(preload_N),
+                                          self.bearing_stiffness))
 
     @property
     def lead_angle(self) -> float:
         """Lead angle β = atan(lead / (π·D_pw)) in rad."""
-        return math.atan(self.lead / (math.pi * self.pitch_diameter))
+        return float(deg.lead_angle(self.lead, self.pitch_diameter))
 
     def drag_torque(self, preload_N: float) -> float:
-        """Nut drag torque in N·m: no-load torque + preload dynamic torque.
-
-        Catalogue formula (THK/NSK ball-screw catalogues): T_p = 0.05·(tan β)^(-1/2)·F_a0·l/(2π).
-        """
-        kp = 0.05 / math.sqrt(math.tan(self.lead_angle))
-        return self.no_load_torque + kp * max(preload_N, 0.0) * self.lead / (2.0 * math.pi)
+        """Nut drag torque in N·m: no-load torque + catalogue preload torque
+        (:func:`twin.degradation.drag_torque_Nm`)."""
+        kp = float(deg.preload_torque_coefficient(self.lead, self.pitch_diameter))
+        return float(deg.drag_torque_Nm(max(preload_N, 0.0), self.lead, self.no_load_torque, kp))
 
 
 @dataclass(frozen=True)

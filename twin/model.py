@@ -52,6 +52,7 @@ import mujoco
 import numpy as np
 
 from twin.axis import GRAVITY, Axis
+from twin.degradation import contact_stiffness
 
 TRUCKS = ("FL", "FR", "RL", "RR")
 
@@ -235,11 +236,11 @@ class MechanicalState:
 
 def stiffness_of(axis: Axis, state: MechanicalState) -> dict[str, float]:
     """Physical stiffnesses for a state: axial (N/m), truck vertical and lateral (N/m each)."""
-    hertz = max(state.truck_preload_fraction, 0.1) ** (1.0 / 3.0)
+    c, frac = axis.carriage, state.truck_preload_fraction
     return {
         "axial": axis.screw.axial_stiffness(state.preload),
-        "truck_vertical": axis.carriage.truck_stiffness_vertical * hertz,
-        "truck_lateral": axis.carriage.truck_stiffness_lateral * hertz,
+        "truck_vertical": float(contact_stiffness(c.truck_stiffness_vertical, frac, 1.0)),
+        "truck_lateral": float(contact_stiffness(c.truck_stiffness_lateral, frac, 1.0)),
     }
 
 
