@@ -4,10 +4,9 @@ Run ``pytest -q tests/test_twin_physics.py -s`` to see the measured figures of e
 
 Conventions used throughout:
 
-- Row k of a :class:`twin.simulate.Trajectory` is the state AFTER step k, i.e. at time (k+1)·dt,
-  which is command sample k+1. At 20 mm/s and dt = 0.2 ms one sample is 4 µm of travel, so every
-  comparison of the true position against the command below aligns the command to the row time
-  (:func:`_at_rows`).
+- Row k of a :class:`twin.simulate.Trajectory` is the state at t_k = k·dt, the time of command
+  sample k and of MuJoCo's sensor row k (:func:`_at_rows` is the identity; it marks the places
+  where that alignment matters: at 20 mm/s and dt = 0.2 ms one sample is 4 µm of travel).
 - "Nut point": the ball-nut tendon acts along the screw axis, ZN below the centre of mass, so
   x_nut = x + ZN·pitch. The centre of mass additionally carries the Abbe term −ZN·pitch of the
   rail-driven pitch.
@@ -75,8 +74,8 @@ def _no_screw_errors(spec: geo.ScrewSpec, cumulative: bool = False) -> geo.Screw
 
 
 def _at_rows(a: np.ndarray) -> np.ndarray:
-    """A command-sampled array at the rows' times: row k is command sample k+1."""
-    return np.concatenate([a[1:], a[-1:]])
+    """A command-sampled array at the rows' times: row k is command sample k."""
+    return a
 
 
 def _steady(cmd: Profile, speed: float, fs: float, trim_s: float, direction: int = 0) -> np.ndarray:

@@ -52,14 +52,12 @@ class Move:
 
 @dataclass(frozen=True)
 class Profile:
-    """Sampled command. t (n,) s; x (n,) m; v (n,) m/s; a (n,) m/s²; segment (n,) int: index of
-    the move each sample belongs to (its dwell included)."""
+    """Sampled command. t (n,) s; x (n,) m; v (n,) m/s; a (n,) m/s²."""
 
     t: np.ndarray
     x: np.ndarray
     v: np.ndarray
     a: np.ndarray
-    segment: np.ndarray
 
 
 def _move_samples(move: Move, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -108,7 +106,6 @@ def command_profile(moves: list[Move], fs: float, lead_in: float = 0.0,
     x = np.full(n, moves[0].start if moves else 0.0)
     v = np.zeros(n)
     a = np.zeros(n)
-    seg = np.full(n, -1, dtype=np.int32)
     t0 = lead_in
     for i, mv in enumerate(moves):
         sel = t >= t0
@@ -117,9 +114,9 @@ def command_profile(moves: list[Move], fs: float, lead_in: float = 0.0,
         if np.any(sel):
             dx, dv, da = _move_samples(mv, t[sel] - t0)
             x[sel] = mv.start + dx
-            v[sel], a[sel], seg[sel] = dv, da, i
+            v[sel], a[sel] = dv, da
         t0 += mv.duration
-    return Profile(t=t, x=x, v=v, a=a, segment=seg)
+    return Profile(t=t, x=x, v=v, a=a)
 
 
 def reciprocating(start: float, end: float, speed: float, accel: float, dwell: float,

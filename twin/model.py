@@ -277,14 +277,16 @@ def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> No
     model.wrap_prm[wrap] = -r * (1.0 + state.lead_stretch)
 
 
-def initial_state(model: mujoco.MjModel, x0: float, theta0: float, flank0: float = 0.0
-                  ) -> np.ndarray:
+def initial_state(model: mujoco.MjModel, x0: float, theta0: float, flank0: float = 0.0,
+                  pose: np.ndarray | None = None) -> np.ndarray:
     """Full physics state at rest: carriage at ``x0`` m, screw at ``theta0`` rad, lead flank at
-    ``flank0`` m."""
+    ``flank0`` m, and the carriage's (y, z, roll, pitch, yaw) ``pose`` (5,) m/rad (default 0)."""
     data = mujoco.MjData(model)
     data.qpos[Q_SCREW] = theta0
     data.qpos[Q_X] = x0
     data.qpos[Q_FLANK] = flank0
+    if pose is not None:
+        data.qpos[Q_Y:Q_YAW + 1] = pose
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     mujoco.mj_forward(model, data)
     state = np.empty(mujoco.mj_stateSize(model, spec))

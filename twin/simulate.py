@@ -44,6 +44,9 @@ from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, 
 from twin.sensors import instruments as ins
 
 
+SETTLE_TIME = 0.1  # s of standstill simulated before t = 0 of every rollout
+
+
 @dataclass(frozen=True)
 class World:
     """Everything fixed over a campaign.
@@ -94,7 +97,7 @@ class Condition:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """A rollout. t (n,) s; qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m]; qvel (n, 8);
+    """A rollout, row k at t_k = k·dt (state and sensors). t (n,) s; qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m]; qvel (n, 8);
     sens (n, 14) MuJoCo sensors (see :mod:`twin.model`); cmd: the commanded profile (controller
     frame); theta_cmd (n,) rad."""
 
@@ -174,6 +177,16 @@ class Simulator:
         """
         return self.run_batch([cond], cmd, passes)[0]
 
+    def rest_pose(self, x: float) -> np.ndarray:
+        """Resting pose of the carriage on the rails at rail position ``x`` m: joint coordinates
+        (y, z, roll, pitch, yaw) of its centre of mass, (5,) in m and rad (quasi-static truck
+        fit, :func:`twin.geometry.error_motions_from_trucks`)."""
+        w = self.world
+        t_y, t_z, e_ax, e_bx, e_cx = geo.error_motions_from_trucks(
+            geo.truck_displacements(w.rails, w.carriage, np.array([x])), w.carriage)[:, 0]
+        # The trucks' lateral contacts are com_height below the centre of mass.
+        return np.array([t_y - w.axis.carriage.com_height * e_ax, t_z, e_ax, e_bx, e_cx])
+
     def run_batch(self, conds: list[Condition], cmd: Profile, passes: int = 2,
                   nthread: int | None = None) -> list[Trajectory]:
         """Roll out several conditions under one command in one ``mujoco.rollout`` call.
@@ -181,34 +194,58 @@ class Simulator:
         The models of different conditions differ only in float fields (see
         :func:`twin.model.apply_state`), so they batch; ``nthread`` threads share the work (the
         GIL is released). The first condition uses this simulator's model, the others copies.
-        Row k of a trajectory is the state after step k, at time (k+1)·dt."""
+
+        Row k of a trajectory is the state at t_k = k·dt, before step k, which is also when
+        MuJoCo evaluates the sensors of step k (``sens`` row k)."""
         r = self.world.axis.screw.radius_per_rad
+        zn = self.world.axis.carriage.nut_height - self.world.axis.carriage.com_height
         x_cmd = [cmd.x + c.origin_offset for c in conds]
-        first_dir = np.sign(cmd.v[np.flatnonzero(cmd.v)[0]]) if np.any(cmd.v) else 1.0
-        models, s0s, x_rails, x0s = [], [], [], []
+        # Direction of the last motion at every instant: the flank the carriage rests on.
+        moving = np.flatnonzero(cmd.v)
+        direction = np.sign(cmd.v)
+        if moving.size:
+            held = np.maximum.accumulate(np.where(direction != 0, np.arange(direction.size), -1))
+            direction = np.where(held >= 0, direction[np.maximum(held, 0)], np.sign(cmd.v[moving[0]]))
+        else:
+            direction = np.ones_like(cmd.v)
+        models, s0s, x_rails = [], [], []
         for cond, xc in zip(conds, x_cmd):
             model = self.model if not models else copy.deepcopy(self.model)
             mech = replace(cond.mech, lead_stretch=self.lead_stretch(cond))
             apply_state(model, self.world.axis, mech)
             stretch = 1.0 + mech.lead_stretch
-            # Start at rest, in contact on the flank of the first motion; first guess of the
-            # true position: the carriage trails the screw by half the clearance.
+            # Start at rest on the rails, in contact on the flank of the first motion; first guess
+            # of the true position: the carriage trails the screw by half the clearance.
             theta0 = xc[0] / r
-            x0 = stretch * xc[0] - 0.5 * cond.mech.backlash * first_dir
+            x0 = stretch * xc[0] - 0.5 * cond.mech.backlash * direction[0]
+            pose = self.rest_pose(x0)
             flank0 = self.flank_motion(np.array([theta0, theta0]))[0][0]
             models.append(model)
-            s0s.append(initial_state(model, x0 + flank0, theta0, flank0))
-            x_rails.append(stretch * xc - 0.5 * cond.mech.backlash * np.sign(cmd.v))
-            x0s.append(x0)
+            s0s.append(initial_state(model, x0 + flank0 - zn * pose[3], theta0, flank0, pose))
+            x_rails.append(stretch * xc - 0.5 * cond.mech.backlash * direction)
         nthread = nthread or min(len(conds), os.cpu_count() or 1)
         datas = [self.data] + [mujoco.MjData(self.model) for _ in range(nthread - 1)]
         nq, nv = self.model.nq, self.model.nv
+        # Let the small transient of the analytic rest pose (the x–pitch coupling of the nut,
+        # ~25 nm) ring out before t = 0, holding the first command, so that no instrument
+        # starts from a disturbed first sample.
+        n_settle = int(round(SETTLE_TIME / self.timestep))
+        hold = Profile(t=np.arange(n_settle) * self.timestep, x=np.full(n_settle, cmd.x[0]),
+                       v=np.zeros(n_settle), a=np.zeros(n_settle))
+        ctrl = np.stack([self.controls(c, hold, np.full(n_settle, xr[0]))
+                         for c, xr in zip(conds, x_rails)])
+        settled, _ = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+        s0s = list(settled[:, -1, :])
+        for s0 in s0s:
+            s0[0] = 0.0  # time
         for _ in range(max(passes, 1)):
             ctrl = np.stack([self.controls(c, cmd, xr) for c, xr in zip(conds, x_rails)])
             state, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
-            # Step k uses the rails at x(t_k): the previous row.
-            x_rails = [np.concatenate(([x0], st[:-1, 1 + Q_X])) for x0, st in zip(x0s, state)]
-        t = (np.arange(cmd.t.size) + 1) * self.timestep
+            # Rollout row k is the state after step k; prepend the initial state so that row k
+            # is the state at t_k, the one step k (its rails, its sensors) sees.
+            state = np.concatenate([np.stack(s0s)[:, None, :], state[:, :-1, :]], axis=1)
+            x_rails = [st[:, 1 + Q_X] for st in state]
+        t = np.arange(cmd.t.size) * self.timestep
         return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
                            cmd=cmd, theta_cmd=xc / r)
                 for st, se, xc in zip(state, sens, x_cmd)]
@@ -375,8 +412,7 @@ def dial_indicator(sim: Simulator, cfg, cond: Condition, rng: np.random.Generato
         # A vanishing first velocity tells the simulator which flank the carriage starts on.
         v = np.zeros_like(x_cmd)
         v[0] = 1e-12
-        cmd_start = Profile(t=t, x=x_cmd, v=v, a=np.zeros_like(x_cmd),
-                            segment=np.zeros(x_cmd.size, np.int32))
+        cmd_start = Profile(t=t, x=x_cmd, v=v, a=np.zeros_like(x_cmd))
         traj = sim.run(cond, cmd_start, passes=1)
         ends = per * 4 + per * (np.arange(2 * nsteps) + 1) - 1
         x_true = traj.x[ends]
