@@ -112,3 +112,41 @@ def test_resume_refuses_another_scenario(small_campaign):
     print(text)
     assert res.returncode == 2 and "Traceback" not in res.stderr
     assert "holds a campaign of another scenario (differing keys: seed)" in text
+
+
+def test_table_onset_is_last_healthy_point():
+    from twin.campaign import onset_hours
+    from twin.scenario import load
+
+    s = load(REPO / "scenarios/paper-reference.toml")
+    assert onset_hours(s) == 99.0  # healthy up to 99 h, preload loss from 100 h
+    t = load(REPO / "scenarios/quick.toml", [
+        'degradation.law="table"', "degradation.table_hours=[0.0, 1000.0]",
+        "degradation.table_preload_fraction=[1.0, 0.5]", "degradation.table_backlash_um=[0.0, 0.0]"])
+    assert onset_hours(t) == 0.0
+
+
+def test_world_does_not_depend_on_nuisance_settings():
+    from twin.campaign import make_world
+    from twin.scenario import load
+
+    a = make_world(load(REPO / "scenarios/quick.toml"))
+    b = make_world(load(REPO / "scenarios/quick.toml", ["phase2.origin_offset_max_mm=1.0",
+                                                         "sensors.imu_acc_noise_ug_per_rthz=25"]))
+    np.testing.assert_array_equal(a.rails.vertical, b.rails.vertical)
+    assert a.screw == b.screw and a.ripple_phase == b.ripple_phase
+
+
+def test_screw_cools_during_pauses():
+    from twin.campaign import temperature_at
+    from twin.scenario import load
+
+    s = load(REPO / "scenarios/paper-rtf.toml")  # pauses at 855.5 h (78 d) and 4033 h (122 d)
+    t = temperature_at(s, [0.0, 855.0, 855.5, 856.5, 900.0])
+    print(t)
+    assert t[0] == 0.0 and t[2] < 1e-6 and abs(t[1] - 3.0) < 1e-6  # cold restart after 78 days
+    assert 0.0 < t[3] < t[4] and abs(t[4] - 3.0) < 1e-6
+    short = load(REPO / "scenarios/paper-rtf.toml", ["campaign.pauses=[{hours=855.5, days=0.01}]"])
+    warm = temperature_at(short, [855.5])[0]
+    print("after a 15-min stop:", warm)
+    assert 2.5 < warm < 3.0  # a short stop leaves the screw nearly warm

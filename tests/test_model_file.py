@@ -1,15 +1,27 @@
-"""The shipped MJCF in models/ is the model the simulator builds (it cannot go stale)."""
+"""The shipped MJCF in models/ is the simulator's model of the new axis (it cannot go stale),
+and it is complete: loaded on its own it holds still."""
 
 import mujoco
+import numpy as np
 
 from conftest import REPO
-from twin.model import NCTRL, build_mjcf
+from twin.model import NCTRL, Q_SCREW, Q_X, Q_Z, build_mjcf
 from twin.scenario import Scenario, to_axis
 
 
-def test_models_file_matches_builder():
+def test_models_file_matches_builder_and_holds_still():
+    s = Scenario()
     shipped = (REPO / "models/linear_axis.xml").read_text()
-    assert shipped == build_mjcf(to_axis(Scenario()), 1e-4), \
+    assert shipped == build_mjcf(to_axis(s), s.phase1.timestep_s), \
         "models/linear_axis.xml is stale: run `twin export-model`"
     model = mujoco.MjModel.from_xml_path(str(REPO / "models/linear_axis.xml"))
     assert model.nu == NCTRL and model.nv == 8 and model.ntendon == 9
+    data = mujoco.MjData(model)
+    data.qpos[Q_X] = 0.2
+    data.qpos[Q_SCREW] = 0.2 / to_axis(s).screw.radius_per_rad
+    data.ctrl[0] = data.qpos[Q_SCREW]
+    for _ in range(int(0.5 / model.opt.timestep)):
+        mujoco.mj_step(model, data)
+    print("after 0.5 s: x", data.qpos[Q_X], "z", data.qpos[Q_Z])
+    assert abs(data.qpos[Q_X] - 0.2) < 1e-6 and abs(data.qpos[Q_Z]) < 1e-6
+    assert np.all(model.tendon_stiffness > 1e7)

@@ -16,7 +16,14 @@ CASES = [
      ["degradation", "table_backlash_um", "-3.0", "negative backlash", ">= 0"]),
     (["--set", "axis.preload_N=5000"], ["axis", "preload_N = 5000", "beyond the rated range", "2100"]),
     (["--set", "phase1.end_mm=500"], ["phase1.end_mm = 500", "beyond the travel", "450"]),
-    (["--set", "phase1.fs_hz=0"], ["phase1.fs_hz", "0", "> 0"]),
+    (["--set", "phase1.fs_hz=0"], ["phase1.fs_hz", "= 0", ">= 2000"]),
+    (["--set", "sensors.imu_acc_bias_ug=[1.0, 2.0]"], ["sensors.imu_acc_bias_ug", "[1.0, 2.0]", "at least 3"]),
+    (["--set", "phase2.session_hours=[-5.0]"], ["phase2", "session_hours = [-5.0]", "hours >= 0"]),
+    (["--set", "degradation.law=\"table\"", "--set", "degradation.table_hours=[10.0, 0.0]",
+      "--set", "degradation.table_preload_fraction=[1.0, 1.0]", "--set", "degradation.table_backlash_um=[0.0, 1.0]"],
+     ["table_hours = [10.0, 0.0]", "strictly increasing"]),
+    (["--set", "campaign.warmup_hours=700"], ["campaign.warmup_hours = 700", "total_hours = 600", "warmup_hours <= total_hours"]),
+    (["--set", "seed=4294967296"], ["seed", "4294967296", "<= 4294967295"]),
     (["--set", "sensors.imu_acc_fs_hz=0"], ["sensors.imu_acc_fs_hz", "0", "> 0"]),
 ]
 

@@ -17,8 +17,7 @@ import math
 from dataclasses import dataclass, field
 
 from twin import degradation as deg
-
-GRAVITY = 9.80665  # m/s², standard gravity
+from twin.sensors.instruments import STANDARD_GRAVITY as GRAVITY  # m/s², re-exported
 
 
 @dataclass(frozen=True)

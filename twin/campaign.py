@@ -26,11 +26,12 @@ from twin import geometry as geo
 from twin.model import MechanicalState, stiffness_of
 from twin.scenario import Scenario, from_dict, nominal_axis_description, to_axis
 from twin.sensors import instruments as ins
+from twin.sensors.instruments import MICRO_G
 from twin.simulate import (Condition, Simulator, World, dial_indicator, phase1_capture,
                            phase2_measure, phase2_trajectory, true_error_motions)
 
 KIND_WORLD, KIND_PHASE1, KIND_PHASE2, KIND_DIAL, KIND_ORIGIN = range(5)
-MICRO_G = 9.80665e-6
+RAIL_MARGIN = 0.15  # m of rail modelled beyond each end of the travel
 
 
 def rng_for(seed: int, kind: int, *index: int) -> np.random.Generator:
@@ -46,15 +47,19 @@ def make_world(s: Scenario) -> World:
     """Draw the campaign's fixed imperfections (rails, screw phases) from the scenario seed."""
     axis = to_axis(s)
     g, se = s.geometry, s.sensors
-    rng = rng_for(s.seed, KIND_WORLD)
+    # Separate streams for the rails, the screw and the motor, so that no other scenario key
+    # changes what is drawn for one of them.
+    rails_rng, screw_rng, motor_rng = (rng_for(s.seed, KIND_WORLD, i) for i in range(3))
     rail_spec = geo.RailSpec(
         straightness_rms_vertical_m=g.straightness_rms_um * 1e-6,
         straightness_rms_lateral_m=g.lateral_straightness_rms_um * 1e-6,
         spectrum_exponent=g.spectrum_exponent, bolt_pitch_m=g.bolt_pitch_mm * 1e-3,
         bolt_amplitude_vertical_m=g.bolt_amplitude_um * 1e-6,
         bolt_amplitude_lateral_m=0.6 * g.bolt_amplitude_um * 1e-6)
-    margin = 0.1 + s.phase2.origin_offset_max_mm * 1e-3
-    rails = geo.make_rail_profiles(rail_spec, length_m=axis.travel + 2 * margin, rng=rng,
+    # A fixed extent beyond the travel (more than the largest allowed origin offset plus half
+    # the truck spacing), so that nuisance settings do not change the rails.
+    margin = RAIL_MARGIN
+    rails = geo.make_rail_profiles(rail_spec, length_m=axis.travel + 2 * margin, rng=rails_rng,
                                    u_start_m=-margin)
     carriage = geo.CarriageGeometry(
         truck_spacing_m=axis.carriage.truck_spacing, rail_spacing_m=axis.carriage.rail_spacing,
@@ -65,7 +70,7 @@ def make_world(s: Scenario) -> World:
         cyclic_lead_phase_rad=tuple(0.0 for _ in g.cyclic_lead_error_um),
         runout_m=g.runout_um * 1e-6, pitch_diameter_m=axis.screw.pitch_diameter,
         ball_diameter_m=g.ball_diameter_mm * 1e-3, contact_angle_rad=math.radians(g.contact_angle_deg),
-        ball_pass_amplitude_m=g.ball_pass_amplitude_um * 1e-6), rng)
+        ball_pass_amplitude_m=g.ball_pass_amplitude_um * 1e-6), screw_rng)
     mis = np.zeros((3, 3))
     m = [v * 1e-6 for v in se.imu_misalignment_urad]
     # Small rotation (roll, pitch, yaw) of the IMU case: skew-symmetric cross-axis matrix.
@@ -83,14 +88,15 @@ def make_world(s: Scenario) -> World:
         noise_density=se.imu_gyro_noise_urad_s_per_rthz * 1e-6,
         error=ins.ErrorModel(bias=tuple(b * 1e-6 for b in se.imu_gyro_bias_urad_s),
                              misalignment=tuple(map(tuple, mis))))
-    nut_acc = ins.NutAccelerometerSpec(fs_hz=se.nut_acc_fs_hz,
+    fs = s.phase1.fs_hz
+    nut_acc = ins.NutAccelerometerSpec(fs_hz=fs, bandwidth_hz=0.4 * fs,
                                        noise_density=se.nut_acc_noise_ug_per_rthz * MICRO_G)
     return World(axis=axis, rails=rails, carriage=carriage, screw=screw,
                  ripple_torque=s.axis.torque_ripple_Nm, ripple_per_rev=s.axis.torque_ripple_per_rev,
-                 ripple_phase=float(rng.uniform(0, 2 * math.pi)),
+                 ripple_phase=float(motor_rng.uniform(0, 2 * math.pi)),
                  thermal_expansion=s.degradation.thermal_expansion_per_K,
                  imu_acc=imu_acc, imu_gyro=imu_gyro, nut_acc=nut_acc,
-                 controller_fs=se.controller_fs_hz, encoder_counts_per_rev=se.encoder_counts_per_rev,
+                 controller_fs=fs, encoder_counts_per_rev=se.encoder_counts_per_rev,
                  torque_noise=se.torque_noise_Nm, position_cmd_fs=se.position_cmd_fs_hz)
 
 
@@ -116,13 +122,19 @@ def degradation_at(s: Scenario, hours) -> tuple[np.ndarray, np.ndarray]:
 
 
 def onset_hours(s: Scenario) -> float:
-    """The injected onset of degradation, h (NaN if the scenario never degrades)."""
+    """The injected onset of degradation, h (NaN if the scenario never degrades).
+
+    For a table law (linear interpolation between sorted points), the onset is the last healthy
+    point (preload fraction 1, no backlash) before the first degraded one."""
     d = s.degradation
     if d.law == "wear":
         return float(d.onset_hours) if d.wear_rate_um_per_kh > 0 else math.nan
     th = np.asarray(d.table_hours)
     bad = (np.asarray(d.table_preload_fraction) < 1.0) | (np.asarray(d.table_backlash_um) > 0.0)
-    return float(th[np.argmax(bad)]) if bad.any() else math.nan
+    if not bad.any():
+        return math.nan
+    first_bad = int(np.argmax(bad))
+    return float(th[first_bad - 1]) if first_bad > 0 else float(th[0])
 
 
 def resume_hours(s: Scenario) -> list[float]:
@@ -130,9 +142,24 @@ def resume_hours(s: Scenario) -> list[float]:
 
 
 def temperature_at(s: Scenario, hours) -> np.ndarray:
+    """Screw temperature rise above ambient at operating ``hours``, K: it warms towards the
+    steady rise after every (re)start, from what remains after the stop cooled it for its
+    ``days`` with the same time constant (a first-order thermal model)."""
     d = s.degradation
-    since = deg.hours_since_resume(np.atleast_1d(np.asarray(hours, float)), resume_hours(s))
-    return deg.temperature_rise_K(since, d.thermal_rise_K, d.thermal_time_constant_hours)
+    h = np.atleast_1d(np.asarray(hours, float))
+    since = deg.hours_since_resume(h, resume_hours(s))
+    rise = deg.temperature_rise_K(since, d.thermal_rise_K, d.thermal_time_constant_hours)
+    # Heat left at the restart: the temperature when the axis stopped, cooled over the pause.
+    pauses = sorted(s.campaign.pauses, key=lambda p: p.hours)
+    left = np.zeros_like(h)
+    for i, p in enumerate(pauses):
+        run_before = p.hours - (pauses[i - 1].hours if i else 0.0)
+        at_stop = float(deg.temperature_rise_K(run_before, d.thermal_rise_K,
+                                               d.thermal_time_constant_hours))
+        since_this = h - p.hours
+        active = (since_this >= 0) & (since_this == since)
+        left[active] = at_stop * math.exp(-24.0 * p.days / d.thermal_time_constant_hours)
+    return rise + left * np.exp(-since / d.thermal_time_constant_hours)
 
 
 def condition_at(s: Scenario, hours: float, origin_offset: float = 0.0) -> Condition:
@@ -265,17 +292,14 @@ def _timeline(s: Scenario, units: list[Unit]) -> dict[str, np.ndarray]:
     """Truth timeline: the injected state every 12 h and at every unit's hours."""
     grid = np.arange(0.0, s.campaign.total_hours + 1e-9, 12.0)
     hours = np.unique(np.concatenate([grid, [u.hours for u in units]]))
-    pf, bl = degradation_at(s, hours)
     axis = to_axis(s)
-    preload = pf * s.axis.preload_N
-    coupling = s.degradation.truck_wear_coupling
-    stiff = np.array([stiffness_of(axis, MechanicalState(
-        preload=p, truck_preload_fraction=1.0 - coupling * (1.0 - f)))["axial"]
-        for p, f in zip(preload, pf)])
-    return {"hours": hours, "preload_N": preload, "backlash_um": bl,
-            "axial_stiffness_N_per_m": stiff,
-            "drag_torque_Nm": np.array([axis.screw.drag_torque(p) for p in preload]),
-            "temperature_rise_K": temperature_at(s, hours)}
+    conds = [condition_at(s, h) for h in hours]
+    return {"hours": hours,
+            "preload_N": np.array([c.mech.preload for c in conds]),
+            "backlash_um": np.array([c.mech.backlash * 1e6 for c in conds]),
+            "axial_stiffness_N_per_m": np.array([stiffness_of(axis, c.mech)["axial"] for c in conds]),
+            "drag_torque_Nm": np.array([axis.screw.drag_torque(c.mech.preload) for c in conds]),
+            "temperature_rise_K": np.array([c.temperature_rise for c in conds])}
 
 
 def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:

@@ -106,9 +106,10 @@ def demo(
 def export_model(
     scenario: Optional[Path] = typer.Argument(None, help="scenario TOML (default: the paper's axis)"),
     out: Path = typer.Option(Path("models/linear_axis.xml"), "-o", "--out"),
-    timestep: float = typer.Option(1e-4, help="simulation time step, s"),
+    timestep: Optional[float] = typer.Option(None, help="time step, s (default: the Phase I step)"),
 ) -> None:
-    """Write the MJCF of the axis (new, healthy state), e.g. to open it in MuJoCo's viewer."""
+    """Write the MJCF of the axis in its new, healthy state: a complete model that holds still,
+    e.g. to open in MuJoCo's viewer (`python -m mujoco.viewer --mjcf models/linear_axis.xml`)."""
     from twin.model import build_mjcf
     from twin.scenario import Scenario, to_axis
 
@@ -117,7 +118,7 @@ def export_model(
     except ScenarioError as exc:
         _fail(str(exc))
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(build_mjcf(to_axis(s), timestep))
+    out.write_text(build_mjcf(to_axis(s), timestep or s.phase1.timestep_s))
     console.print(f"wrote {out}")
 
 

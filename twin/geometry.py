@@ -539,7 +539,7 @@ class ScrewSpec:
     """
 
     lead_m: float = 0.010
-    cumulative_lead_error_m_per_m: float = 5.0e-6 / 0.300
+    cumulative_lead_error_m_per_m: float = 8.0e-6
     cyclic_lead_error_m: tuple[float, ...] = (0.3e-6, 0.15e-6, 0.1e-6)
     cyclic_lead_phase_rad: tuple[float, ...] = (0.0, 0.0, 0.0)
     runout_m: float = 0.3e-6

@@ -100,9 +100,16 @@ def _fmt(v: float) -> str:
 
 
 def build_mjcf(axis: Axis, timestep: float) -> str:
-    """MJCF text of the axis in its new (healthy, zero-backlash) state; floats are set later by
+    """MJCF text of the axis in its new (healthy, zero-backlash) state, a complete model that
+    holds still when loaded on its own; other states are written into the compiled model by
     :func:`apply_state`. ``timestep`` in s."""
     c, s = axis.carriage, axis.screw
+    new = state_fields(axis, MechanicalState(preload=s.preload))
+
+    def spring(i: int) -> str:
+        lo, hi = new.tendon_lengthspring[i]
+        return (f'springlength="{_fmt(lo)} {_fmt(hi)}" stiffness="{_fmt(new.tendon_stiffness[i])}" '
+                f'damping="{_fmt(new.tendon_damping[i])}"')
     r = s.radius_per_rad
     layout = TruckLayout.of(axis)
     zn = c.nut_height - c.com_height  # nut axis relative to the centre of mass (m, negative)
@@ -116,12 +123,12 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
     for i, name in enumerate(TRUCKS):
         xi, yi, h = layout.x[i], layout.y[i], layout.height_below_com
         truck_tendons.append(
-            f'    <fixed name="truck_v{i}" springlength="0 0" stiffness="1" damping="0">\n'
+            f'    <fixed name="truck_v{i}" {spring(1 + 2 * i)}>\n'
             f'      <joint joint="carriage_z" coef="1"/>\n'
             f'      <joint joint="carriage_roll" coef="{_fmt(yi)}"/>\n'
             f'      <joint joint="carriage_pitch" coef="{_fmt(-xi)}"/>\n'
             f'    </fixed>\n'
-            f'    <fixed name="truck_l{i}" springlength="0 0" stiffness="1" damping="0">\n'
+            f'    <fixed name="truck_l{i}" {spring(2 + 2 * i)}>\n'
             f'      <joint joint="carriage_y" coef="1"/>\n'
             f'      <joint joint="carriage_yaw" coef="{_fmt(xi)}"/>\n'
             f'      <joint joint="carriage_roll" coef="{_fmt(h)}"/>\n'
@@ -174,7 +181,7 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
     </body>
   </worldbody>
   <tendon>
-    <fixed name="ballnut" springlength="0 0" stiffness="1" damping="0">
+    <fixed name="ballnut" {spring(0)}>
       <joint joint="carriage_x" coef="1"/>
       <joint joint="carriage_pitch" coef="{_fmt(zn)}"/>
       <joint joint="screw" coef="{_fmt(-r)}"/>
@@ -244,37 +251,63 @@ def stiffness_of(axis: Axis, state: MechanicalState) -> dict[str, float]:
     }
 
 
-def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> None:
-    """Write a degradation state into the model's float fields (in place)."""
+@dataclass(frozen=True)
+class StateFields:
+    """The model's float fields for one state, in SI units.
+
+    Attributes:
+        tendon_stiffness, tendon_damping: (9,) N/m and N·s/m, tendon order ballnut,
+            truck_v0, truck_l0, ..., truck_v3, truck_l3 (as in :func:`build_mjcf`).
+        tendon_lengthspring: (9, 2) m (dead band of the ball nut; weight-carrying rest length of
+            the vertical trucks).
+        screw_frictionloss: nut drag torque, N·m.
+        screw_coef: the ball-nut tendon's coefficient of the screw joint, −R·(1 + lead_stretch),
+            m/rad.
+    """
+
+    tendon_stiffness: np.ndarray
+    tendon_damping: np.ndarray
+    tendon_lengthspring: np.ndarray
+    screw_frictionloss: float
+    screw_coef: float
+
+
+def state_fields(axis: Axis, state: MechanicalState) -> StateFields:
+    """The float fields of the model in ``state`` (one source for the MJCF and for
+    :func:`apply_state`)."""
     k = stiffness_of(axis, state)
     c = axis.carriage
-    r = axis.screw.radius_per_rad
     # Effective mass of the axial mode with the screw held by the servo: the carriage.
-    m_axial = c.mass
-    ballnut = model.tendon("ballnut").id
-    model.tendon_stiffness[ballnut] = k["axial"]
-    model.tendon_damping[ballnut] = 2.0 * axis.screw.contact_damping_ratio * math.sqrt(
-        k["axial"] * m_axial)
-    half = state.backlash / 2.0
-    model.tendon_lengthspring[ballnut] = (-half, half)
-    sag = c.mass * GRAVITY / (4.0 * k["truck_vertical"])  # static truck deflection under weight
-    for i in range(4):
-        tv, tl = model.tendon(f"truck_v{i}").id, model.tendon(f"truck_l{i}").id
-        model.tendon_stiffness[tv] = k["truck_vertical"]
-        model.tendon_stiffness[tl] = k["truck_lateral"]
-        model.tendon_damping[tv] = 2.0 * c.truck_damping_ratio * math.sqrt(
-            k["truck_vertical"] * c.mass / 4.0)
-        model.tendon_damping[tl] = 2.0 * c.truck_damping_ratio * math.sqrt(
-            k["truck_lateral"] * c.mass / 4.0)
-        # The rest length carries the weight, so the equilibrium is at carriage_z = 0.
-        model.tendon_lengthspring[tv] = (sag, sag)
-        model.tendon_lengthspring[tl] = (0.0, 0.0)
-    screw = model.joint("screw").dofadr[0]
-    model.dof_frictionloss[screw] = axis.screw.drag_torque(state.preload) * state.drag_scale
+    stiff = [k["axial"]]
+    damp = [2.0 * axis.screw.contact_damping_ratio * math.sqrt(k["axial"] * c.mass)]
+    rest = [(-state.backlash / 2.0, state.backlash / 2.0)]
+    # The rest length carries the weight, so the equilibrium is at carriage_z = 0.
+    sag = c.mass * GRAVITY / (4.0 * k["truck_vertical"])
+    for _ in range(4):
+        for key, length in (("truck_vertical", sag), ("truck_lateral", 0.0)):
+            stiff.append(k[key])
+            damp.append(2.0 * c.truck_damping_ratio * math.sqrt(k[key] * c.mass / 4.0))
+            rest.append((length, length))
+    return StateFields(
+        tendon_stiffness=np.array(stiff), tendon_damping=np.array(damp),
+        tendon_lengthspring=np.array(rest),
+        screw_frictionloss=axis.screw.drag_torque(state.preload) * state.drag_scale,
+        screw_coef=-axis.screw.radius_per_rad * (1.0 + state.lead_stretch))
+
+
+def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> None:
+    """Write a degradation state into the model's float fields (in place)."""
+    f = state_fields(axis, state)
+    assert model.tendon("ballnut").id == 0 and model.tendon("truck_l3").id == 8
+    model.tendon_stiffness[:] = f.tendon_stiffness
+    model.tendon_damping[:] = f.tendon_damping
+    model.tendon_lengthspring[:] = f.tendon_lengthspring
+    model.dof_frictionloss[model.joint("screw").dofadr[0]] = f.screw_frictionloss
     # The screw is the third joint of the ball-nut tendon (see build_mjcf).
+    ballnut = model.tendon("ballnut").id
     wrap = model.tendon_adr[ballnut] + 2
     assert model.wrap_objid[wrap] == model.joint("screw").id
-    model.wrap_prm[wrap] = -r * (1.0 + state.lead_stretch)
+    model.wrap_prm[wrap] = f.screw_coef
 
 
 def initial_state(model: mujoco.MjModel, x0: float, theta0: float, flank0: float = 0.0,

@@ -70,13 +70,14 @@ class AxisConfig(_Section):
 
 
 class GeometryConfig(_Section):
-    straightness_rms_um: float = Field(1.0, ge=0, le=100)
-    lateral_straightness_rms_um: float = Field(1.0, ge=0, le=100)
+    straightness_rms_um: float = Field(0.5, ge=0, le=100)
+    lateral_straightness_rms_um: float = Field(0.5, ge=0, le=100)
     spectrum_exponent: float = Field(2.0, ge=0, le=4)
     bolt_pitch_mm: float = Field(60.0, gt=0)
     bolt_amplitude_um: float = Field(0.5, ge=0, le=20)
     cumulative_lead_error_um_per_m: float = Field(8.0, ge=-200, le=200)
-    cyclic_lead_error_um: list[float] = Field(default_factory=lambda: [0.3, 0.15, 0.1])
+    cyclic_lead_error_um: list[float] = Field(default_factory=lambda: [0.3, 0.15, 0.1],
+                                              max_length=20)
     runout_um: float = Field(0.3, ge=0, le=50)
     ball_pass_amplitude_um: float = Field(0.03, ge=0, le=5)
     ball_diameter_mm: float = Field(3.969, gt=0)
@@ -90,13 +91,11 @@ class SensorsConfig(_Section):
     imu_gyro_fs_hz: float = Field(1000.0, gt=0)
     imu_gyro_bandwidth_hz: float = Field(200.0, gt=0)
     imu_gyro_noise_urad_s_per_rthz: float = Field(35.0, ge=0)
-    imu_acc_bias_ug: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
-    imu_acc_scale_error: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
-    imu_gyro_bias_urad_s: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
-    imu_misalignment_urad: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
-    nut_acc_fs_hz: float = Field(10000.0, gt=0)
-    nut_acc_noise_ug_per_rthz: float = Field(30.0, ge=0)
-    controller_fs_hz: float = Field(10000.0, gt=0)
+    imu_acc_bias_ug: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
+    imu_acc_scale_error: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
+    imu_gyro_bias_urad_s: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
+    imu_misalignment_urad: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
+    nut_acc_noise_ug_per_rthz: float = Field(20.0, ge=0)
     encoder_counts_per_rev: int = Field(2**20, ge=16)
     torque_noise_Nm: float = Field(0.005, ge=0)
     position_cmd_fs_hz: float = Field(1000.0, gt=0)
@@ -129,6 +128,10 @@ class DegradationConfig(_Section):
             if any(b < 0 for b in self.table_backlash_um):
                 raise ValueError(f"table_backlash_um = {self.table_backlash_um} has a negative "
                                  "backlash: allowed values are >= 0 µm")
+            if any(b <= a for a, b in zip(self.table_hours, self.table_hours[1:])):
+                raise ValueError(f"table_hours = {self.table_hours}: allowed strictly increasing hours")
+            if self.table_hours[0] < 0:
+                raise ValueError(f"table_hours = {self.table_hours}: allowed hours >= 0")
             if any(not 0 < p <= 1 for p in self.table_preload_fraction):
                 raise ValueError(f"table_preload_fraction = {self.table_preload_fraction}: "
                                  "allowed 0 < value <= 1")
@@ -142,7 +145,7 @@ class Phase1Config(_Section):
     end_mm: float = Field(330.0, ge=0)
     dwell_s: float = Field(1.0, ge=0)
     capture_s: float = Field(10.0, gt=0, le=120)
-    fs_hz: float = Field(10000.0, gt=0)
+    fs_hz: float = Field(10000.0, ge=2000, le=100000, description="DAQ and controller rate of all eight Phase I signals")
     captures_per_sample: int = Field(10, ge=1)
     capture_interval_minutes: float = Field(30.0, gt=0)
     sample_interval_hours: float = Field(84.0, gt=0)
@@ -163,6 +166,8 @@ class Phase2Config(_Section):
 
     @model_validator(mode="after")
     def _speeds(self) -> "Phase2Config":
+        if any(h < 0 for h in self.session_hours):
+            raise ValueError(f"session_hours = {self.session_hours}: allowed hours >= 0")
         if not self.speeds_mm_s or any(not 0 < s <= 2000 for s in self.speeds_mm_s):
             raise ValueError(f"speeds_mm_s = {self.speeds_mm_s}: allowed a non-empty list of "
                              "speeds with 0 < speed <= 2000 mm/s")
@@ -178,8 +183,8 @@ class DialConfig(_Section):
 
 
 class PauseConfig(_Section):
-    hours: float = Field(ge=0)
-    days: float = Field(gt=0)
+    hours: float = Field(ge=0, description="operating hours at which the axis stopped")
+    days: float = Field(gt=0, description="length of the stop; the screw cools towards ambient meanwhile")
 
 
 class CampaignConfig(_Section):
@@ -195,7 +200,7 @@ class CampaignConfig(_Section):
 class Scenario(_Section):
     name: str = "unnamed"
     description: str = ""
-    seed: int = Field(0, ge=0)
+    seed: int = Field(0, ge=0, le=2**32 - 1)
     axis: AxisConfig = Field(default_factory=AxisConfig)
     geometry: GeometryConfig = Field(default_factory=GeometryConfig)
     sensors: SensorsConfig = Field(default_factory=SensorsConfig)
@@ -207,6 +212,10 @@ class Scenario(_Section):
 
     @model_validator(mode="after")
     def _strokes(self) -> "Scenario":
+        if self.campaign.warmup_hours > self.campaign.total_hours:
+            raise ValueError(f"campaign.warmup_hours = {self.campaign.warmup_hours:g} exceeds "
+                             f"campaign.total_hours = {self.campaign.total_hours:g}: allowed "
+                             "0 <= warmup_hours <= total_hours")
         travel = self.axis.travel_mm
         for key, val in (("phase1.start_mm", self.phase1.start_mm), ("phase1.end_mm", self.phase1.end_mm),
                          ("phase2.start_mm", self.phase2.start_mm), ("phase2.end_mm", self.phase2.end_mm)):
@@ -346,8 +355,10 @@ def to_axis(s: Scenario) -> Axis:
         no_load_torque=a.no_load_torque_Nm, drag_viscous=a.drag_viscous_Nm_s_per_rad,
         contact_damping_ratio=a.contact_damping_ratio,
         radial_stiffness=a.radial_stiffness_N_per_um * 1e6)
+    ref = Carriage()
     carriage = Carriage(
-        mass=a.carriage_mass_kg, truck_spacing=a.truck_spacing_mm * 1e-3,
+        mass=a.carriage_mass_kg,
+        inertia=tuple(i * a.carriage_mass_kg / ref.mass for i in ref.inertia), truck_spacing=a.truck_spacing_mm * 1e-3,
         rail_spacing=a.rail_spacing_mm * 1e-3,
         truck_stiffness_vertical=a.truck_stiffness_vertical_N_per_um * 1e6,
         truck_stiffness_lateral=a.truck_stiffness_lateral_N_per_um * 1e6,
@@ -368,13 +379,13 @@ def nominal_axis_description(s: Scenario) -> dict[str, Any]:
         "rail_spacing_mm": a.rail_spacing_mm,
         "sensors": {
             "nut_accelerometers": {"count": 2, "axes": 3, "sensitivity_mV_per_g": 100.0,
-                                   "fs_hz": se.nut_acc_fs_hz},
+                                   "fs_hz": s.phase1.fs_hz},
             "imu_accelerometer": {"sensitivity_mV_per_g": 2000.0, "bandwidth_hz": se.imu_acc_bandwidth_hz,
                                   "noise_ug_per_rthz": se.imu_acc_noise_ug_per_rthz, "fs_hz": se.imu_acc_fs_hz},
             "imu_gyroscope": {"bandwidth_hz": se.imu_gyro_bandwidth_hz,
                               "noise_urad_s_per_rthz": se.imu_gyro_noise_urad_s_per_rthz,
                               "fs_hz": se.imu_gyro_fs_hz},
-            "controller": {"fs_hz": se.controller_fs_hz, "encoder_counts_per_rev": se.encoder_counts_per_rev},
+            "controller": {"fs_hz": s.phase1.fs_hz, "encoder_counts_per_rev": se.encoder_counts_per_rev},
         },
         "phase1_routine": s.phase1.model_dump(include={"speed_mm_s", "accel_mm_s2", "start_mm", "end_mm", "dwell_s"}),
         "phase2_routine": s.phase2.model_dump(include={"speeds_mm_s", "accel_mm_s2", "start_mm", "end_mm", "dwell_s"}),
