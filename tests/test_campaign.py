@@ -2,6 +2,7 @@
 SIGKILL (checks 9-11 of the twin issue)."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -54,13 +55,18 @@ def test_layout_and_no_truth_in_measurements(small_campaign):
         assert t.onset_hours == 150.0
         x, e, attrs = t.session(t.sessions()[-1])
         assert e.shape == (6, x.size) and attrs["backlash_um"] > 0.0
-        # truth values must not appear as measurement values: the injected backlash of the
-        # last session is not stored anywhere in measurements.h5 except through the dial.
-        injected = attrs["backlash_um"]
+    # No numeric attribute anywhere in measurements.h5 carries an injected value.
+    with open_truth(t_path) as t:
+        injected_values = [t.session(x)[2][k] for x in t.sessions()
+                           for k in ("backlash_um", "origin_offset_m", "preload_N")]
+    numeric = []
     with h5py.File(m_path, "r") as f:
-        for name in f["/phase2"]:
-            for v in f["/phase2"][name].attrs.values():
-                assert not np.isclose(v, injected)
+        f.visititems(lambda n, o: numeric.extend(
+            v for v in o.attrs.values() if np.isscalar(v) and isinstance(v, (int, float, np.number))))
+        numeric.extend(v for v in f.attrs.values() if isinstance(v, (int, float, np.number)))
+    for v in injected_values:
+        if v != 0.0:
+            assert not any(np.isclose(v, x, rtol=1e-9, atol=0.0) for x in numeric), v
 
 
 def test_same_seed_same_data_other_seed_other_noise(small_campaign, tmp_path):
@@ -95,8 +101,8 @@ def test_killed_simulation_resumes_without_redoing(small_campaign, tmp_path):
     assert not (out / "measurements.h5").exists()
     res = run_twin("simulate", REPO / "scenarios/quick.toml", "-o", out, *SMALL, "--workers", "1")
     print(res.stderr)
-    assert f"{len(finished)} reused" in res.stderr.replace("\n", " ") or \
-        f"{len(finished) + len(PartStore(out).names('phase2')) * 0}" in res.stderr
+    reused = int(re.search(r"(\d+) reused", " ".join(res.stderr.split())).group(1))
+    assert reused >= len(finished)  # every part finished before the kill was reused
     for n, mtime in finished.items():  # finished captures were not recomputed
         assert store.path("phase1", n).stat().st_mtime_ns == mtime
     a, b = _arrays(small_campaign / "measurements.h5"), _arrays(out / "measurements.h5")

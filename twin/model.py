@@ -39,7 +39,8 @@ balls and may coexist with the remaining preload of the others; the shaft stiffn
 mid-stroke.
 
 Models in different degradation states differ only in float fields (``tendon_stiffness``,
-``tendon_damping``, ``tendon_lengthspring``, ``dof_frictionloss``), see :func:`apply_state`, so
+``tendon_damping``, ``tendon_lengthspring``, ``dof_frictionloss`` and the lead coefficient in
+``wrap_prm``), see :func:`apply_state`, so
 that any number of them can run in one ``mujoco.rollout`` call.
 """
 
