@@ -9,8 +9,6 @@ import numpy as np
 import pytest
 
 from twin.degradation import (
-    PAPER_RESUME_HOURS,
-    Timeline,
     WearLaw,
     backlash_um,
     contact_stiffness,
@@ -208,8 +206,4 @@ def test_hours_since_resume_hand_values():
     expected = [0.0, 100.0, 0.0, 44.5, 3176.5, 0.0, 967.0, 4660.0]
     np.testing.assert_allclose(hours_since_resume(hours, [855.5, 4033.0]), expected)
     np.testing.assert_allclose(hours_since_resume(hours, [4033.0, 855.5]), expected)  # order-free
-    tl = Timeline()
-    assert tl.resume_hours == PAPER_RESUME_HOURS
-    np.testing.assert_allclose(tl.hours_since_resume(hours), expected)
-    assert tl.temperature_rise_K(900.0, 3.0, 44.5) == pytest.approx(3.0 * (1.0 - math.exp(-1.0)))
     assert hours_since_resume(np.zeros((2, 2)), []).shape == (2, 2)

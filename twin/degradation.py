@@ -46,8 +46,6 @@ import numpy as np
 from scipy import optimize, special
 
 __all__ = [
-    "PAPER_RESUME_HOURS",
-    "PAPER_END_HOURS",
     "WearLaw",
     "wear_depth_um",
     "preload_fraction",
@@ -60,7 +58,6 @@ __all__ = [
     "series_stiffness",
     "temperature_rise_K",
     "hours_since_resume",
-    "Timeline",
     "XjtuSeries",
     "XJTU_FILES",
     "load_xjtu",
@@ -69,10 +66,6 @@ __all__ = [
     "fit_friction_trend",
 ]
 
-#: Operating hours at which the paper's campaign resumed after a pause (Table II of [Paper]).
-PAPER_RESUME_HOURS: tuple[float, ...] = (855.5, 4033.0)
-#: Operating hours at the end of the paper's campaign (Table II of [Paper]).
-PAPER_END_HOURS: float = 8693.0
 
 _HERTZ_EXPONENT = 1.5  # Q ∝ delta^(3/2) for a point contact [Hertz]
 _N_HERMITE = 48  # Gauss–Hermite nodes for the smooth (no-truncation) branch of the 3/2 moment
@@ -448,34 +441,6 @@ def hours_since_resume(hours, resume_hours) -> np.ndarray:
     starts = np.unique(np.concatenate([[0.0], np.asarray(list(resume_hours), dtype=float)]))
     idx = np.searchsorted(starts, h, side="right") - 1
     return h - starts[idx]
-
-
-@dataclass(frozen=True)
-class Timeline:
-    """Operating-hour timeline of a campaign with pauses (default: the paper's, Table II).
-
-    Attributes:
-        resume_hours: operating hours at which the campaign resumed after a pause [h].
-        end_hours: operating hours at the end of the campaign [h].
-    """
-
-    resume_hours: tuple[float, ...] = PAPER_RESUME_HOURS
-    end_hours: float = PAPER_END_HOURS
-
-    def __post_init__(self) -> None:
-        r = tuple(float(x) for x in self.resume_hours)
-        if any(not (0.0 <= x <= self.end_hours) for x in r):
-            raise ValueError(f"Timeline.resume_hours = {r!r} must lie in [0, end_hours = {self.end_hours!r}]")
-        object.__setattr__(self, "resume_hours", tuple(sorted(r)))
-
-    def hours_since_resume(self, hours) -> np.ndarray:
-        """``hours_since_resume(hours, self.resume_hours)`` [h], shape of ``hours``."""
-        return hours_since_resume(hours, self.resume_hours)
-
-    def temperature_rise_K(self, hours, steady_rise_K: float, time_constant_hours: float) -> np.ndarray:
-        """Warm-up rise at operating ``hours`` after the last (re)start [K], shape of ``hours``
-        (``temperature_rise_K`` of ``hours_since_resume``)."""
-        return temperature_rise_K(self.hours_since_resume(hours), steady_rise_K, time_constant_hours)
 
 
 # ----------------------------------------------------------------------------------------------

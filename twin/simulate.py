@@ -369,8 +369,11 @@ def true_error_motions(world: World, cfg, cond: Condition, dx: float = 0.05e-3
 @dataclass(frozen=True)
 class DialResult:
     """backlash_um: the reading a technician reports (mean over repeats), µm; elastic_um: the
-    elastic part of the lost motion at the measuring friction, 2·F_rail/K_axial, µm (what the
-    procedure adds to the clearance by physics, not by error)."""
+    largest elastic part of the lost motion, 2·F_rail/K_axial, µm (the rail friction fully
+    loading the nut in both directions). In the simulation the reading lands 0.08 µm *below*
+    the clearance rather than up to elastic_um above it: MuJoCo's Coulomb friction is a soft
+    constraint, so the settled carriage slowly relaxes the nut's load at each 30 ms step.
+    repeats_um: the single readings, µm."""
 
     backlash_um: float
     elastic_um: float
