@@ -789,6 +789,7 @@ def assemble_truth(
         f.attrs["scenario"] = scenario_json
         f.attrs["onset_hours"] = np.float64(onset)
         gt = f.create_group("timeline")
+        gt.attrs["onset_hours"] = np.float64(onset)  # also here, beside the injected state
         for key in TIMELINE_REQUIRED:
             if key not in timeline:
                 raise DatasetError(f"{label}: /timeline/{key} is missing; expected a (t,) array")

@@ -53,6 +53,9 @@ def test_layout_and_no_truth_in_measurements(small_campaign):
         for key in ("hours", "preload_N", "backlash_um"):
             assert key in tl and tl[key].shape == tl["hours"].shape
         assert t.onset_hours == 150.0
+    with h5py.File(t_path, "r") as f:
+        assert f["/timeline"].attrs["onset_hours"] == 150.0
+    with open_truth(t_path) as t:
         x, e, attrs = t.session(t.sessions()[-1])
         assert e.shape == (6, x.size) and attrs["backlash_um"] > 0.0
     # No numeric attribute anywhere in measurements.h5 carries an injected value.
