@@ -283,6 +283,13 @@ def _explain(err: dict[str, Any], source: str) -> str:
                 f"{' and '.join(bounds)}.")
     if kind == "value_error":
         msg = str(ctx.get("error", err.get("msg", "")))
+        first, _, rest = msg.partition(" ")
+        # "field = value ..." from a section's validator, "section.field = value ..." from the
+        # scenario's own: name the full dotted key.
+        if first in _allowed_keys((*loc, "")):
+            return f"{source}: key `{key + '.' if loc else ''}{first}` {rest}."
+        if not loc and "." in first and rest.startswith("="):
+            return f"{source}: key `{first}` {rest}."
         return f"{source}: key `{key}`: {msg}."
     if kind == "missing":
         return f"{source}: key `{key}` is required but missing."
