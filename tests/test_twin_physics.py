@@ -448,7 +448,7 @@ def test_rail_waviness_through_truck_spacing(wavelength):
 def _pitch_registration(dt: float, v: float = 0.02, wavelength: float = 0.05):
     """Fit the pitch of a constant-speed forward move over a sinusoidal rail as the geometric
     pitch at x_true + Δ; returns (Δ m, sim)."""
-    amp, a = 1e-6, AXIS.carriage.truck_spacing
+    amp = 1e-6
     rails = geo.sinusoidal_rail_profiles(RAIL_LENGTH, wavelength, amp, "vertical",
                                          u_start_m=RAIL_START)
     world = replace(WORLD, rails=rails, screw=_no_screw_errors(WORLD.screw))

@@ -17,7 +17,6 @@ import math
 from dataclasses import dataclass, field
 
 from twin import degradation as deg
-from twin.sensors.instruments import STANDARD_GRAVITY as GRAVITY  # m/s², re-exported
 
 
 @dataclass(frozen=True)

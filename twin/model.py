@@ -52,8 +52,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.axis import GRAVITY, Axis
+from twin.axis import Axis
 from twin.degradation import contact_stiffness
+from twin.sensors.instruments import STANDARD_GRAVITY as GRAVITY  # m/s²
 
 TRUCKS = ("FL", "FR", "RL", "RR")
 

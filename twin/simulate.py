@@ -36,10 +36,10 @@ from scipy import signal
 from twin import geometry as geo
 from twin.axis import Axis
 from twin.drive import Move, Profile, command_profile, reciprocating
-from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, FLANK_MASS, CTRL_POS, CTRL_RIPPLE, CTRL_RUNOUT, CTRL_TRUCK_L,
-                        CTRL_TRUCK_V, CTRL_VEL, NCTRL, Q_PITCH, Q_ROLL, Q_SCREW, Q_X, Q_Y, Q_YAW,
-                        Q_Z, SENS_IMU_ACC, SENS_IMU_GYRO, SENS_NUT1_ACC, SENS_NUT2_ACC,
-                        SENS_SERVO_FORCE, MechanicalState, apply_state, build_model,
+from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, CTRL_POS,
+                        CTRL_RIPPLE, CTRL_RUNOUT, CTRL_TRUCK_L, CTRL_TRUCK_V, CTRL_VEL, FLANK_MASS,
+                        NCTRL, Q_SCREW, Q_X, SENS_IMU_ACC, SENS_IMU_GYRO, SENS_NUT1_ACC,
+                        SENS_NUT2_ACC, SENS_SERVO_FORCE, MechanicalState, apply_state, build_model,
                         initial_state, stiffness_of)
 from twin.sensors import instruments as ins
 
