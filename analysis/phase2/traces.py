@@ -1,0 +1,58 @@
+"""Containers for error motions against position, shared by the error-motion and backlash code.
+
+Position reference: the *commanded* position of the controller (``position_cmd``), which is
+proportional to the screw angle. Rows of every (6, n) array follow :data:`DOFS`: E_XX, E_YX, E_ZX
+in m, E_AX, E_BX, E_CX in rad (ISO 230-1 names; carriage travels along +X, Z up).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
+DOF_UNITS = ("m", "m", "m", "rad", "rad", "rad")
+
+
+@dataclass(frozen=True)
+class DirectionalTraces:
+    """Error motions of one direction pair on a common position grid.
+
+    x_m: (n,) commanded position, m, ascending with uniform step ``dx_m``.
+    forward, reverse: (6, n) error motions while moving towards +X and towards −X, rows DOFS.
+    """
+
+    x_m: np.ndarray
+    forward: np.ndarray
+    reverse: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = len(self.x_m)
+        for name in ("forward", "reverse"):
+            a = getattr(self, name)
+            if a.shape != (6, n):
+                raise ValueError(f"DirectionalTraces.{name} has shape {a.shape}; expected (6, {n})")
+
+    @property
+    def dx_m(self) -> float:
+        """Grid step, m."""
+        return float(self.x_m[1] - self.x_m[0])
+
+
+@dataclass(frozen=True)
+class SessionErrorMotions:
+    """The error motions of one Phase II session, averaged over its usable runs.
+
+    combined: all speeds combined where each is best (the full error motions).
+    slow: the slow-speed component ``slow()`` of the paper, the high-spatial-frequency content
+        that the backlash methods correlate.
+    skipped: (run, reason) for each run left out.
+    """
+
+    session: str
+    hours: float
+    runs: tuple[str, ...]
+    combined: DirectionalTraces
+    slow: DirectionalTraces
+    skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
