@@ -113,6 +113,19 @@ class Trajectory:
         """True carriage position (rail coordinate), m."""
         return self.qpos[:, Q_X]
 
+    @property
+    def angular_velocity_imu(self) -> np.ndarray:
+        """(n, 3) angular velocity of the IMU frame at t_k, rad/s.
+
+        MuJoCo's (semi-)implicit Euler step computes q_{k+1} = q_k + dt·v_{k+1}, so the velocity
+        of row k, v_k = (q_k − q_{k−1})/dt, is the mean rate over [t_{k−1}, t_k], centred half a
+        step late; the accelerometer rows, (v_{k+1} − v_k)/dt, are centred at t_k. The mean of
+        consecutive rows centres the gyro at t_k (last row repeated)."""
+        g = self.sens[:, SENS_IMU_GYRO]
+        out = g.copy()
+        out[:-1] = 0.5 * (g[:-1] + g[1:])
+        return out
+
 
 class Simulator:
     """A compiled axis model at one time step, reused for every rollout of a worker."""
@@ -338,7 +351,7 @@ def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -
     w = sim.world
     fs = sim.fs
     _, acc = ins.measure_imu_accelerometer(traj.sens[:, SENS_IMU_ACC], fs, w.imu_acc, rng)
-    _, gyro = ins.measure_gyroscope(traj.sens[:, SENS_IMU_GYRO], fs, w.imu_gyro, rng)
+    _, gyro = ins.measure_gyroscope(traj.angular_velocity_imu, fs, w.imu_gyro, rng)
     n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
     t_cmd = np.arange(n_cmd) / w.position_cmd_fs
     pos = np.interp(t_cmd, traj.cmd.t, traj.cmd.x)
