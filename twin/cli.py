@@ -122,6 +122,42 @@ def export_model(
     console.print(f"wrote {out}")
 
 
+# --- Phase I detection (issue 3) -------------------------------------------------------------
+@app.command()
+def detect(
+    directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
+    reference: Path = typer.Option(..., "--reference", help="reference data set directory (Fisher selection)"),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
+    method: list[str] = typer.Option([], "--method", help="method(s) to run (default: all six)"),
+    consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
+) -> None:
+    """Phase I incipient-fault detection (paper section IV): writes OUT/detection.json and OUT/detection.png."""
+    from analysis.phase1.detect import run
+    from analysis.phase1.pipeline import METHODS, PAPER_NAMES
+
+    out = out or directory / "phase1"
+    try:
+        details = run(directory, reference, out, method or METHODS, consecutive)
+    except (ValueError, FileNotFoundError) as exc:  # DatasetError, ExtractionError, DetectError
+        _fail(f"{exc} (anything computed before the error is in {out})")
+    onset = details["onset_hours"]
+    table = Table(title=f"Phase I detection, {details['n_samples']} samples, baseline "
+                        f"{details['n_baseline']}, injected onset "
+                        f"{'none' if onset is None else f'{onset:g} h'}")
+    for col in ("method", "limit", "detect h", "delay h", "delay n", "FA/healthy", "FA base"):
+        table.add_column(col)
+    for name, r in details["methods"].items():
+        def fmt(v, f="{:g}"):
+            return "-" if v is None else f.format(v)
+        table.add_row(PAPER_NAMES[name], f"{r['threshold']:.4g}", fmt(r["detection_hours"]),
+                      fmt(r["delay_hours"]), fmt(r["delay_samples"]),
+                      f"{r['false_alarms']} / {r['healthy_test_samples']}", str(r["baseline_alarms"]))
+    Console(width=max(100, Console().width)).print(table)
+    console.print(f"selected features: {', '.join(details['selected_features'])}")
+    console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}")
+# --- end of Phase I detection ---------------------------------------------------------------
+
+
 def main() -> None:
     try:
         app()

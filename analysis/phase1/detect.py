@@ -1,0 +1,119 @@
+"""The ``twin detect`` workflow: reference features -> Fisher selection -> campaign features ->
+six detectors -> scores against the injected onset -> files in OUT.
+
+Files written to OUT, each as soon as it is computed (so a failure later loses nothing before it):
+
+- ``reference_features.csv``, ``selection.json``: the reference table, Fisher scores, selection;
+- ``features.csv``: the campaign's raw features (or ``features.partial.csv`` with the complete
+  samples before a capture that cannot be read; the error is then raised);
+- ``detection.json`` (schema of issue 3), ``detection_details.json`` (scores against the onset,
+  parameters), ``detection.png`` (six panels like the paper's Fig. 6).
+
+The detectors see ``measurements.h5`` only; ``truth.h5`` of the campaign is read for scoring
+(``onset_hours``) and ``truth.h5`` of the reference for its condition labels.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from analysis.dataset import open_measurements, open_truth
+from analysis.phase1 import pipeline, report
+from analysis.phase1.scoring import score_method
+
+__all__ = ["DetectError", "run"]
+
+
+class DetectError(ValueError):
+    """Bad input to the workflow (missing file, unknown method, too few samples)."""
+
+
+def _require(path: Path, what: str) -> None:
+    if not path.is_file():
+        raise DetectError(f"{path}: no such file; expected {what}")
+
+
+def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pipeline.METHODS,
+        consecutive: int = 1, n_baseline: int = pipeline.N_BASELINE, fraction: float = 0.9,
+        random_state: int = 0) -> dict:
+    """Run the workflow; returns the details dict (also written as ``detection_details.json``).
+
+    Raises :class:`DetectError`, :class:`analysis.dataset.DatasetError` or
+    :class:`analysis.phase1.pipeline.ExtractionError` (all ``ValueError``) on bad input.
+    """
+    campaign, reference, out = Path(campaign), Path(reference), Path(out)
+    unknown = [m for m in methods if m not in pipeline.METHODS]
+    if unknown:
+        raise DetectError(f"--method {', '.join(unknown)} is unknown; expected one of "
+                          f"{', '.join(pipeline.METHODS)}")
+    methods = [m for m in pipeline.METHODS if m in methods]
+    _require(campaign / "measurements.h5", "the campaign's measurements.h5")
+    _require(reference / "measurements.h5", "the reference data set's measurements.h5")
+    _require(reference / "truth.h5", "the reference data set's truth.h5 (its condition labels)")
+    with open_measurements(campaign / "measurements.h5"):
+        pass  # an unreadable or truncated campaign file fails here, before any work
+    out.mkdir(parents=True, exist_ok=True)
+
+    # 1. Reference set: features, labels, Fisher selection.
+    try:
+        ref = pipeline.extract(reference / "measurements.h5")
+    except pipeline.ExtractionError as exc:
+        if exc.partial is not None:
+            exc.partial.write_csv(out / "reference_features.partial.csv")
+        raise
+    ref.write_csv(out / "reference_features.csv")
+    labels = pipeline.reference_labels(reference / "truth.h5", ref.hours)
+    n_h, n_f = int(np.sum(labels == 0)), int(np.sum(labels == 1))
+    if n_h < 2 or n_f < 2:
+        raise DetectError(f"{reference / 'truth.h5'}: /timeline gives {n_h} healthy and {n_f} "
+                          "backlash samples of the reference set; expected at least 2 of each")
+    fisher, selected = pipeline.select_features(ref.X, labels, fraction)
+    total = float(np.sum(np.nan_to_num(fisher, posinf=0.0)))
+    selection = {
+        "selected": [ref.names[i] for i in selected],
+        "fisher_scores": {n: (float(s) if np.isfinite(s) else None) for n, s in zip(ref.names, fisher)},
+        "cumulative_fraction": (float(np.sum(fisher[selected]) / total) if total > 0 else None),
+        "threshold_fraction": fraction,
+        "reference_samples": {"healthy": n_h, "backlash": n_f, "unused": int(np.sum(labels < 0))},
+    }
+    report.write_json(out / "selection.json", selection)
+
+    # 2. Campaign features.
+    try:
+        table = pipeline.extract(campaign / "measurements.h5")
+    except pipeline.ExtractionError as exc:
+        if exc.partial is not None:
+            exc.partial.write_csv(out / "features.partial.csv")
+        raise
+    table.write_csv(out / "features.csv")
+    if len(table.hours) <= n_baseline:
+        raise DetectError(f"{campaign / 'measurements.h5'}: /phase1 has {len(table.hours)} samples; "
+                          f"expected more than the {n_baseline} baseline samples")
+
+    # 3. Detectors and scoring.
+    results = pipeline.run_detectors(table, selected, methods, n_baseline, random_state)
+    onset = None
+    truth = campaign / "truth.h5"
+    if truth.is_file():
+        with open_truth(truth) as t:
+            onset = t.onset_hours
+    scores = {m: score_method(table.hours, r["scores"], r["threshold"], n_baseline, onset, consecutive)
+              for m, r in results.items()}
+    detections = {m: s.detection_hours for m, s in scores.items()}
+    report.write_json(out / "detection.json", report.detection_json(table.hours, results, detections))
+    details = {
+        "campaign": str(campaign), "reference": str(reference), "onset_hours": onset,
+        "n_samples": len(table.hours), "n_baseline": n_baseline, "consecutive": consecutive,
+        "selected_features": selection["selected"],
+        "methods": {m: {**asdict(scores[m]), "threshold": results[m]["threshold"],
+                        "n_components": getattr(results[m]["detector"], "n_components_", None)}
+                    for m in results},
+    }
+    report.write_json(out / "detection_details.json", details)
+    report.plot_fig6(out / "detection.png", table.hours, results, pipeline.PAPER_NAMES, n_baseline,
+                     onset, detections)
+    return details

@@ -1,0 +1,77 @@
+"""Phase I outputs: ``detection.json`` and the six-panel figure like the paper's Fig. 6.
+
+``detection.json`` schema (issue 3): ``{"methods": {NAME: {"detection_hours": float or null,
+"threshold": float, "scores": [...], "hours": [...]}}}``, one entry per method, scores oriented so
+that above the threshold is an alarm. Everything else (selected features, delays, false alarms)
+goes to ``detection_details.json``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+__all__ = ["detection_json", "plot_fig6", "write_json"]
+
+
+def _num(x: float | None) -> float | None:
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+def detection_json(hours: np.ndarray, results: dict[str, dict], detections: dict[str, float | None]) -> dict:
+    """The ``detection.json`` object. results: {name: {"scores" (n,), "threshold"}}."""
+    return {"methods": {
+        name: {"detection_hours": _num(detections[name]), "threshold": float(r["threshold"]),
+               "scores": [float(v) for v in r["scores"]], "hours": [float(h) for h in hours]}
+        for name, r in results.items()}}
+
+
+def write_json(path: Path, obj: dict) -> None:
+    """Write JSON (no NaN allowed) through a temporary file."""
+    tmp = Path(str(path) + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=1, allow_nan=False))
+    tmp.replace(path)
+
+
+def plot_fig6(path: Path, hours: np.ndarray, results: dict[str, dict], titles: dict[str, str],
+              n_baseline: int, onset_hours: float | None, detections: dict[str, float | None]) -> None:
+    """Six (or fewer) panels: score trajectory, control limit, baseline, injected onset, detection.
+
+    Scores rising more than three decades above the limit (or the baseline) are drawn on a log
+    (or symmetric-log) axis.
+    """
+    names = list(results)
+    rows = max(1, (len(names) + 1) // 2)
+    fig, axes = plt.subplots(rows, 2 if len(names) > 1 else 1, figsize=(11, 3.0 * rows), squeeze=False)
+    for ax, name in zip(axes.ravel(), names):
+        s = np.asarray(results[name]["scores"], dtype=float)
+        thr = results[name]["threshold"]
+        ax.plot(hours[:n_baseline], s[:n_baseline], "o-", ms=3, color="tab:green", label="baseline")
+        ax.plot(hours[n_baseline - 1:], s[n_baseline - 1:], "o-", ms=3, color="tab:blue", label="test")
+        ax.axhline(thr, color="tab:red", ls="--", label=f"limit {thr:.3g}")
+        if onset_hours is not None:
+            ax.axvline(onset_hours, color="k", ls=":", label=f"injected onset {onset_hours:g} h")
+        if detections.get(name) is not None:
+            ax.axvline(detections[name], color="tab:orange", ls="-.", label=f"detection {detections[name]:g} h")
+        pos = s[np.isfinite(s) & (s > 0)]
+        ref = max(abs(thr), float(np.median(np.abs(s[:n_baseline]))), 1e-300)
+        if pos.size and pos.max() / ref > 1e3:
+            if np.all(s > 0) and thr > 0:
+                ax.set_yscale("log")
+            else:
+                ax.set_yscale("symlog", linthresh=max(ref, 1e-3))
+        ax.set_title(titles.get(name, name))
+        ax.set_xlabel("operating hours")
+        ax.set_ylabel("score")
+        ax.legend(fontsize=7, loc="upper left")
+    for ax in axes.ravel()[len(names):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
