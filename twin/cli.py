@@ -158,6 +158,129 @@ def detect(
 # --- end of Phase I detection ---------------------------------------------------------------
 
 
+# --- Phase II backlash (issue 4) -------------------------------------------------------------
+@app.command()
+def backlash(
+    directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 only for the plot)"),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/backlash)"),
+    strict: bool = typer.Option(False, "--strict", help="exit 2 on a bad run instead of skipping it"),
+    plots: bool = typer.Option(True, "--plots/--no-plots", help="write the PNG figures"),
+    process_noise: str = typer.Option("1e-23", "--process-noise",
+                                      help="Kalman process noise q in m²/h³, or 'ml' (maximum likelihood)"),
+) -> None:
+    """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
+    perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
+    A bad run (missing, cut short, non-finite channel) is skipped with a warning recorded in the
+    JSON, or with --strict ends the command with exit code 2 naming session, run and channel."""
+    import json
+    import math
+
+    import numpy as np
+
+    from analysis.dataset import DatasetError, open_measurements, open_truth
+    from analysis.phase2.backlash import campaign_backlash
+    from analysis.phase2.prognosis import BacklashTrend, prognosis
+
+    out = out or directory / "backlash"
+    try:
+        q = process_noise if process_noise == "ml" else float(process_noise)
+        if q != "ml" and not (math.isfinite(q) and q >= 0):
+            raise ValueError(process_noise)
+    except ValueError:
+        _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
+    try:
+        with open_measurements(directory / "measurements.h5") as m:
+            result = campaign_backlash(m, on_bad_run="raise" if strict else "skip")
+            dial = m.dial_indicator()
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    except ValueError as exc:  # traces that cannot be correlated
+        _fail(f"{directory}: {exc}")
+    for session, run, why in result.skipped_runs:
+        console.print(f"warning: skipped session {session} run {run}: {why}", style="yellow",
+                      markup=False, highlight=False)
+    for session, why in result.skipped_sessions:
+        console.print(f"warning: skipped session {session}: {why}", style="yellow", markup=False,
+                      highlight=False)
+    ses = result.sessions
+    hours = [s.hours for s in ses]
+    shift = [s.delta_backlash_shift_m for s in ses]
+    trend = None
+    if len(ses) >= 2 and np.isfinite(shift).any():
+        trend = BacklashTrend(process_noise=q).fit(hours, shift)
+    prog = prognosis(trend) if trend is not None else None
+    dial_delta = None
+    if dial is not None and len(dial[0]):
+        dial_delta = (dial[0], dial[1] - dial[1][0])
+    records = []
+    for i, s in enumerate(ses):
+        rec = s.to_json()
+        if trend is not None:
+            rec["smoothed_um"] = float(trend.smoothed[i] * 1e6)
+            rec["smoothed_std_um"] = float(trend.smoothed_std[i] * 1e6)
+        if dial_delta is not None:
+            k = int(np.argmin(np.abs(dial_delta[0] - s.hours)))
+            if abs(dial_delta[0][k] - s.hours) < 1e-6:
+                rec["dial_indicator_um"] = float(dial[1][k])
+                rec["dial_delta_um"] = float(dial_delta[1][k])
+        records.append(rec)
+    est = result.estimator
+    doc = {
+        "sessions": records,
+        "prognosis": prog.to_json() if prog is not None else None,
+        "reference_session": ses[0].session,
+        "position_reference": "commanded position (position_cmd, screw-locked); rail-fixed "
+                              "features shift by +Δbacklash forward minus reverse",
+        "sign": "positive = more backlash than in the reference session",
+        "skipped_runs": [{"session": a, "run": b, "reason": c} for a, b, c in result.skipped_runs],
+        "skipped_sessions": [{"session": a, "reason": b} for a, b in result.skipped_sessions],
+        "parameters": {"cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
+                       "kalman_process_noise_m2_per_h3": None if trend is None else trend.process_noise,
+                       "window_definition": est.window_definition, "threshold": est.threshold,
+                       "sigma": est.sigma, "dofs": list(est.dofs), "stationary": est.stationary,
+                       "travel_mm": est.travel_m * 1e3, "lead_mm": est.lead_m * 1e3,
+                       "reference_pitch_mm": None if not math.isfinite(est.reference_pitch_m_)
+                       else est.reference_pitch_m_ * 1e3},
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "backlash.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
+    figures = []
+    if plots:
+        from analysis.phase2.report import write_figures
+
+        injected = None
+        if (directory / "truth.h5").exists():
+            with open_truth(directory / "truth.h5") as t:
+                names = [s.session for s in ses]
+                b = [t.session(n)[2]["backlash_um"] for n in names]
+                injected = (hours, [v - b[0] for v in b])
+        figures = write_figures(result, out, trend=trend, dial=dial_delta, injected=injected)
+
+    def fmt(v, f="{:.2f}"):
+        return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f.format(v)
+
+    table = Table(title=f"Phase II backlash change vs session {ses[0].session} ({len(ses)} sessions)")
+    for col in ("session", "hours", "Δb shifts µm", "Δb pitch µm", "smoothed µm", "dial Δ µm",
+                "pitch mm", "γ max"):
+        table.add_column(col)
+    for rec in records:
+        g = [v for v in rec["gamma"].values() if v is not None]
+        table.add_row(rec["session"], f"{rec['hours']:g}", fmt(rec["delta_backlash_um_shift"]),
+                      fmt(rec["delta_backlash_um_pitch"]), fmt(rec.get("smoothed_um")),
+                      fmt(rec.get("dial_delta_um")), fmt(rec["observed_pitch_mm"], "{:.6f}"),
+                      fmt(max(g) if g else None, "{:.3f}"))
+    Console(width=max(100, Console().width)).print(table)
+    if prog is not None:
+        p = prog.to_json()
+        console.print(f"prognosis: {fmt(p['level_um'])} µm at {p['at_hours']:g} h, rate "
+                      f"{fmt(p['rate_um_per_kh'])} µm/kh; {p['limit_um']:g} µm reached at "
+                      f"{fmt(p['crossing_hours'], '{:.0f}')} h (95 % band "
+                      f"{fmt(p['band_hours'][0], '{:.0f}')}–{fmt(p['band_hours'][1], '{:.0f}')} h)",
+                      markup=False, highlight=False)
+    console.print(f"wrote {out / 'backlash.json'}" + (f" and {len(figures)} figures" if figures else ""))
+# --- end of Phase II backlash ----------------------------------------------------------------
+
+
 def main() -> None:
     try:
         app()

@@ -1,0 +1,345 @@
+"""Change of backlash from the slow-speed error motions: by signal shifts (paper section V,
+Eqs. 4–7) and by perceived ball-screw pitch (Eqs. 8–9).
+
+Position reference and sign convention
+--------------------------------------
+The traces are functions of the *commanded* position (``position_cmd``, proportional to the screw
+angle; :mod:`analysis.phase2.traces`). Under this reference
+
+- screw-fixed features (lead error, ball passing, the motor's torque ripple) stay in place between
+  the forward and reverse traces and between sessions, up to the origin set for the session;
+- rail-fixed features (straightness E_YX, E_ZX and the angles E_AX, E_BX, E_CX from the rails'
+  waviness) appear where the carriage, which trails the nut by half the clearance, meets them:
+  at x_cmd = u + b/2 moving forward and u − b/2 moving in reverse (x_cmd − origin). Relative to the
+  first session the forward trace shifts by +Δb/2 and the reverse trace by −Δb/2, on top of the
+  common shift of the new origin.
+
+The paper's text assumes the opposite reference (rail features stay, E_XX moves), which is why its
+Eq. 5 subtracts ΔPositionShift of E_XX. Here the commanded position itself is screw-locked, so the
+stationary part is the axis and (``stationary="command"``, the default)
+
+    ΔPositionShift_ij = PositionShift_ij1 − PositionShift_ij2            (Eq. 4, forward − reverse)
+    ΔBacklash_ij      = ΔPositionShift_ij                                 (Eq. 5, this reference)
+
+With the shift convention of :mod:`analysis.phase2.shifts` (a positive shift = features at a larger
+commanded position) a **positive change of backlash comes out positive**: ΔPositionShift = +Δb.
+``stationary="E_XX"`` subtracts the shift of E_XX instead (ΔBacklash_ij = ΔPositionShift_ij −
+ΔPositionShift_i1, Eq. 5 with the moving and stationary roles of this reference); it only makes
+sense if the high-pass-filtered E_XX is purely screw-fixed. At the IMU it is not: its content above
+the 0.5 mm cutoff mixes the motor's 8-per-revolution torque ripple and ball passing (screw-fixed)
+with the Abbe terms of pitch and yaw (rail-fixed): in the twin it shifts by about 0 % of the
+backlash at 20 mm/s (torque ripple dominates) but 60–70 % at 100 mm/s, so E_XX is left out of the
+default sum.
+
+Weighted sum (Eqs. 6–7): γ_ij = min(γ_ij1, γ_ij2), ΔBacklash_i = Σ_j γ_ij^σ ΔBacklash_ij /
+Σ_j γ_ij^σ with σ = 4 over ``dofs`` (by default the straightness pair E_YX, E_ZX; the paper's
+five non-positioning DOFs with ``dofs=NON_POSITIONING``, see :class:`BacklashEstimator`).
+
+Perceived pitch (Eqs. 8–9): for every DOF and direction whose correlation shows a comb of peaks
+(:class:`analysis.phase2.shifts.ShiftResult.spacing_m`), the observed pitch p_ijk is the peak
+spacing times its order h = round(lead / spacing) (peaks of an h-per-revolution feature are lead/h
+apart; the twin's comb is the motor's 8-per-revolution torque ripple, 1.25 mm). The spacing is
+taken from the session's own autocorrelation: the comb of the *cross*-correlation of two traces
+with periods P_0 and P_i has the mean spacing (P_0 + P_i)/2 (the sum over x of two slightly
+detuned combs; checked in tests/test_phase2_backlash.py), which would halve Eq. 9. Then
+p_i = Σ γ_ijk^σ p_ijk / Σ γ_ijk^σ over (j, k) with the γ of the correlation against the reference
+(Eq. 8), and ΔBacklash_i ≈ (L/p)(p_i − p_0) with L the travel, p the nominal lead and p_0 the
+pitch of the first session. Eq. 9 assumes that backlash makes the IMU-based position scale with
+L/(L − b), and recovers b on such traces; under the commanded reference the comb is locked to the
+screw angle, so its spacing cannot change with backlash (nor with the lead's thermal growth), and
+this estimate only shows its noise (±3 µm on the paper's campaign, see the README).
+
+Units: SI inside (m, rad); results carry µm / mm only in the names of the JSON fields.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from sklearn.base import BaseEstimator
+
+from analysis.phase2.shifts import THRESHOLD, ShiftResult, shift_between
+from analysis.phase2.traces import DOFS, DirectionalTraces, SessionErrorMotions
+from analysis.phase2.winfilt import CUTOFF_WAVELENGTH_M, winfilt
+
+SIGMA = 4
+"""Weighting exponent σ of Eqs. 6 and 8 (paper section V)."""
+
+DIRECTIONS = ("forward", "reverse")
+NON_POSITIONING = DOFS[1:]
+"""The five DOFs of the paper's Eq. 6 (j = 2..6)."""
+STRAIGHTNESS = ("E_YX", "E_ZX")
+"""Default DOFs of Eq. 6 here (see :class:`BacklashEstimator`)."""
+COMB_TOLERANCE = 0.01
+"""A comb of correlation peaks counts as a pitch only if h·spacing is within 1 % of the nominal
+lead and the peaks sit within 5 % of the spacing (rms) from their line."""
+
+
+@dataclass(frozen=True)
+class SessionBacklash:
+    """Backlash estimates of one session against the reference session.
+
+    Attributes:
+        session, hours: the session and its operating hours (h).
+        shifts: {(dof, direction): ShiftResult} of every correlation.
+        delta_position_shift_m: {dof: ΔPositionShift_ij} (Eq. 4), m.
+        delta_backlash_dof_m: {dof: ΔBacklash_ij} (Eq. 5, this reference), m.
+        gamma: {dof: γ_ij = min over directions} (Eq. 7).
+        delta_backlash_shift_m: ΔBacklash_i by shifts (Eq. 6), m.
+        observed_pitch_m: perceived pitch p_i (Eq. 8), m (NaN if no comb of peaks).
+        delta_backlash_pitch_m: ΔBacklash_i by pitch (Eq. 9), m.
+        pitch_by: {"dof/direction": p_ijk} used in Eq. 8, m (NaN: no comb).
+    """
+
+    session: str
+    hours: float
+    shifts: dict = field(repr=False)
+    delta_position_shift_m: dict
+    delta_backlash_dof_m: dict
+    gamma: dict
+    delta_backlash_shift_m: float
+    observed_pitch_m: float
+    delta_backlash_pitch_m: float
+    pitch_by: dict = field(repr=False, default_factory=dict)
+
+    def to_json(self) -> dict:
+        """The session record of ``backlash.json`` (µm and mm as the names say)."""
+        def num(v, scale=1.0):
+            return None if v is None or not math.isfinite(v) else float(v) * scale
+        return {
+            "session": self.session,
+            "hours": float(self.hours),
+            "delta_backlash_um_shift": num(self.delta_backlash_shift_m, 1e6),
+            "delta_backlash_um_pitch": num(self.delta_backlash_pitch_m, 1e6),
+            "observed_pitch_mm": num(self.observed_pitch_m, 1e3),
+            "gamma": {d: num(g) for d, g in self.gamma.items()},
+            "gamma_by_direction": {f"{d}/{k}": num(r.gamma) for (d, k), r in self.shifts.items()},
+            "position_shift_um": {f"{d}/{k}": num(r.shift_m, 1e6) for (d, k), r in self.shifts.items()},
+            "delta_position_shift_um": {d: num(v, 1e6) for d, v in self.delta_position_shift_m.items()},
+            "delta_backlash_um_by_dof": {d: num(v, 1e6) for d, v in self.delta_backlash_dof_m.items()},
+        }
+
+
+def _traces(X) -> tuple[DirectionalTraces, str, float]:
+    if isinstance(X, SessionErrorMotions):
+        return X.slow, X.session, X.hours
+    if isinstance(X, DirectionalTraces):
+        return X, "", float("nan")
+    raise TypeError(f"expected SessionErrorMotions or DirectionalTraces, got {type(X).__name__}")
+
+
+def weighted_sum(values, gammas, sigma: int = SIGMA) -> float:
+    """Σ γ^σ v / Σ γ^σ over the finite entries (Eqs. 6 and 8); NaN if none (γ < 0 counts as 0)."""
+    v = np.asarray(values, dtype=float)
+    w = np.clip(np.asarray(gammas, dtype=float), 0.0, None) ** sigma
+    ok = np.isfinite(v) & np.isfinite(w) & (w > 0)
+    if not ok.any():
+        return float("nan")
+    return float(np.sum(w[ok] * v[ok]) / np.sum(w[ok]))
+
+
+class BacklashEstimator(BaseEstimator):
+    """Change of backlash relative to a reference session (scikit-learn style).
+
+    ``fit(reference)`` takes the first session (a :class:`SessionErrorMotions`, whose ``slow``
+    traces are used, or :class:`DirectionalTraces`); ``estimate(session)`` returns a
+    :class:`SessionBacklash`; ``transform(sessions)`` an (n, 2) array of [by shifts, by pitch] in m.
+
+    Parameters:
+        cutoff_wavelength_m: winfilt cutoff λc, m (0.5 mm). window_definition: see
+            :mod:`analysis.phase2.winfilt`.
+        threshold: peak threshold as a fraction of γ (0.75). fit_fraction: lobe part of each peak
+            fit. upsample: lag-grid refinement. min_peaks: fewest peaks for a pitch.
+        max_lag_m: search range of the main peak, m (5 mm: origins within ±2 mm plus backlash).
+        sigma: weighting exponent (4).
+        dofs: DOFs of the shift-based sum (Eq. 6). Default: the straightness pair E_YX, E_ZX.
+            The paper sums the five non-positioning DOFs (``NON_POSITIONING``) and relies on
+            γ^σ to silence poor ones; in the twin the gyro-based angles at 100 mm/s correlate
+            at γ ≈ 0.7 while their shifts scatter by 5–20 µm (the winfilt band sits at the edge
+            of the gyro's 200 Hz bandwidth), which with σ = 4 still weighs 20–25 % and spoils
+            the sum by µm, whereas E_YX and E_ZX resolve 0.1 µm at γ ≈ 0.998. At 20 mm/s the
+            angles reach only γ ≈ 0.1–0.2 and the two choices agree.
+        pitch_dofs: DOFs of the perceived pitch (Eq. 8).
+        stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
+        travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).
+    """
+
+    def __init__(self, *, cutoff_wavelength_m: float = CUTOFF_WAVELENGTH_M,
+                 window_definition: str = "iso50", threshold: float = THRESHOLD,
+                 fit_fraction: float = 0.8, upsample: int = 8, min_peaks: int = 3,
+                 max_lag_m: float = 5e-3, sigma: int = SIGMA, dofs: tuple = STRAIGHTNESS,
+                 pitch_dofs: tuple = DOFS, stationary: str = "command", travel_m: float = 0.45,
+                 lead_m: float = 0.010):
+        self.cutoff_wavelength_m = cutoff_wavelength_m
+        self.window_definition = window_definition
+        self.threshold = threshold
+        self.fit_fraction = fit_fraction
+        self.upsample = upsample
+        self.min_peaks = min_peaks
+        self.max_lag_m = max_lag_m
+        self.sigma = sigma
+        self.dofs = dofs
+        self.pitch_dofs = pitch_dofs
+        self.stationary = stationary
+        self.travel_m = travel_m
+        self.lead_m = lead_m
+
+    # -- helpers ---------------------------------------------------------------------------
+    def _check_params(self) -> None:
+        if self.stationary not in ("command", "E_XX"):
+            raise ValueError(f"stationary is {self.stationary!r}; expected 'command' or 'E_XX'")
+        for d in (*self.dofs, *self.pitch_dofs):
+            if d not in DOFS:
+                raise ValueError(f"unknown DOF {d!r}; expected one of {DOFS}")
+        if not (self.travel_m > 0 and self.lead_m > 0):
+            raise ValueError(f"travel_m = {self.travel_m!r} and lead_m = {self.lead_m!r}: expected > 0 m")
+
+    def _filtered(self, tr: DirectionalTraces, what: str) -> dict:
+        dx = tr.dx_m
+        out = {}
+        for k in DIRECTIONS:
+            arr = getattr(tr, k)
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{what}: the {k} slow traces have non-finite values")
+            out[k] = winfilt(arr, dx, self.cutoff_wavelength_m, self.window_definition)
+        return {"x0": float(tr.x_m[0]), "dx": dx, **out}
+
+    def _shift(self, a: dict, b: dict, j: int, k: str) -> ShiftResult:
+        return shift_between(a[k][j], b[k][j], a["dx"], a["x0"], b["x0"], upsample=self.upsample,
+                             max_lag_m=self.max_lag_m, threshold=self.threshold,
+                             fit_fraction=self.fit_fraction, min_peaks=self.min_peaks)
+
+    def comb_pitch(self, r: ShiftResult) -> float:
+        """Observed pitch (m) of a comb of correlation peaks: spacing × order, or NaN when the
+        comb does not match a harmonic of the nominal lead (see ``COMB_TOLERANCE``)."""
+        spacing = r.spacing_m
+        if not math.isfinite(spacing) or spacing <= 0 or not r.comb_residual_m <= 0.05 * spacing:
+            return float("nan")
+        p = spacing * max(1, round(self.lead_m / spacing))
+        return p if abs(p - self.lead_m) <= COMB_TOLERANCE * self.lead_m else float("nan")
+
+    # -- scikit-learn API ------------------------------------------------------------------
+    def fit(self, X, y=None) -> BacklashEstimator:
+        """Use ``X`` (the first session) as the reference. Returns self."""
+        self._check_params()
+        tr, name, hours = _traces(X)
+        self.reference_ = self._filtered(tr, f"reference session {name or '(traces)'}")
+        self.reference_session_ = name
+        self.reference_hours_ = hours
+        pitches, gammas = [], []
+        for d in self.pitch_dofs:
+            j = DOFS.index(d)
+            for k in DIRECTIONS:
+                r = self._shift(self.reference_, self.reference_, j, k)
+                pitches.append(self.comb_pitch(r))
+                gammas.append(r.gamma)
+        self.reference_pitch_m_ = weighted_sum(pitches, gammas, self.sigma)
+        return self
+
+    def estimate(self, X) -> SessionBacklash:
+        """Estimates for one session (Eqs. 4–9) against the fitted reference."""
+        if not hasattr(self, "reference_"):
+            raise RuntimeError("BacklashEstimator: call fit(reference_session) first")
+        tr, name, hours = _traces(X)
+        cur = self._filtered(tr, f"session {name or '(traces)'}")
+        if abs(cur["dx"] - self.reference_["dx"]) > 1e-6 * self.reference_["dx"]:
+            raise ValueError(f"session {name}: slow grid step {cur['dx'] * 1e6:g} µm differs from "
+                             f"the reference's {self.reference_['dx'] * 1e6:g} µm; expected equal steps")
+        needed = sorted(set(self.dofs) | set(self.pitch_dofs) | {"E_XX"}, key=DOFS.index)
+        shifts = {(d, k): self._shift(cur, self.reference_, DOFS.index(d), k)
+                  for d in needed for k in DIRECTIONS}
+        dps = {d: shifts[(d, "forward")].shift_m - shifts[(d, "reverse")].shift_m for d in needed}
+        gamma = {d: min(shifts[(d, "forward")].gamma, shifts[(d, "reverse")].gamma) for d in needed}
+        ref = dps["E_XX"] if self.stationary == "E_XX" else 0.0
+        dbl = {d: dps[d] - ref for d in self.dofs}
+        by_shift = weighted_sum([dbl[d] for d in self.dofs], [gamma[d] for d in self.dofs],
+                                self.sigma)
+        pitch_by = {(d, k): self.comb_pitch(self._shift(cur, cur, DOFS.index(d), k))
+                    for d in self.pitch_dofs for k in DIRECTIONS}
+        p_i = weighted_sum(list(pitch_by.values()),
+                           [shifts[key].gamma for key in pitch_by], self.sigma)
+        by_pitch = self.travel_m / self.lead_m * (p_i - self.reference_pitch_m_)
+        return SessionBacklash(session=name, hours=hours, shifts=shifts,
+                               delta_position_shift_m=dps, delta_backlash_dof_m=dbl, gamma=gamma,
+                               delta_backlash_shift_m=by_shift, observed_pitch_m=p_i,
+                               delta_backlash_pitch_m=by_pitch,
+                               pitch_by={f"{d}/{k}": v for (d, k), v in pitch_by.items()})
+
+    def transform(self, X) -> np.ndarray:
+        """(n, 2) [ΔBacklash by shifts, by pitch] in m for the sessions ``X`` (a sequence)."""
+        return np.array([[e.delta_backlash_shift_m, e.delta_backlash_pitch_m]
+                         for e in (self.estimate(x) for x in X)]).reshape(-1, 2)
+
+
+@dataclass
+class CampaignBacklash:
+    """Backlash estimates of every session of a campaign against its first usable session.
+
+    Attributes:
+        sessions: one :class:`SessionBacklash` per usable session, in hours order (the first is
+            the reference, with zero change by construction).
+        error_motions: the :class:`SessionErrorMotions` they came from (same order).
+        skipped_runs: (session, run, reason) of every run left out.
+        skipped_sessions: (session, reason) of every session left out (no usable run).
+        estimator: the fitted :class:`BacklashEstimator`.
+    """
+
+    sessions: list
+    error_motions: list
+    skipped_runs: list
+    skipped_sessions: list
+    estimator: BacklashEstimator
+
+
+def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimator | None = None,
+                      progress=None, **error_motion_kw) -> CampaignBacklash:
+    """Error motions (:func:`analysis.phase2.error_motions.session_error_motions`) and backlash
+    estimates for every Phase II session of an open ``measurements.h5``.
+
+    Args:
+        m: :class:`analysis.dataset.Measurements`.
+        on_bad_run: "skip" (a bad run is left out and reported) or "raise" (the first bad run
+            raises :class:`analysis.dataset.DatasetError` naming session, run and channel).
+        estimator: default ``BacklashEstimator`` with L and p from the file's ``axis``
+            description (``travel_mm``, ``lead_mm``) when present.
+        progress: optional callable(done, total, session).
+    Raises:
+        DatasetError: a bad run with ``on_bad_run="raise"``, no Phase II session, or no usable
+            run in any session.
+    """
+    from analysis.dataset import DatasetError
+    from analysis.phase2.error_motions import session_error_motions
+
+    names = m.phase2_sessions()
+    if not names:
+        raise DatasetError(f"{m.label}: /phase2 has no session; expected at least two sessions")
+    if estimator is None:
+        axis = m.axis() or {}
+        kw = {}
+        if isinstance(axis.get("travel_mm"), (int, float)):
+            kw["travel_m"] = float(axis["travel_mm"]) * 1e-3
+        if isinstance(axis.get("lead_mm"), (int, float)):
+            kw["lead_m"] = float(axis["lead_mm"]) * 1e-3
+        estimator = BacklashEstimator(**kw)
+    ems, skipped_runs, skipped_sessions = [], [], []
+    for i, name in enumerate(names):
+        try:
+            em = session_error_motions(m, name, on_bad_run=on_bad_run, **error_motion_kw)
+        except DatasetError as exc:
+            if on_bad_run == "raise":
+                raise
+            skipped_sessions.append((name, str(exc)))
+        else:
+            ems.append(em)
+            skipped_runs.extend((name, run, why) for run, why in em.skipped)
+        if progress is not None:
+            progress(i + 1, len(names), name)
+    if not ems:
+        raise DatasetError(f"{m.label}: no Phase II session has a usable run "
+                           f"({'; '.join(w for _, w in skipped_sessions)})")
+    estimator.fit(ems[0])
+    return CampaignBacklash(sessions=[estimator.estimate(e) for e in ems], error_motions=ems,
+                            skipped_runs=skipped_runs, skipped_sessions=skipped_sessions,
+                            estimator=estimator)

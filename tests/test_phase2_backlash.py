@@ -1,0 +1,318 @@
+"""Backlash by signal shifts and by perceived pitch (issue 4, checks 2, 3, 4).
+
+Unit tests on synthetic traces with known shifts, then the CI gate on ``scenarios/backlash-steps.toml``
+(simulated once per session, analysed through ``twin backlash``). ``pytest -s`` prints the figures.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from conftest import REPO, run_twin
+
+from analysis.phase2.backlash import NON_POSITIONING, BacklashEstimator, weighted_sum
+from analysis.phase2.shifts import correlate_traces, shift_between
+from analysis.phase2.traces import DOFS, DirectionalTraces
+from analysis.phase2.winfilt import highpass, savgol_window, winfilt
+
+STEPS = REPO / "scenarios/backlash-steps.toml"
+_CAMPAIGNS: dict = {}
+_JSON: dict = {}
+
+
+def steps_campaign(tmp_path_factory, *overrides: str):
+    """backlash-steps simulated with ``--set`` overrides, once per test session (shared with
+    test_phase2_cli.py)."""
+    key = tuple(overrides)
+    if key not in _CAMPAIGNS:
+        out = tmp_path_factory.mktemp("steps")
+        run_twin("simulate", STEPS, "-o", out, *[a for o in overrides for a in ("--set", o)])
+        _CAMPAIGNS[key] = out
+    return _CAMPAIGNS[key]
+
+
+def backlash_json(directory, *args: str) -> dict:
+    """``twin backlash DIR -o DIR/backlash`` once per directory; the parsed backlash.json."""
+    key = (str(directory), args)
+    if key not in _JSON:
+        out = directory / "backlash"
+        run_twin("backlash", directory, "-o", out, *args)
+        _JSON[key] = json.loads((out / "backlash.json").read_text())
+    return _JSON[key]
+
+
+def injected_change_um(directory) -> dict:
+    from analysis.dataset import open_truth
+
+    with open_truth(directory / "truth.h5") as t:
+        b = {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
+    first = b[min(b)]
+    return {s: v - first for s, v in b.items()}
+
+
+# ---------------------------------------------------------------------------------------------
+# Synthetic traces
+
+
+def rail_profile(rng, lam_min=0.4e-3, lam_max=60e-3, amp=1e-6, du=2e-6):
+    """A random rail-like profile (random phases, amplitude ∝ wavelength between ``lam_min`` and
+    ``lam_max``, rms ``amp``), synthesised by inverse FFT on a 2 µm grid and interpolated."""
+    u = np.arange(-0.01, 0.47, du)
+    k = np.fft.rfftfreq(u.size, du)
+    band = (k >= 1 / lam_max) & (k <= 1 / lam_min)
+    spec = np.zeros(k.size, dtype=complex)
+    spec[band] = np.exp(1j * rng.uniform(0, 2 * math.pi, band.sum())) / k[band]
+    prof = np.fft.irfft(spec, u.size)
+    prof *= amp / np.sqrt(np.mean(prof ** 2))
+    return lambda x: np.interp(x, u, prof)
+
+
+def directional(rng_seed, backlash, origin, x, profiles, screw, noise=0.0, stretch=1.0):
+    """(forward, reverse) (6, n) traces against commanded position x: E_XX screw-fixed (no
+    backlash shift), the others rail-fixed; the carriage trails the nut by b/2."""
+    rng = np.random.default_rng(rng_seed)
+    out = []
+    for sign in (+1, -1):
+        xt = stretch * (x + origin) - sign * backlash / 2.0
+        rows = [screw(x + origin)] + [p(xt) for p in profiles]
+        out.append(np.array(rows) + noise * rng.standard_normal((6, x.size)))
+    return DirectionalTraces(x, out[0], out[1])
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    rng = np.random.default_rng(42)
+    profiles = [rail_profile(rng) for _ in range(5)]
+    period = 0.010 / 8  # an 8-per-revolution screw-fixed feature
+    screw_rng = rail_profile(rng, amp=0.05e-6)
+    screw = lambda u: 0.1e-6 * np.sin(2 * math.pi * u / period) + screw_rng(u)
+    x = np.arange(0.002, 0.252, 10e-6)  # 250 mm of the stroke keeps the test fast
+    return profiles, screw, x
+
+
+def test_winfilt_window_and_cutoff():
+    assert savgol_window(10e-6) == 31  # 0.603 * 0.5 mm / 10 µm = 30.15 -> 31 (odd)
+    assert savgol_window(20e-6) == 15
+    dx = 10e-6
+    x = np.arange(0, 0.2, dx)
+    w = savgol_window(dx) * dx
+    lam_c = w / 0.603  # the cutoff of the rounded window
+    gains = {}
+    for lam in (lam_c / 3, lam_c, 3 * lam_c):
+        hp = highpass(np.sin(2 * math.pi * x / lam), dx)[2000:-2000]
+        gains[lam] = np.sqrt(2 * np.mean(hp ** 2))
+    print(f"\nwinfilt: W = 31 samples on 10 µm, λc = {lam_c * 1e3:.4f} mm; high-pass gain "
+          + ", ".join(f"{g:.3f} at {lam * 1e3:.3f} mm" for lam, g in gains.items()))
+    assert gains[lam_c] == pytest.approx(0.5, abs=0.01)
+    assert gains[lam_c / 3] > 0.9 and gains[3 * lam_c] < 0.1
+    out = winfilt(np.sin(2 * math.pi * x / 0.3e-3) + 5.0, dx)
+    assert abs(out[0]) < 1e-12 and abs(out[-1]) < 1e-12 and abs(out.mean()) < 0.05
+
+
+def test_shift_sign_and_subsample_precision():
+    rng = np.random.default_rng(1)
+    dx = 10e-6
+    x = np.arange(0, 0.45, dx)
+    errs = []
+    for _ in range(6):
+        f = rail_profile(rng)
+        true = rng.uniform(-4e-3, 4e-3)
+        r = shift_between(winfilt(f(x - true), dx), winfilt(f(x), dx), dx)
+        errs.append(r.shift_m - true)
+    errs = np.array(errs) * 1e9
+    print(f"\nsynthetic shifts (±4 mm, sub-sample): errors {np.round(errs, 1)} nm")
+    assert np.all(np.abs(errs) < 20)  # 20 nm = 1/500 of the grid step
+    # features at a larger position -> positive shift; offset grids are accounted for
+    f = rail_profile(rng)
+    r = shift_between(winfilt(f(x[100:] - 30e-6), dx), winfilt(f(x), dx), dx, x[100], x[0])
+    assert r.shift_m == pytest.approx(30e-6, abs=0.02e-6)
+
+
+def test_correlation_upsampled_matches_plain():
+    rng = np.random.default_rng(3)
+    smooth = np.hanning(9) / np.hanning(9).sum()  # band-limited, as winfiltered traces are
+    a = np.convolve(rng.standard_normal(500), smooth, "same")
+    b = np.convolve(rng.standard_normal(400), smooth, "same")
+    l1, c1 = correlate_traces(a, b, 1.0, upsample=1)
+    l8, c8 = correlate_traces(a, b, 1.0, upsample=8)
+    on_grid = np.isclose(l8 % 1.0, 0.0)
+    assert np.allclose(l8[on_grid], l1) and np.allclose(c8[on_grid], c1, atol=2e-3)
+
+
+def test_comb_spacing_and_peak_numbers():
+    dx = 10e-6
+    x = np.arange(0, 0.45, dx)
+    period = 1.25e-3
+    rng = np.random.default_rng(5)
+    f = rail_profile(rng, amp=0.02e-6)
+    sig = lambda u: np.sin(2 * math.pi * u / period) * 1e-7 + f(u)
+    r = shift_between(winfilt(sig(x - 0.3e-3), dx), winfilt(sig(x), dx), dx)
+    print(f"\ncomb: {r.n_peaks} peaks, spacing {r.spacing_m * 1e6:.4f} µm (true 1250), "
+          f"shift {r.shift_m * 1e6:.3f} µm (true 300)")
+    assert r.n_peaks > 20
+    assert r.spacing_m == pytest.approx(period, abs=0.01e-6)
+    assert r.shift_m == pytest.approx(0.3e-3, abs=0.05e-6)
+
+
+def test_weighted_sum_eq6():
+    assert weighted_sum([1.0, 3.0], [1.0, 1.0]) == pytest.approx(2.0)
+    assert weighted_sum([1.0, 3.0], [1.0, 0.5], sigma=4) == pytest.approx((1 + 3 / 16) / (1 + 1 / 16))
+    assert math.isnan(weighted_sum([np.nan], [1.0]))
+
+
+@pytest.mark.parametrize("stationary", ["command", "E_XX"])
+def test_estimator_recovers_injected_backlash_on_synthetic_traces(synthetic, stationary):
+    profiles, screw, x = synthetic
+    ref = directional(0, 3e-6, 0.7e-3, x, profiles, screw)
+    est = BacklashEstimator(stationary=stationary, pitch_dofs=("E_XX",), dofs=NON_POSITIONING).fit(ref)
+    rows = []
+    for i, (db, o) in enumerate([(0.0, -1.0e-3), (2e-6, 1.9e-3), (5e-6, -1.6e-3), (20e-6, 0.1e-3)]):
+        r = est.estimate(directional(i + 1, 3e-6 + db, o, x, profiles, screw))
+        rows.append((db, r.delta_backlash_shift_m))
+        for d in DOFS[1:]:
+            assert r.delta_position_shift_m[d] == pytest.approx(db, abs=0.03e-6), d
+        assert r.delta_position_shift_m["E_XX"] == pytest.approx(0.0, abs=0.03e-6)
+        assert r.delta_backlash_shift_m == pytest.approx(db, abs=0.03e-6)
+    print(f"\nsynthetic ({stationary}): injected -> estimated "
+          + ", ".join(f"{a * 1e6:g} -> {b * 1e6:.3f}" for a, b in rows) + " µm")
+
+
+def test_pitch_formula_eq9_on_stretched_traces(synthetic):
+    """Eq. 9 on the mechanism the paper assumes: the IMU-based position scales by L/(L − b)."""
+    profiles, screw, x = synthetic
+    L, p = 0.45, 0.010
+    ref = directional(0, 0.0, 0.0, x, profiles, screw)
+    est = BacklashEstimator(travel_m=L, lead_m=p, pitch_dofs=("E_XX",)).fit(ref)
+    assert est.reference_pitch_m_ == pytest.approx(p, abs=0.1e-6)
+    for b in (5e-6, 20e-6):
+        s = L / (L - b)
+        tr = DirectionalTraces(x, screw(x / s)[None].repeat(6, 0), screw(x / s)[None].repeat(6, 0))
+        r = est.estimate(tr)
+        print(f"\nEq. 9 with the IMU position stretched by L/(L−b), b = {b * 1e6:g} µm: "
+              f"pitch {r.observed_pitch_m * 1e3:.6f} mm, Δbacklash {r.delta_backlash_pitch_m * 1e6:.2f} µm")
+        assert r.delta_backlash_pitch_m == pytest.approx(b, abs=0.1 * b)
+        # the cross-correlation comb has the mean spacing of the two traces (why the pitch comes
+        # from the session's own autocorrelation)
+        cross = r.shifts[("E_XX", "forward")].spacing_m * 8
+        assert cross == pytest.approx(p * (1 + s) / 2, abs=0.1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# The CI gate on backlash-steps (100 mm/s, 10 runs, paper IMU noise, origins within ±2 mm)
+
+
+def test_check2_backlash_steps_shift_based(tmp_path_factory):
+    d = steps_campaign(tmp_path_factory)
+    doc = backlash_json(d, "--no-plots")
+    injected = injected_change_um(d)
+    print("\ncheck 2 (backlash-steps): session, injected, by shifts, by pitch (µm)")
+    bad = []
+    for rec in doc["sessions"]:
+        inj = injected[rec["session"]]
+        est = rec["delta_backlash_um_shift"]
+        tol = max(1.0, 0.1 * inj)
+        gam = {k: round(v, 3) for k, v in rec["gamma"].items()}
+        print(f"  {rec['session']}  {inj:5.1f}  {est:7.3f}  {rec['delta_backlash_um_pitch']}"
+              f"  (tolerance {tol:.1f}, error {est - inj:+.3f}, γ {gam})")
+        if not abs(est - inj) <= tol:
+            bad.append((rec["session"], inj, est))
+    assert len(doc["sessions"]) == 6
+    assert not bad, f"sessions outside 1 µm / 10 %: {bad}"
+
+
+def test_check4_no_backlash_anywhere(tmp_path_factory):
+    d = steps_campaign(tmp_path_factory, "degradation.table_backlash_um=[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]",
+                       "phase2.session_hours=[100.0, 300.0, 500.0, 600.0]")
+    doc = backlash_json(d, "--no-plots")
+    est = [rec["delta_backlash_um_shift"] for rec in doc["sessions"]]
+    print(f"\ncheck 4 (no backlash anywhere): estimates {np.round(est, 3)} µm")
+    assert all(abs(v) <= 1.0 for v in est)
+
+
+SLOW = ("phase2.speeds_mm_s=[20.0]", "phase2.session_hours=[100.0, 600.0]",
+        "phase2.runs_per_session=2")
+"""backlash-steps at the paper's slow speed (20 mm/s), two sessions (0 and 20 µm), two runs: the
+campaign of check 3 and of test_phase2_cli.py."""
+
+
+@pytest.fixture(scope="module")
+def slow_campaign(tmp_path_factory):
+    return steps_campaign(tmp_path_factory, *SLOW)
+
+
+@pytest.fixture(scope="module")
+def slow_result(slow_campaign):
+    from analysis.dataset import open_measurements
+    from analysis.phase2.backlash import campaign_backlash
+
+    with open_measurements(slow_campaign / "measurements.h5") as m:
+        return campaign_backlash(m, on_bad_run="raise")
+
+
+def test_check3_observed_pitch(slow_campaign, slow_result):
+    from twin.scenario import load
+
+    s = load(STEPS)
+    expected = s.axis.lead_mm * 1e-3 * (1.0 + s.geometry.cumulative_lead_error_um_per_m * 1e-6)
+    pitches = [r.observed_pitch_m for r in slow_result.sessions]
+    ref = slow_result.estimator.reference_pitch_m_
+    print(f"\ncheck 3: observed pitch {np.round(np.array(pitches) * 1e3, 6)} mm (reference "
+          f"{ref * 1e3:.6f}); lead·(1 + cumulative error) = {expected * 1e3:.6f} mm; in the "
+          f"commanded frame the screw-fixed comb has exactly the nominal lead {s.axis.lead_mm:g} mm")
+    for p in [ref, *pitches]:
+        assert abs(p - expected) <= 0.5e-6
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "Eq. 9 assumes the IMU-based position scales by L/(L - b); with the commanded position the "
+    "comb of correlation peaks is screw-fixed (the motor's 8-per-revolution torque ripple) and "
+    "cannot change its spacing with backlash, so the pitch-based change stays near 0 (README)"))
+def test_check2_pitch_based_at_slow_speed(slow_campaign, slow_result):
+    injected = injected_change_um(slow_campaign)
+    rows = [(r.session, injected[r.session], r.delta_backlash_pitch_m * 1e6) for r in slow_result.sessions]
+    print(f"\ncheck 2, pitch-based at 20 mm/s: (session, injected, estimated µm) {rows}")
+    for _, inj, est in rows:
+        assert abs(est - inj) <= max(2.0, 0.2 * inj)
+
+
+@pytest.mark.slow
+def test_paper_rtf_fig13_analogue(tmp_path_factory):
+    """The paper's campaign (paper-rtf.toml) at a tenth of the runs and a session every 500 h
+    (17 sessions x 9 runs of 20/100/500 mm/s, Phase I off; about 4 min simulation, 1 min
+    analysis): the shift-based change stays near 0 before the wear onset (2500 h) and reaches
+    about 10 µm near 8000 h, as in the paper's Fig. 13a."""
+    out = tmp_path_factory.mktemp("rtf")
+    run_twin("simulate", REPO / "scenarios/paper-rtf.toml", "-o", out, "--set", "campaign.scale=0.1",
+             "--set", "phase2.session_interval_hours=500", "--set", "phase2.dwell_s=2",
+             "--set", "campaign.phase1=false")
+    doc = backlash_json(out, "--process-noise", "ml")
+    inj = injected_change_um(out)
+    print("\npaper-rtf (reduced): hours, injected, by shifts, smoothed, by pitch, pitch mm")
+    for r in doc["sessions"]:
+        print(f"  {r['hours']:6.0f}  {inj[r['session']]:6.2f}  {r['delta_backlash_um_shift']:6.2f}  "
+              f"{r['smoothed_um']:6.2f}  {r['delta_backlash_um_pitch']:6.2f}  {r['observed_pitch_mm']:.6f}")
+    print(f"  prognosis: {doc['prognosis']}")
+    early = [r["delta_backlash_um_shift"] for r in doc["sessions"] if inj[r["session"]] < 0.1]
+    late = [(r["delta_backlash_um_shift"], inj[r["session"]]) for r in doc["sessions"] if r["hours"] >= 7500]
+    assert early and all(abs(v) <= 2.5 for v in early)
+    assert late and all(abs(v - t) <= 2.5 for v, t in late)
+
+
+def test_bad_input_errors(synthetic):
+    profiles, screw, x = synthetic
+    ref = directional(0, 0.0, 0.0, x[:3000], profiles, screw)
+    with pytest.raises(ValueError, match="stationary"):
+        BacklashEstimator(stationary="rails").fit(ref)
+    with pytest.raises(RuntimeError, match="fit"):
+        BacklashEstimator().estimate(ref)
+    est = BacklashEstimator(pitch_dofs=("E_XX",)).fit(ref)
+    coarse = directional(1, 0.0, 0.0, x[:6000:2], profiles, screw)
+    with pytest.raises(ValueError, match="20 µm differs from the reference's 10 µm"):
+        est.estimate(coarse)
+    bad = DirectionalTraces(ref.x_m, ref.forward.copy(), ref.reverse.copy())
+    bad.forward[2, 5] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        est.estimate(bad)

@@ -1,0 +1,124 @@
+"""``twin backlash`` (issue 4, check 6 and the JSON schema).
+
+Bad runs are skipped by default, each with a warning on stderr and an entry in
+``backlash.json["skipped_runs"]`` naming session, run and reason (channel); ``--strict`` instead
+exits with code 2 and one message naming session, run and channel. Never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+from conftest import run_twin
+from test_phase2_backlash import SLOW, steps_campaign
+
+DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """backlash-steps reduced to two sessions (0 and 20 µm) of two runs at 20 mm/s (shared with
+    check 3 in test_phase2_backlash.py)."""
+    return steps_campaign(tmp_path_factory, *SLOW)
+
+
+@pytest.fixture(scope="module")
+def small_result(small):
+    out = small / "out"
+    r = run_twin("backlash", small, "-o", out)
+    return r, out, json.loads((out / "backlash.json").read_text())
+
+
+def test_json_schema_table_and_figures(small_result):
+    r, out, doc = small_result
+    print("\n" + r.stdout)
+    assert set(doc) >= {"sessions", "prognosis"}
+    assert [s["session"] for s in doc["sessions"]] == ["s0000", "s0001"]
+    for s in doc["sessions"]:
+        assert set(s) >= {"hours", "delta_backlash_um_shift", "delta_backlash_um_pitch",
+                          "observed_pitch_mm", "gamma"}
+        assert set(s["gamma"]) == set(DOFS)
+        assert isinstance(s["hours"], float) and isinstance(s["delta_backlash_um_shift"], float)
+        assert s["delta_backlash_um_pitch"] is None or isinstance(s["delta_backlash_um_pitch"], float)
+        assert all(g is None or -1.0 <= g <= 1.0 + 1e-9 for g in s["gamma"].values())
+    last = doc["sessions"][-1]
+    print(f"two sessions, 2 runs at 20 mm/s: Δbacklash {last['delta_backlash_um_shift']:.3f} µm "
+          "(injected 20; not the gate, which is check 2 at 10 runs)")
+    assert last["delta_backlash_um_shift"] == pytest.approx(20.0, abs=4.0)
+    assert doc["sessions"][0]["delta_backlash_um_shift"] == pytest.approx(0.0, abs=1e-9)
+    p = doc["prognosis"]
+    assert set(p) >= {"crossing_hours", "remaining_hours", "band_hours", "limit_um"}
+    assert doc["skipped_runs"] == []
+    for col in ("hours", "shifts", "pitch", "smoothed", "dial"):
+        assert col in r.stdout
+    pngs = sorted(q.name for q in out.glob("*.png"))
+    assert len(pngs) == 7 and all((out / q).stat().st_size > 10_000 for q in pngs), pngs
+
+
+def _copy(src, dst):
+    dst.mkdir()
+    shutil.copy(src / "measurements.h5", dst / "measurements.h5")
+    return dst / "measurements.h5"
+
+
+def _missing(f):
+    del f["phase2/s0001/r0001/imu_acc"]
+    return "s0001", "r0001", "imu_acc"
+
+
+def _cut_short(f):
+    g = f["phase2/s0001/r0001"]
+    for key in ("imu_acc", "imu_gyro", "position_cmd"):
+        data, attrs = g[key][...], dict(g[key].attrs)
+        del g[key]
+        ds = g.create_dataset(key, data=data[: int(0.4 * len(data))])
+        for k, v in attrs.items():
+            ds.attrs[k] = v
+    return "s0001", "r0001", ""
+
+
+def _nan(f):
+    ds = f["phase2/s0001/r0000/imu_gyro"]
+    data = ds[...]
+    data[:, 1] = np.nan
+    ds[...] = data
+    return "s0001", "r0000", "imu_gyro"
+
+
+@pytest.mark.parametrize("damage", [_missing, _cut_short, _nan], ids=["missing", "cut-short", "nan"])
+def test_check6_bad_runs(small, tmp_path, damage):
+    d = tmp_path / "bad"
+    path = _copy(small, d)
+    with h5py.File(path, "r+") as f:
+        session, run, channel = damage(f)
+    # strict: exit 2 naming session, run (and channel)
+    r = run_twin("backlash", d, "-o", d / "strict", "--strict", "--no-plots", check=False)
+    print(f"\n--strict ({damage.__name__}): exit {r.returncode}: {r.stderr.strip()}")
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr + r.stdout
+    msg = " ".join(r.stderr.split())
+    assert session in msg and run in msg and channel in msg
+    # default: skip with a warning recorded in the JSON, the other runs still give a number
+    r = run_twin("backlash", d, "-o", d / "skip", "--no-plots", check=False)
+    assert r.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr
+    warn = " ".join(r.stderr.split())
+    assert "warning" in warn and session in warn and run in warn
+    doc = json.loads((d / "skip" / "backlash.json").read_text())
+    skipped = doc["skipped_runs"]
+    print(f"skip ({damage.__name__}): {skipped}")
+    assert [(s["session"], s["run"]) for s in skipped] == [(session, run)]
+    assert channel in skipped[0]["reason"]
+    est = doc["sessions"][-1]["delta_backlash_um_shift"]
+    assert math.isfinite(est) and est == pytest.approx(20.0, abs=4.0)
+
+
+def test_missing_campaign_exits_2(tmp_path):
+    r = run_twin("backlash", tmp_path / "nowhere", check=False)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "measurements.h5" in r.stderr
