@@ -232,6 +232,29 @@ def test_check4_no_backlash_anywhere(tmp_path_factory):
     assert all(abs(v) <= 1.0 for v in est)
 
 
+def test_baseline_sessions_rezero_on_their_mean(tmp_path_factory):
+    """--baseline-sessions 2 on backlash-steps (its first two sessions share the initial
+    backlash): every estimate moves by the mean of the first two raw estimates, the offset is
+    recorded, and the CI gate's tolerance still holds. A count beyond the sessions exits 2."""
+    d = steps_campaign(tmp_path_factory)
+    raw = backlash_json(d, "--no-plots")
+    doc = backlash_json(d, "--no-plots", "--baseline-sessions", "2")
+    r = np.array([rec["delta_backlash_um_shift"] for rec in raw["sessions"]])
+    k2 = np.array([rec["delta_backlash_um_shift"] for rec in doc["sessions"]])
+    injected = injected_change_um(d)
+    inj = np.array([injected[rec["session"]] for rec in doc["sessions"]])
+    print(f"\nbaseline of 2 sessions: raw {np.round(r, 3)}, re-zeroed {np.round(k2, 3)}, "
+          f"injected {inj} µm")
+    assert doc["parameters"]["baseline_sessions"] == 2
+    assert doc["parameters"]["baseline_offset_um"]["shift"] == pytest.approx(r[:2].mean(), abs=1e-9)
+    assert np.allclose(k2, r - r[:2].mean(), atol=1e-9)
+    assert np.all(np.abs(k2 - inj) <= np.maximum(1.0, 0.1 * inj))
+    bad = run_twin("backlash", d, "-o", d / "bad", "--no-plots", "--baseline-sessions", "7",
+                   check=False)
+    assert bad.returncode == 2
+    assert "baseline sessions = 7; expected 1 to 6" in bad.stderr
+
+
 SLOW = ("phase2.speeds_mm_s=[20.0]", "phase2.session_hours=[100.0, 600.0]",
         "phase2.runs_per_session=2")
 """backlash-steps at the paper's slow speed (20 mm/s), two sessions (0 and 20 µm), two runs: the

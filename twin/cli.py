@@ -167,6 +167,10 @@ def backlash(
     plots: bool = typer.Option(True, "--plots/--no-plots", help="write the PNG figures"),
     process_noise: str = typer.Option("1e-23", "--process-noise",
                                       help="Kalman process noise q in m²/h³, or 'ml' (maximum likelihood)"),
+    baseline_sessions: int = typer.Option(1, "--baseline-sessions", min=1,
+                                          help="leading sessions known to share the initial backlash; "
+                                               "the estimates are re-zeroed on their mean (1 = the paper's "
+                                               "single reference)"),
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
@@ -190,7 +194,8 @@ def backlash(
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
     try:
         with open_measurements(directory / "measurements.h5") as m:
-            result = campaign_backlash(m, on_bad_run="raise" if strict else "skip")
+            result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
+                                       baseline_sessions=baseline_sessions)
             dial = m.dial_indicator()
     except (DatasetError, FileNotFoundError, OSError) as exc:
         _fail(str(exc))
@@ -235,6 +240,9 @@ def backlash(
         "skipped_runs": [{"session": a, "run": b, "reason": c} for a, b, c in result.skipped_runs],
         "skipped_sessions": [{"session": a, "reason": b} for a, b in result.skipped_sessions],
         "parameters": {"cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
+                       "baseline_sessions": result.baseline_sessions,
+                       "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
+                                              "pitch": result.baseline_offset_m[1] * 1e6},
                        "kalman_process_noise_m2_per_h3": None if trend is None else trend.process_noise,
                        "window_definition": est.window_definition, "threshold": est.threshold,
                        "sigma": est.sigma, "dofs": list(est.dofs), "stationary": est.stationary,
@@ -259,7 +267,9 @@ def backlash(
     def fmt(v, f="{:.2f}"):
         return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f.format(v)
 
-    table = Table(title=f"Phase II backlash change vs session {ses[0].session} ({len(ses)} sessions)")
+    ref = (f"session {ses[0].session}" if result.baseline_sessions == 1 else
+           f"the mean of sessions {ses[0].session}-{ses[result.baseline_sessions - 1].session}")
+    table = Table(title=f"Phase II backlash change vs {ref} ({len(ses)} sessions)")
     for col in ("session", "hours", "Δb shifts µm", "Δb pitch µm", "smoothed µm", "dial Δ µm",
                 "pitch mm", "γ max"):
         table.add_column(col)

@@ -55,7 +55,7 @@ Units: SI inside (m, rad); results carry µm / mm only in the names of the JSON 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -284,6 +284,9 @@ class CampaignBacklash:
         skipped_runs: (session, run, reason) of every run left out.
         skipped_sessions: (session, reason) of every session left out (no usable run).
         estimator: the fitted :class:`BacklashEstimator`.
+        baseline_sessions: how many leading sessions define zero change (see
+            :func:`rezero_on_baseline`); 1 is the paper's single reference.
+        baseline_offset_m: (by shifts, by pitch) subtracted from every raw estimate, m.
     """
 
     sessions: list
@@ -291,10 +294,49 @@ class CampaignBacklash:
     skipped_runs: list
     skipped_sessions: list
     estimator: BacklashEstimator
+    baseline_sessions: int = 1
+    baseline_offset_m: tuple = (0.0, 0.0)
+
+
+def rezero_on_baseline(sessions: list, k: int) -> tuple[list, tuple[float, float]]:
+    """Re-zero the estimates on the mean of the first ``k`` sessions.
+
+    Every estimate is a difference against the reference session, so that session's noise enters
+    every later estimate alike (a constant offset with the standard deviation of one session's
+    estimate). When the first ``k`` sessions are known to share the initial backlash (before any
+    wear, as the paper's first 2500 h), subtracting the mean of their estimates takes that offset
+    down by √k. ``k = 1`` leaves the paper's single reference unchanged.
+
+    Args:
+        sessions: :class:`SessionBacklash` in hours order, the first being the reference.
+        k: number of leading sessions assumed to have the reference's backlash, 1 ≤ k ≤ len.
+    Returns:
+        The re-zeroed sessions and the (by shifts, by pitch) offsets subtracted, m.
+    Raises:
+        ValueError: ``k`` outside 1..len(sessions).
+    """
+    if not 1 <= k <= len(sessions):
+        raise ValueError(f"baseline sessions = {k}; expected 1 to {len(sessions)} (the number "
+                         "of usable Phase II sessions)")
+    if k == 1:
+        return list(sessions), (0.0, 0.0)
+    base = sessions[:k]
+    off_shift = float(np.mean([s.delta_backlash_shift_m for s in base]))
+    pitch = [s.delta_backlash_pitch_m for s in base if math.isfinite(s.delta_backlash_pitch_m)]
+    off_pitch = float(np.mean(pitch)) if pitch else 0.0
+    dofs = sessions[0].delta_backlash_dof_m.keys()
+    off_dof = {d: float(np.nanmean([s.delta_backlash_dof_m[d] for s in base])) for d in dofs}
+    out = [replace(s, delta_backlash_shift_m=s.delta_backlash_shift_m - off_shift,
+                   delta_backlash_pitch_m=s.delta_backlash_pitch_m - off_pitch,
+                   delta_backlash_dof_m={d: v - off_dof.get(d, 0.0)
+                                         for d, v in s.delta_backlash_dof_m.items()})
+           for s in sessions]
+    return out, (off_shift, off_pitch)
 
 
 def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimator | None = None,
-                      progress=None, **error_motion_kw) -> CampaignBacklash:
+                      progress=None, baseline_sessions: int = 1,
+                      **error_motion_kw) -> CampaignBacklash:
     """Error motions (:func:`analysis.phase2.error_motions.session_error_motions`) and backlash
     estimates for every Phase II session of an open ``measurements.h5``.
 
@@ -305,6 +347,7 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
         estimator: default ``BacklashEstimator`` with L and p from the file's ``axis``
             description (``travel_mm``, ``lead_mm``) when present.
         progress: optional callable(done, total, session).
+        baseline_sessions: leading sessions that define zero change (:func:`rezero_on_baseline`).
     Raises:
         DatasetError: a bad run with ``on_bad_run="raise"``, no Phase II session, or no usable
             run in any session.
@@ -339,7 +382,11 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
     if not ems:
         raise DatasetError(f"{m.label}: no Phase II session has a usable run "
                            f"({'; '.join(w for _, w in skipped_sessions)})")
+    if not 1 <= baseline_sessions <= len(ems):
+        raise ValueError(f"baseline sessions = {baseline_sessions}; expected 1 to {len(ems)} "
+                         "(the number of usable Phase II sessions)")
     estimator.fit(ems[0])
-    return CampaignBacklash(sessions=[estimator.estimate(e) for e in ems], error_motions=ems,
-                            skipped_runs=skipped_runs, skipped_sessions=skipped_sessions,
-                            estimator=estimator)
+    sessions, offset = rezero_on_baseline([estimator.estimate(e) for e in ems], baseline_sessions)
+    return CampaignBacklash(sessions=sessions, error_motions=ems, skipped_runs=skipped_runs,
+                            skipped_sessions=skipped_sessions, estimator=estimator,
+                            baseline_sessions=baseline_sessions, baseline_offset_m=offset)
