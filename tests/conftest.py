@@ -19,6 +19,16 @@ def run_twin(*args, check=True, **kw):
                           text=True, check=check, **kw)
 
 
+def truncate_dataset(group, key: str, fraction: float) -> None:
+    """Replace ``group[key]`` by its first ``fraction`` of rows, keeping its attributes (a
+    recording cut short)."""
+    data, attrs = group[key][...], dict(group[key].attrs)
+    del group[key]
+    ds = group.create_dataset(key, data=data[: int(fraction * len(data))])
+    for k, v in attrs.items():
+        ds.attrs[k] = v
+
+
 @pytest.fixture(scope="session")
 def small_campaign(tmp_path_factory):
     out = tmp_path_factory.mktemp("small")

@@ -14,7 +14,7 @@ import shutil
 import h5py
 import numpy as np
 import pytest
-from conftest import run_twin
+from conftest import run_twin, truncate_dataset
 from test_phase2_backlash import SLOW, steps_campaign
 
 DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
@@ -72,13 +72,8 @@ def _missing(f):
 
 
 def _cut_short(f):
-    g = f["phase2/s0001/r0001"]
     for key in ("imu_acc", "imu_gyro", "position_cmd"):
-        data, attrs = g[key][...], dict(g[key].attrs)
-        del g[key]
-        ds = g.create_dataset(key, data=data[: int(0.4 * len(data))])
-        for k, v in attrs.items():
-            ds.attrs[k] = v
+        truncate_dataset(f["phase2/s0001/r0001"], key, 0.4)
     return "s0001", "r0001", ""
 
 

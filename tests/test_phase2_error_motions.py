@@ -19,7 +19,7 @@ from analysis.dataset import DatasetError, open_measurements, open_truth
 from analysis.phase2 import fusion
 from analysis.phase2.error_motions import session_error_motions
 from analysis.phase2.traces import DOFS, DirectionalTraces, SessionErrorMotions
-from tests.conftest import REPO, run_twin
+from tests.conftest import REPO, run_twin, truncate_dataset
 
 QUICK = REPO / "scenarios/quick.toml"
 NO_PHASE1 = ["--set", "campaign.phase1=false"]
@@ -245,23 +245,11 @@ def _delete_gyro(f):
 
 
 def _cut_short(f):
-    g = f["/phase2/s0000/r0004"]
-    data = g["imu_acc"][: g["imu_acc"].shape[0] // 2]
-    attrs = dict(g["imu_acc"].attrs)
-    del g["imu_acc"]
-    ds = g.create_dataset("imu_acc", data=data)
-    for k, v in attrs.items():
-        ds.attrs[k] = v
+    truncate_dataset(f["/phase2/s0000/r0004"], "imu_acc", 0.5)
 
 
 def _cut_command(f):
-    g = f["/phase2/s0000/r0006"]
-    data = g["position_cmd"][: int(g["position_cmd"].shape[0] * 0.9)]
-    attrs = dict(g["position_cmd"].attrs)
-    del g["position_cmd"]
-    ds = g.create_dataset("position_cmd", data=data)
-    for k, v in attrs.items():
-        ds.attrs[k] = v
+    truncate_dataset(f["/phase2/s0000/r0006"], "position_cmd", 0.9)
 
 
 def _nan_gyro(f):

@@ -37,6 +37,20 @@ def _require(path: Path, what: str) -> None:
         raise DetectError(f"{path}: no such file; expected {what}")
 
 
+def _extract_to_csv(measurements: Path, stem: Path):
+    """Features of every sample of ``measurements`` (:func:`pipeline.extract`), written to
+    ``<stem>.csv``; if a capture is bad, the samples before it go to ``<stem>.partial.csv`` and
+    the error is raised again, so nothing computed is lost."""
+    try:
+        table = pipeline.extract(measurements)
+    except pipeline.ExtractionError as exc:
+        if exc.partial is not None:
+            exc.partial.write_csv(stem.with_name(stem.name + ".partial.csv"))
+        raise
+    table.write_csv(stem.with_name(stem.name + ".csv"))
+    return table
+
+
 def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pipeline.METHODS,
         consecutive: int = 1, n_baseline: int = pipeline.N_BASELINE, fraction: float = 0.9,
         random_state: int = 0) -> dict:
@@ -59,13 +73,7 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
     out.mkdir(parents=True, exist_ok=True)
 
     # 1. Reference set: features, labels, Fisher selection.
-    try:
-        ref = pipeline.extract(reference / "measurements.h5")
-    except pipeline.ExtractionError as exc:
-        if exc.partial is not None:
-            exc.partial.write_csv(out / "reference_features.partial.csv")
-        raise
-    ref.write_csv(out / "reference_features.csv")
+    ref = _extract_to_csv(reference / "measurements.h5", out / "reference_features")
     labels = pipeline.reference_labels(reference / "truth.h5", ref.hours)
     n_h, n_f = int(np.sum(labels == 0)), int(np.sum(labels == 1))
     if n_h < 2 or n_f < 2:
@@ -83,13 +91,7 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
     report.write_json(out / "selection.json", selection)
 
     # 2. Campaign features.
-    try:
-        table = pipeline.extract(campaign / "measurements.h5")
-    except pipeline.ExtractionError as exc:
-        if exc.partial is not None:
-            exc.partial.write_csv(out / "features.partial.csv")
-        raise
-    table.write_csv(out / "features.csv")
+    table = _extract_to_csv(campaign / "measurements.h5", out / "features")
     if len(table.hours) <= n_baseline:
         raise DetectError(f"{campaign / 'measurements.h5'}: /phase1 has {len(table.hours)} samples; "
                           f"expected more than the {n_baseline} baseline samples")

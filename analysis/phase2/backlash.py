@@ -382,9 +382,6 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
     if not ems:
         raise DatasetError(f"{m.label}: no Phase II session has a usable run "
                            f"({'; '.join(w for _, w in skipped_sessions)})")
-    if not 1 <= baseline_sessions <= len(ems):
-        raise ValueError(f"baseline sessions = {baseline_sessions}; expected 1 to {len(ems)} "
-                         "(the number of usable Phase II sessions)")
     estimator.fit(ems[0])
     sessions, offset = rezero_on_baseline([estimator.estimate(e) for e in ems], baseline_sessions)
     return CampaignBacklash(sessions=sessions, error_motions=ems, skipped_runs=skipped_runs,

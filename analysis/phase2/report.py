@@ -32,6 +32,13 @@ _SCALE = {"E_XX": (1e6, "µm"), "E_YX": (1e6, "µm"), "E_ZX": (1e6, "µm"),
           "E_AX": (1e6, "µrad"), "E_BX": (1e6, "µrad"), "E_CX": (1e6, "µrad")}
 
 
+def _label_hours(axes) -> None:
+    """x label of operating hours and a small legend on each of ``axes``."""
+    for ax in axes:
+        ax.set_xlabel("operating hours (h)")
+        ax.legend(fontsize=7)
+
+
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -133,9 +140,7 @@ def write_figures(result, out_dir, trend=None, dial=None, injected=None) -> list
     axes[0].set_title("position shift vs the first session (Fig. 10)")
     axes[1].set_ylabel("forward − reverse (µm)")
     axes[1].set_title("difference of the directions (Fig. 10b)")
-    for ax in axes:
-        ax.set_xlabel("operating hours (h)")
-        ax.legend(fontsize=7)
+    _label_hours(axes)
     paths.append(_save(fig, out / "fig10_position_shifts.png"))
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
@@ -164,9 +169,7 @@ def write_figures(result, out_dir, trend=None, dial=None, injected=None) -> list
     axes[0].set_title("correlation per DOF (Fig. 12a)")
     axes[1].set_ylabel("Δbacklash (µm)")
     axes[1].set_title("per DOF and weighted sum (Eqs. 5–6, Fig. 12c)")
-    for ax in axes:
-        ax.set_xlabel("operating hours (h)")
-        ax.legend(fontsize=7)
+    _label_hours(axes)
     paths.append(_save(fig, out / "fig12_gamma.png"))
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
