@@ -1,0 +1,147 @@
+"""The ``twin backlash`` workflow: session error motions -> change of backlash per session ->
+Kalman trend and prognosis -> ``OUT/backlash.json`` and the figures of paper section V.
+
+Reads ``measurements.h5`` only for the estimates; ``truth.h5`` (if present) only to draw the
+injected values in Fig. 13. The CLI and the harness (``twin demo``, ``twin sweep``) both call
+:func:`run`, so what they write is the same file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from analysis.dataset import open_measurements, open_truth
+from analysis.phase2.backlash import CampaignBacklash, campaign_backlash
+from analysis.phase2.traces import DOFS
+from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis
+
+__all__ = ["BacklashRun", "run"]
+
+POSITION_REFERENCE = ("commanded position (position_cmd, screw-locked); rail-fixed features shift "
+                      "by +Δbacklash forward minus reverse")
+
+
+@dataclass
+class BacklashRun:
+    """What :func:`run` computed.
+
+    Attributes:
+        doc: the content of ``backlash.json`` (µm, h, mm at this edge).
+        result: the per-session estimates (SI).
+        trend: the Kalman trend, or None with fewer than two usable sessions.
+        prognosis: remaining time to the limit, or None without a trend.
+        figures: PNG paths written.
+    """
+
+    doc: dict
+    result: CampaignBacklash
+    trend: BacklashTrend | None
+    prognosis: Prognosis | None
+    figures: list[Path]
+
+
+def write_error_motions(path: Path, ems) -> None:
+    """Write the combined error motions of every session: group ``/<session>`` with ``x_m`` (n,)
+    commanded position in m and ``forward``, ``reverse`` (6, n) in m and rad (rows ``dofs``
+    attribute), attributes ``hours``, ``runs``. Read by :mod:`analysis.scoring`."""
+    import h5py
+
+    tmp = Path(str(path) + ".tmp")
+    with h5py.File(tmp, "w") as f:
+        f.attrs["dofs"] = list(DOFS)
+        f.attrs["position_reference"] = "position_cmd, m"
+        for em in ems:
+            g = f.create_group(em.session)
+            g.attrs["hours"] = em.hours
+            g.attrs["runs"] = list(em.runs)
+            g.create_dataset("x_m", data=em.combined.x_m)
+            g.create_dataset("forward", data=em.combined.forward)
+            g.create_dataset("reverse", data=em.combined.reverse)
+    tmp.replace(path)
+
+
+def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
+        plots: bool = True, process_noise: float | str = 1e-23,
+        baseline_sessions: int = 1) -> BacklashRun:
+    """Estimate the change of backlash of every Phase II session of ``directory``.
+
+    Args:
+        directory: campaign directory holding ``measurements.h5``.
+        out: output directory (default ``directory/backlash``); ``backlash.json`` and, with
+            ``plots``, the PNGs of Figs. 7–13 are written there.
+        strict: raise on a bad run (missing, cut short, non-finite) instead of skipping it.
+        process_noise: Kalman process noise q in m²/h³, or ``"ml"`` (maximum likelihood).
+        baseline_sessions: leading sessions known to share the initial backlash; the estimates
+            are re-zeroed on their mean.
+
+    Raises:
+        DatasetError, FileNotFoundError, OSError: unreadable input (names file, key, channel).
+        ValueError: traces that cannot be correlated.
+    """
+    directory = Path(directory)
+    out = Path(out) if out is not None else directory / "backlash"
+    with open_measurements(directory / "measurements.h5") as m:
+        result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
+                                   baseline_sessions=baseline_sessions)
+        dial = m.dial_indicator()
+    ses = result.sessions
+    hours = [s.hours for s in ses]
+    shift = [s.delta_backlash_shift_m for s in ses]
+    trend = None
+    if len(ses) >= 2 and np.isfinite(shift).any():
+        trend = BacklashTrend(process_noise=process_noise).fit(hours, shift)
+    prog = prognosis(trend) if trend is not None else None
+    dial_delta = None
+    if dial is not None and len(dial[0]):
+        dial_delta = (dial[0], dial[1] - dial[1][0])
+    records = []
+    for i, s in enumerate(ses):
+        rec = s.to_json()
+        if trend is not None:
+            rec["smoothed_um"] = float(trend.smoothed[i] * 1e6)
+            rec["smoothed_std_um"] = float(trend.smoothed_std[i] * 1e6)
+        if dial_delta is not None:
+            k = int(np.argmin(np.abs(dial_delta[0] - s.hours)))
+            if abs(dial_delta[0][k] - s.hours) < 1e-6:
+                rec["dial_indicator_um"] = float(dial[1][k])
+                rec["dial_delta_um"] = float(dial_delta[1][k])
+        records.append(rec)
+    est = result.estimator
+    doc = {
+        "sessions": records,
+        "prognosis": prog.to_json() if prog is not None else None,
+        "reference_session": ses[0].session if ses else None,
+        "position_reference": POSITION_REFERENCE,
+        "sign": "positive = more backlash than in the reference session",
+        "skipped_runs": [{"session": a, "run": b, "reason": c} for a, b, c in result.skipped_runs],
+        "skipped_sessions": [{"session": a, "reason": b} for a, b in result.skipped_sessions],
+        "parameters": {"cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
+                       "baseline_sessions": result.baseline_sessions,
+                       "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
+                                              "pitch": result.baseline_offset_m[1] * 1e6},
+                       "kalman_process_noise_m2_per_h3": None if trend is None else trend.process_noise,
+                       "window_definition": est.window_definition, "threshold": est.threshold,
+                       "sigma": est.sigma, "dofs": list(est.dofs), "stationary": est.stationary,
+                       "travel_mm": est.travel_m * 1e3, "lead_mm": est.lead_m * 1e3,
+                       "reference_pitch_mm": None if not math.isfinite(est.reference_pitch_m_)
+                       else est.reference_pitch_m_ * 1e3},
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "backlash.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
+    write_error_motions(out / "error_motions.h5", result.error_motions)
+    figures: list[Path] = []
+    if plots and ses:
+        from analysis.phase2.report import write_figures
+
+        injected = None
+        if (directory / "truth.h5").exists():
+            with open_truth(directory / "truth.h5") as t:
+                b = [t.session(s.session)[2]["backlash_um"] for s in ses]
+                injected = (hours, [v - b[0] for v in b])
+        figures = write_figures(result, out, trend=trend, dial=dial_delta, injected=injected)
+    return BacklashRun(doc=doc, result=result, trend=trend, prognosis=prog, figures=figures)

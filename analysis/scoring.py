@@ -1,0 +1,237 @@
+"""Scores of both phases against the injected truth (DESIGN section 6, "Scoring").
+
+:func:`score` reads what the analyses wrote into a campaign directory and the directory's
+``truth.h5``; it never reruns an estimator, so the same numbers come out of ``twin score``,
+``twin demo`` and every point of ``twin sweep``:
+
+- ``DIR/phase1/detection.json`` and ``detection_details.json`` (``twin detect``): per method the
+  detection hour, the delay from the injected onset, false alarms on the healthy post-baseline
+  samples (:func:`analysis.phase1.scoring.score_method`), and the same over threshold factors
+  (the limit times 0.25 … 4) for detection-rate against false-alarm curves;
+- ``DIR/backlash/backlash.json`` and ``error_motions.h5`` (``twin backlash``): per session the
+  estimated change of backlash against the injected one (both relative to the mean of the
+  baseline sessions), their RMS, largest and mean error; the predicted hour at which the change
+  reaches the 10 µm limit against the hour the injected backlash does; the RMS error of the
+  recovered straightness and angular error motions against the true ones after removal of the
+  unobservable terms (methods.md section 1; E_XX is left out because the kinematic truth lacks
+  the axial dynamics the IMU sees).
+
+Units: the JSON carries µm, µrad and h in its key names; :func:`flat` gives one row of scalars
+(dotted names) for sweep tables.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from analysis.dataset import DatasetError, open_truth
+from analysis.phase1.scoring import score_method
+from analysis.phase2.fusion import remove_unobservable
+
+__all__ = ["ScoreError", "THRESHOLD_FACTORS", "flat", "score", "write_score"]
+
+THRESHOLD_FACTORS = tuple(float(f) for f in np.round(np.logspace(-2, 2, 17, base=2), 6))
+LIMIT_UM = 10.0
+EM_DOFS = ("E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
+
+
+class ScoreError(ValueError):
+    """A campaign directory that cannot be scored (names the file and what is missing)."""
+
+
+def _read_json(path: Path) -> dict | None:
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ScoreError(f"{path}: not valid JSON ({exc}); rerun the analysis that writes it") from None
+
+
+def _none(x) -> float | None:
+    return None if x is None or not math.isfinite(float(x)) else float(x)
+
+
+def score_phase1(directory: Path, onset_hours: float | None) -> dict | None:
+    """Phase I scores from ``DIR/phase1``; None if ``detection.json`` is absent."""
+    det = _read_json(directory / "phase1" / "detection.json")
+    if det is None:
+        return None
+    details = _read_json(directory / "phase1" / "detection_details.json") or {}
+    n_base = int(details.get("n_baseline", 15))
+    consecutive = int(details.get("consecutive", 1))
+    methods = {}
+    n_samples = 0
+    for name, r in det["methods"].items():
+        hours, scores = np.asarray(r["hours"], float), np.asarray(r["scores"], float)
+        n_samples = len(hours)
+        s = score_method(hours, scores, r["threshold"], n_base, onset_hours, consecutive)
+        rec = asdict(s)
+        rec["threshold"] = float(r["threshold"])
+        rec["false_alarm_rate"] = (s.false_alarms / s.healthy_test_samples
+                                   if s.healthy_test_samples else None)
+        roc = {"threshold_factor": list(THRESHOLD_FACTORS), "false_alarm_rate": [], "detected": [],
+               "delay_hours": []}
+        for f in THRESHOLD_FACTORS:
+            # Scores are compared as "score > f * limit"; for the one-class SVM (limit 0) the
+            # factor cannot scale, so the threshold is shifted by (f - 1) instead.
+            thr = r["threshold"] * f if r["threshold"] != 0 else (f - 1.0)
+            sf = score_method(hours, scores, thr, n_base, onset_hours, consecutive)
+            roc["false_alarm_rate"].append(sf.false_alarms / sf.healthy_test_samples
+                                           if sf.healthy_test_samples else None)
+            roc["detected"].append(sf.detection_hours is not None and
+                                   (onset_hours is None or sf.detection_hours > onset_hours))
+            roc["delay_hours"].append(sf.delay_hours)
+        rec["roc"] = roc
+        methods[name] = rec
+    return {"onset_hours": onset_hours, "n_samples": n_samples, "n_baseline": n_base,
+            "consecutive": consecutive, "methods": methods}
+
+
+def _crossing(hours: np.ndarray, values: np.ndarray, limit: float) -> float | None:
+    """First hour at which ``values`` reaches ``limit`` (linear interpolation), or None."""
+    above = np.flatnonzero(values >= limit)
+    if not len(above):
+        return None
+    i = int(above[0])
+    if i == 0:
+        return float(hours[0])
+    h0, h1, v0, v1 = hours[i - 1], hours[i], values[i - 1], values[i]
+    return float(h0 + (limit - v0) / (v1 - v0) * (h1 - h0))
+
+
+def _error_motion_errors(path: Path, truth) -> dict | None:
+    """Median over sessions of the RMS error of the recovered error motions (µm, µrad)."""
+    if not path.is_file():
+        return None
+    import h5py
+
+    per = {d: [] for d in EM_DOFS}
+    with h5py.File(path, "r") as f:
+        dofs = [str(d) for d in f.attrs["dofs"]]
+        for name in f:
+            x = f[name]["x_m"][...]
+            mean = 0.5 * (f[name]["forward"][...] + f[name]["reverse"][...])
+            try:
+                xt, et, attrs = truth.session(name)
+            except DatasetError:
+                continue
+            ref = np.array([np.interp(x + attrs["origin_offset_m"], xt, et[i]) for i in range(6)])
+            err = remove_unobservable(mean, x) - remove_unobservable(ref, x)
+            rms = np.sqrt((err ** 2).mean(axis=1))
+            for d in EM_DOFS:
+                per[d].append(float(rms[dofs.index(d)]) * 1e6)
+    if not per[EM_DOFS[0]]:
+        return None
+    return {"rms_um": {d: float(np.median(per[d])) for d in EM_DOFS[:2]},
+            "rms_urad": {d: float(np.median(per[d])) for d in EM_DOFS[2:]},
+            "sessions": len(per[EM_DOFS[0]])}
+
+
+def score_phase2(directory: Path, truth) -> dict | None:
+    """Phase II scores from ``DIR/backlash``; None if ``backlash.json`` is absent."""
+    doc = _read_json(directory / "backlash" / "backlash.json")
+    if doc is None or not doc.get("sessions"):
+        return None
+    k = int(doc.get("parameters", {}).get("baseline_sessions", 1))
+    names = [r["session"] for r in doc["sessions"]]
+    injected = []
+    for n in names:
+        try:
+            injected.append(float(truth.session(n)[2]["backlash_um"]))
+        except DatasetError as exc:
+            raise ScoreError(f"{directory / 'backlash' / 'backlash.json'} names session {n}, but "
+                             f"truth.h5 cannot give its backlash: {exc}") from None
+    ref = float(np.mean(injected[:k]))
+    rows, err, perr = [], [], []
+    for rec, b in zip(doc["sessions"], injected):
+        est, pit = _none(rec.get("delta_backlash_um_shift")), _none(rec.get("delta_backlash_um_pitch"))
+        row = {"session": rec["session"], "hours": rec["hours"], "injected_delta_um": b - ref,
+               "estimated_delta_um": est, "error_um": None if est is None else est - (b - ref),
+               "pitch_estimated_delta_um": pit,
+               "pitch_error_um": None if pit is None else pit - (b - ref),
+               "smoothed_um": _none(rec.get("smoothed_um")),
+               "dial_delta_um": _none(rec.get("dial_delta_um"))}
+        rows.append(row)
+        if row["error_um"] is not None:
+            err.append(row["error_um"])
+        if row["pitch_error_um"] is not None:
+            perr.append(row["pitch_error_um"])
+    err_a = np.asarray(err)
+    tl = truth.timeline()
+    true_cross = _crossing(tl["hours"], tl["backlash_um"] - ref, LIMIT_UM)
+    prog = doc.get("prognosis") or {}
+    pred = _none(prog.get("crossing_hours"))
+    return {
+        "baseline_sessions": k, "n_sessions": len(rows), "sessions": rows,
+        "rms_error_um": float(np.sqrt(np.mean(err_a ** 2))) if len(err) else None,
+        "max_abs_error_um": float(np.max(np.abs(err_a))) if len(err) else None,
+        "bias_um": float(np.mean(err_a)) if len(err) else None,
+        "pitch_rms_error_um": float(np.sqrt(np.mean(np.square(perr)))) if perr else None,
+        "prognosis": {"limit_um": LIMIT_UM, "predicted_crossing_hours": pred,
+                      "true_crossing_hours": true_cross,
+                      "error_hours": None if pred is None or true_cross is None else pred - true_cross},
+        "error_motions": _error_motion_errors(directory / "backlash" / "error_motions.h5", truth),
+        "skipped_runs": len(doc.get("skipped_runs", [])),
+    }
+
+
+def score(directory: str | Path) -> dict:
+    """Score the analyses found in ``directory`` against its ``truth.h5`` (the score.json object).
+
+    Raises:
+        ScoreError: no truth.h5, or neither ``phase1/detection.json`` nor ``backlash/backlash.json``.
+        DatasetError: an unreadable truth.h5 (names the key).
+    """
+    directory = Path(directory)
+    truth_path = directory / "truth.h5"
+    if not truth_path.is_file():
+        raise ScoreError(f"{truth_path}: no such file; scoring needs the injected truth "
+                         "(a real machine's recordings have none)")
+    with open_truth(truth_path) as t:
+        scen = t.scenario()
+        p1 = score_phase1(directory, t.onset_hours)
+        p2 = score_phase2(directory, t)
+    if p1 is None and p2 is None:
+        raise ScoreError(f"{directory}: found neither phase1/detection.json (twin detect) nor "
+                         "backlash/backlash.json (twin backlash); run the analyses first")
+    return {"directory": str(directory), "scenario": {"name": scen.get("name"), "seed": scen.get("seed")},
+            "phase1": p1, "phase2": p2}
+
+
+def write_score(directory: str | Path, doc: dict) -> Path:
+    """Write ``doc`` to ``directory/score.json`` (through a temporary file) and return the path."""
+    path = Path(directory) / "score.json"
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(doc, indent=1, allow_nan=False))
+    tmp.replace(path)
+    return path
+
+
+def flat(doc: dict) -> dict[str, float | int | None]:
+    """One row of scalars from a score object: ``phase1.<method>.<score>`` and ``phase2.<score>``
+    (lists, per-session rows and curves left out)."""
+    row: dict[str, float | int | None] = {}
+    p1 = doc.get("phase1")
+    if p1:
+        for name, r in p1["methods"].items():
+            for key in ("detection_hours", "delay_hours", "delay_samples", "false_alarms",
+                        "false_alarm_rate", "baseline_alarms"):
+                row[f"phase1.{name}.{key}"] = r[key]
+    p2 = doc.get("phase2")
+    if p2:
+        for key in ("rms_error_um", "max_abs_error_um", "bias_um", "pitch_rms_error_um", "skipped_runs"):
+            row[f"phase2.{key}"] = p2[key]
+        for key, v in p2["prognosis"].items():
+            if key != "limit_um":
+                row[f"phase2.prognosis.{key}"] = v
+        em = p2.get("error_motions") or {}
+        for unit in ("rms_um", "rms_urad"):
+            for d, v in em.get(unit, {}).items():
+                row[f"phase2.error_motion.{d}.{unit}"] = v
+    return row
