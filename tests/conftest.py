@@ -34,3 +34,18 @@ def small_campaign(tmp_path_factory):
     out = tmp_path_factory.mktemp("small")
     run_twin("simulate", REPO / "scenarios/quick.toml", "-o", out, *SMALL)
     return out
+
+
+# `twin demo` at a smaller scale than `make demo`: 25 Phase I samples (15 baseline, onset at
+# 172 h), three Phase II sessions of 3 runs (100, 150 h healthy; 250 h with ~2 µm of backlash).
+DEMO_SMALL = ["--set", "campaign.total_hours=250", "--set", "phase2.session_hours=[100.0, 150.0, 250.0]",
+              "--set", "phase2.runs_per_session=3"]
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory):
+    """``twin demo`` run once per test session: (directory, completed process)."""
+    out = tmp_path_factory.mktemp("demo") / "demo"
+    proc = run_twin("demo", "-o", out, *DEMO_SMALL, check=False, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return out, proc

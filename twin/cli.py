@@ -70,36 +70,115 @@ def simulate(
                   f"{out / 'truth.h5'}")
 
 
+REFERENCE_SMALL = ["phase1.captures_per_sample=2", "phase1.capture_s=4.0",
+                   "phase1.sample_interval_hours=20"]
+
+
+def _score_tables(doc: dict) -> list[Table]:
+    """The summary tables of a score.json object (shared by ``twin score`` and ``twin demo``)."""
+    from analysis.phase1.pipeline import PAPER_NAMES
+
+    def fmt(v, f="{:g}"):
+        return "-" if v is None else f.format(v)
+
+    tables = []
+    p1 = doc.get("phase1")
+    if p1:
+        onset = p1["onset_hours"]
+        t = Table(title=f"Phase I: detection hour per method ({p1['n_samples']} samples, baseline "
+                        f"{p1['n_baseline']}, injected onset {fmt(onset)} h)")
+        for col in ("method", "detection h", "delay h", "delay samples", "false alarms / healthy"):
+            t.add_column(col)
+        for name, r in p1["methods"].items():
+            t.add_row(PAPER_NAMES.get(name, name), fmt(r["detection_hours"]), fmt(r["delay_hours"]),
+                      fmt(r["delay_samples"]), f"{r['false_alarms']} / {r['healthy_test_samples']}")
+        tables.append(t)
+    p2 = doc.get("phase2")
+    if p2:
+        t = Table(title=f"Phase II: change of backlash against the injected one (RMS error "
+                        f"{fmt(p2['rms_error_um'], '{:.2f}')} µm, largest "
+                        f"{fmt(p2['max_abs_error_um'], '{:.2f}')} µm)")
+        for col in ("session", "hours", "injected Δ µm", "estimated Δ µm", "error µm", "dial Δ µm"):
+            t.add_column(col)
+        for r in p2["sessions"]:
+            t.add_row(r["session"], fmt(r["hours"]), f"{r['injected_delta_um']:.2f}",
+                      fmt(r["estimated_delta_um"], "{:.2f}"), fmt(r["error_um"], "{:+.2f}"),
+                      fmt(r["dial_delta_um"], "{:.1f}"))
+        tables.append(t)
+        pr = p2["prognosis"]
+        t = Table(title=f"Phase II: hour at which the change of backlash reaches {pr['limit_um']:g} µm")
+        for col in ("predicted h", "injected h", "error h"):
+            t.add_column(col)
+        t.add_row(fmt(pr["predicted_crossing_hours"], "{:.0f}"), fmt(pr["true_crossing_hours"], "{:.0f}"),
+                  fmt(pr["error_hours"], "{:+.0f}"))
+        tables.append(t)
+    return tables
+
+
+def _print_score(doc: dict) -> None:
+    out = Console(width=max(100, Console().width))
+    for t in _score_tables(doc):
+        out.print(t)
+
+
+@app.command()
+def score(
+    directory: Path = typer.Argument(..., help="campaign directory with truth.h5 and the analyses' outputs"),
+) -> None:
+    """Score both phases against DIRECTORY/truth.h5: prints the tables and writes DIRECTORY/score.json.
+
+    Reads DIRECTORY/phase1/detection.json (twin detect) and DIRECTORY/backlash/backlash.json
+    (twin backlash); either may be missing, not both."""
+    from analysis.dataset import DatasetError
+    from analysis.scoring import ScoreError, score as score_dir, write_score
+
+    try:
+        doc = score_dir(directory)
+    except (ScoreError, DatasetError) as exc:
+        _fail(str(exc))
+    _print_score(doc)
+    console.print(f"wrote {write_score(directory, doc)}")
+
+
 @app.command()
 def demo(
     out: Path = typer.Option(Path("runs/demo"), "-o", "--out", help="where to write the demo"),
-    set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE on the quick scenario"),
-    workers: Optional[int] = typer.Option(None, "--workers"),
+    set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE on scenarios/demo.toml"),
+    workers: Optional[int] = typer.Option(None, "--workers", help="processes (default: all cores)"),
 ) -> None:
-    """Simulate the quick campaign and print what was simulated."""
-    from analysis.dataset import open_measurements, open_truth
+    """The whole chain on a small campaign (scenarios/demo.toml): simulate the Phase I reference
+    data set and the campaign, run Phase I (Fisher selection, six detectors) and Phase II
+    (backlash, trend), score both against the truth, write the report and a Rerun recording,
+    and print the summary."""
+    from analysis.report import write_report
+    from twin.harness import analyse
+    from twin.view import write_recording
 
-    summary = _run_simulation(SCENARIOS / "quick.toml", out, set_, workers)
-    with open_measurements(out / "measurements.h5") as m, open_truth(out / "truth.h5") as t:
-        tl = t.timeline()
-        table = Table(title=f"quick campaign in {out}")
-        for col in ("what", "count", "values"):
-            table.add_column(col)
-        caps = m.phase1_captures()
-        sessions = m.phase2_sessions()
-        table.add_row("Phase I captures", str(len(caps)),
-                      f"{m.phase1(caps[0]).hours:.0f} .. {m.phase1(caps[-1]).hours:.0f}" if caps else "-")
-        table.add_row("Phase II sessions", str(len(sessions)),
-                      ", ".join(f"{m.session_hours(x):.0f}" for x in sessions))
-        dial = m.dial_indicator()
-        if dial is not None:
-            table.add_row("dial-indicator backlash (µm)", str(len(dial[0])),
-                          ", ".join(f"{b:.1f}" for b in dial[1]))
-        table.add_row("injected backlash at sessions (µm)", "",
-                      ", ".join(f"{t.session(x)[2]['backlash_um']:.1f}" for x in t.sessions()))
-        table.add_row("injected preload at end (N)", "", f"{tl['preload_N'][-1]:.0f}")
-        Console().print(table)
-    console.print(f"done in {summary['seconds']:.1f} s")
+    t0 = time.perf_counter()
+    _run_simulation(SCENARIOS / "paper-reference.toml", out / "reference", REFERENCE_SMALL, workers)
+    _run_simulation(SCENARIOS / "demo.toml", out, set_, workers)
+    with console.status("analysing") as status:
+        def on_step(what: str) -> None:
+            status.update(what)
+            console.print(f"{what} ...")
+
+        try:
+            a = analyse(out, out / "reference", on_step=on_step)
+        except (ValueError, FileNotFoundError) as exc:
+            _fail(f"{exc} (anything computed before the error is in {out})")
+        on_step("report")
+        report = write_report(out)
+        on_step("Rerun recording")
+        recording = write_recording(out, out / "view.rrd").path
+    for phase, why in a.skipped.items():
+        console.print(f"note: {phase} skipped: {why}", style="yellow")
+    if a.score is not None:
+        _print_score(a.score)
+    console.print(f"demo done in {time.perf_counter() - t0:.0f} s")
+    for line in (f"  scores:    {out / 'score.json'}  (the same tables: twin score {out})",
+                 f"  report:    {report}",
+                 f"  recording: {recording}  (open with: rerun {recording}, or twin view {out} --serve)"):
+        console.print(line, soft_wrap=True, markup=False, highlight=False)
 
 
 @app.command("export-model")
@@ -176,14 +255,10 @@ def backlash(
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
     A bad run (missing, cut short, non-finite channel) is skipped with a warning recorded in the
     JSON, or with --strict ends the command with exit code 2 naming session, run and channel."""
-    import json
     import math
 
-    import numpy as np
-
-    from analysis.dataset import DatasetError, open_measurements, open_truth
-    from analysis.phase2.backlash import campaign_backlash
-    from analysis.phase2.prognosis import BacklashTrend, prognosis
+    from analysis.dataset import DatasetError
+    from analysis.phase2.workflow import run
 
     out = out or directory / "backlash"
     try:
@@ -193,76 +268,23 @@ def backlash(
     except ValueError:
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
     try:
-        with open_measurements(directory / "measurements.h5") as m:
-            result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
-                                       baseline_sessions=baseline_sessions)
-            dial = m.dial_indicator()
+        br = run(directory, out, strict=strict, plots=plots, process_noise=q,
+                 baseline_sessions=baseline_sessions)
     except (DatasetError, FileNotFoundError, OSError) as exc:
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated
         _fail(f"{directory}: {exc}")
-    for session, run, why in result.skipped_runs:
-        console.print(f"warning: skipped session {session} run {run}: {why}", style="yellow",
+    result, records, prog, figures = br.result, br.doc["sessions"], br.prognosis, br.figures
+    ses = result.sessions
+    for session, run_name, why in result.skipped_runs:
+        console.print(f"warning: skipped session {session} run {run_name}: {why}", style="yellow",
                       markup=False, highlight=False)
     for session, why in result.skipped_sessions:
         console.print(f"warning: skipped session {session}: {why}", style="yellow", markup=False,
                       highlight=False)
-    ses = result.sessions
-    hours = [s.hours for s in ses]
-    shift = [s.delta_backlash_shift_m for s in ses]
-    trend = None
-    if len(ses) >= 2 and np.isfinite(shift).any():
-        trend = BacklashTrend(process_noise=q).fit(hours, shift)
-    prog = prognosis(trend) if trend is not None else None
-    dial_delta = None
-    if dial is not None and len(dial[0]):
-        dial_delta = (dial[0], dial[1] - dial[1][0])
-    records = []
-    for i, s in enumerate(ses):
-        rec = s.to_json()
-        if trend is not None:
-            rec["smoothed_um"] = float(trend.smoothed[i] * 1e6)
-            rec["smoothed_std_um"] = float(trend.smoothed_std[i] * 1e6)
-        if dial_delta is not None:
-            k = int(np.argmin(np.abs(dial_delta[0] - s.hours)))
-            if abs(dial_delta[0][k] - s.hours) < 1e-6:
-                rec["dial_indicator_um"] = float(dial[1][k])
-                rec["dial_delta_um"] = float(dial_delta[1][k])
-        records.append(rec)
-    est = result.estimator
-    doc = {
-        "sessions": records,
-        "prognosis": prog.to_json() if prog is not None else None,
-        "reference_session": ses[0].session,
-        "position_reference": "commanded position (position_cmd, screw-locked); rail-fixed "
-                              "features shift by +Δbacklash forward minus reverse",
-        "sign": "positive = more backlash than in the reference session",
-        "skipped_runs": [{"session": a, "run": b, "reason": c} for a, b, c in result.skipped_runs],
-        "skipped_sessions": [{"session": a, "reason": b} for a, b in result.skipped_sessions],
-        "parameters": {"cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
-                       "baseline_sessions": result.baseline_sessions,
-                       "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
-                                              "pitch": result.baseline_offset_m[1] * 1e6},
-                       "kalman_process_noise_m2_per_h3": None if trend is None else trend.process_noise,
-                       "window_definition": est.window_definition, "threshold": est.threshold,
-                       "sigma": est.sigma, "dofs": list(est.dofs), "stationary": est.stationary,
-                       "travel_mm": est.travel_m * 1e3, "lead_mm": est.lead_m * 1e3,
-                       "reference_pitch_mm": None if not math.isfinite(est.reference_pitch_m_)
-                       else est.reference_pitch_m_ * 1e3},
-    }
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "backlash.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
-    figures = []
-    if plots:
-        from analysis.phase2.report import write_figures
-
-        injected = None
-        if (directory / "truth.h5").exists():
-            with open_truth(directory / "truth.h5") as t:
-                names = [s.session for s in ses]
-                b = [t.session(n)[2]["backlash_um"] for n in names]
-                injected = (hours, [v - b[0] for v in b])
-        figures = write_figures(result, out, trend=trend, dial=dial_delta, injected=injected)
+    if not ses:
+        _fail(f"{directory / 'measurements.h5'}: no Phase II session could be used (see the warnings); "
+              f"wrote {out / 'backlash.json'}")
 
     def fmt(v, f="{:.2f}"):
         return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f.format(v)
@@ -289,6 +311,165 @@ def backlash(
                       markup=False, highlight=False)
     console.print(f"wrote {out / 'backlash.json'}" + (f" and {len(figures)} figures" if figures else ""))
 # --- end of Phase II backlash ----------------------------------------------------------------
+
+
+# --- twin sweep (helper: sweep) ----------------------------------------------------------------
+@app.command()
+def sweep(
+    sweep_file: Path = typer.Argument(..., help="sweep TOML file (see twin/sweep.py and scenarios/sweeps/)"),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default: runs/sweeps/<file stem>)"),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler",
+                                            help="address of a running dask.distributed scheduler; "
+                                                 "OUT must be on a file system its workers share"),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1,
+                                          help="run on a dask LocalCluster of N worker processes"),
+) -> None:
+    """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
+    OUT/results.csv and plots. Default executor: all local cores (processes). Resumes if interrupted."""
+    from twin.sweep import Callbacks, SweepError, plan_sweep, run_sweep, summary
+
+    if scheduler is not None and workers is not None:
+        _fail("--scheduler and --workers exclude each other: --scheduler runs on an existing "
+              "dask cluster, --workers N starts a local one")
+    try:
+        plan = plan_sweep(sweep_file)
+    except SweepError as exc:
+        _fail(str(exc))
+    out = out or Path("runs/sweeps") / sweep_file.stem
+    n_tasks = len(plan.tasks)
+    console.print(f"sweep [bold]{plan.name}[/]: {plan.n_points} points x {len(plan.seeds)} seeds = "
+                  f"{n_tasks} campaigns of scenario {plan.base['name']} "
+                  f"({', '.join(plan.columns) or 'no axes'}) -> {out}")
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=False) as progress:
+        tasks: dict = {}
+
+        def on_reference(done: int, total: int, name: str) -> None:
+            if "ref" not in tasks:
+                tasks["ref"] = progress.add_task("reference data set", total=total)
+            progress.update(tasks["ref"], completed=done, description=f"reference data set {name}")
+
+        def on_start(todo: int, total: int) -> None:
+            tasks["pts"] = progress.add_task("points", total=total, completed=total - todo)
+
+        def on_executor(description: str) -> None:
+            progress.console.print(f"executor: {description}")
+
+        def on_point(done: int, total: int, task, rec: dict) -> None:
+            if rec["error"] is not None:
+                progress.console.print(f"warning: point {task.id} failed: {rec['error']}",
+                                       style="yellow", markup=False, highlight=False)
+            progress.update(tasks["pts"], completed=done, description=f"points (last {task.id})")
+
+        try:
+            end = run_sweep(plan, out, workers=workers, scheduler=scheduler,
+                            callbacks=Callbacks(executor=on_executor, reference=on_reference,
+                                                start=on_start, point=on_point))
+        except SweepError as exc:
+            progress.stop()
+            _fail(str(exc))
+    import pandas as pd
+
+    df = pd.read_parquet(out / "results.parquet")
+    header, rows = summary(plan, df)
+    table = Table(title=f"sweep {plan.name}: mean ± sd over seeds ({len(df)} rows)")
+    for col in header:
+        table.add_column(col)
+    for row in rows:
+        table.add_row(*row)
+    Console(width=max(130, Console().width)).print(table)
+    console.print(f"{end['computed']} points computed, {end['reused']} reused, {end['failed']} failed; "
+                  f"{end['simulated_units']} units simulated, {end['reused_units']} reused; "
+                  f"{end['seconds']:.1f} s; wrote {out / 'results.parquet'}, {out / 'results.csv'} "
+                  f"and {len(end['figures'])} figures")
+    if end["failed"]:
+        _fail(f"{end['failed']} point(s) failed (see the warnings and {out / 'sweep-log.jsonl'}); "
+              "rerun the same command to retry them", code=1)
+# --- end of twin sweep -------------------------------------------------------------------------
+
+
+# --- twin view (helper: view) ------------------------------------------------------------------
+@app.command()
+def view(
+    directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5, phase1/, "
+                                               "backlash/ when present)"),
+    save: Optional[Path] = typer.Option(None, "--save", help="write the recording here "
+                                                            "(default: DIRECTORY/view.rrd)"),
+    serve: bool = typer.Option(False, "--serve", help="serve a web viewer instead and block until Ctrl-C"),
+    session: Optional[str] = typer.Option(None, "--session", help="Phase II session shown in 3D "
+                                                                  "(default: the last)"),
+    run_: Optional[str] = typer.Option(None, "--run", help="run of that session (default: its first)"),
+    capture: list[str] = typer.Option([], "--capture", help="Phase I capture(s) to show, repeatable "
+                                                           "(default: the first and the last)"),
+    exaggeration: float = typer.Option(2000.0, "--exaggeration",
+                                       help="factor on the error motions in the 3D view"),
+    web_port: int = typer.Option(9090, "--web-port", help="with --serve: port of the web viewer"),
+    grpc_port: int = typer.Option(9876, "--grpc-port", help="with --serve: port of the data server"),
+) -> None:
+    """A Rerun recording of a campaign: the axis in 3D through one Phase II run with exaggerated
+    error motions, the Phase I and Phase II sensor streams, the Phase I scores (T²) with their
+    limits and the onset, backlash estimates against the truth and the dial indicator over
+    operating hours, the scenario as properties. Parts whose inputs are missing are left out
+    with a note (e.g. no truth.h5 on a real machine)."""
+    from analysis.dataset import DatasetError
+    from twin.view import ViewError, serve_recording, write_recording
+
+    if save is not None and serve:
+        _fail("--save and --serve: give one of them (--save FILE.rrd writes a file, --serve serves a "
+              "web viewer)")
+    options = {"session": session, "run": run_, "captures": capture or None, "exaggeration": exaggeration}
+    try:
+        if serve:
+            summary, url, rec = serve_recording(directory, web_port=web_port, grpc_port=grpc_port, **options)
+        else:
+            summary = write_recording(directory, save, **options)
+    except (ViewError, DatasetError, FileNotFoundError) as exc:
+        _fail(str(exc))
+    except OSError as exc:  # e.g. a port in use, an unwritable --save
+        _fail(f"{exc}")
+    for note in summary.notes:
+        console.print(f"note: {note}", style="yellow", markup=False, highlight=False, soft_wrap=True)
+    what = (f"session {summary.session} run {summary.run} ({summary.hours:g} h), {summary.n_poses} poses, "
+            f"error motions x{summary.exaggeration:g} from {summary.error_motion_source}"
+            if summary.session else "no Phase II run")
+    console.print(f"{what}; Phase I captures {', '.join(summary.captures) or '-'}; "
+                  f"{len(summary.methods)} detector(s); {summary.backlash_sessions} backlash session(s)",
+                  markup=False, highlight=False, soft_wrap=True)
+    if not serve:
+        console.print(f"wrote {summary.path} ({summary.size_bytes / 1e6:.1f} MB) in {summary.seconds:.1f} s; "
+                      f"open it with: rerun {summary.path}", markup=False, highlight=False, soft_wrap=True)
+        return
+    console.print(f"serving the web viewer at {url} (Ctrl-C to stop)", markup=False, highlight=False, soft_wrap=True)
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        rec.disconnect()
+        console.print("stopped")
+# --- end of twin view --------------------------------------------------------------------------
+
+
+# --- twin report (helper: report) --------------------------------------------------------------
+@app.command()
+def report(
+    directory: Path = typer.Argument(..., help="analysed campaign directory (truth.h5, phase1/, backlash/, score.json)"),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="report folder (default: DIRECTORY/report)"),
+) -> None:
+    """HTML report: the scenario, the scores of both phases, and the paper's Table III and Figs. 6,
+    10-13 side by side with ours. Writes OUT/index.html and the PNGs it shows into OUT/figures;
+    computes DIRECTORY/score.json first if it is missing and truth.h5 is there."""
+    from analysis.report import INPUT_ERRORS, render
+
+    try:
+        rep = render(directory, out)
+    except INPUT_ERRORS as exc:
+        _fail(str(exc))
+    except OSError as exc:
+        _fail(f"{out or directory / 'report'}: cannot write the report ({exc})")
+    for note in rep.notes:
+        console.print(note, markup=False, highlight=False)
+    console.print(f"wrote {rep.index} with {len(rep.figures)} figures", markup=False, highlight=False)
+# --- end of twin report ------------------------------------------------------------------------
 
 
 def main() -> None:

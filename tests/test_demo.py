@@ -1,0 +1,58 @@
+"""Issue 5, check 1: ``twin demo`` (what ``make demo`` runs) at a smaller scale exits 0, writes the
+report and the recording, and prints a summary whose figures are those of ``twin score`` on the
+same directory; ``twin score`` on bad input exits 2 naming what is missing."""
+
+import json
+import shutil
+
+from conftest import run_twin
+
+
+def _tables(text: str) -> str:
+    """The rows of the rich tables printed (lines with the table's vertical bar)."""
+    return "\n".join(line for line in text.splitlines() if line.startswith("│"))
+
+
+def test_demo_writes_report_recording_and_the_score_summary(demo_run):
+    out, proc = demo_run
+    for path in ("measurements.h5", "truth.h5", "reference/measurements.h5", "phase1/detection.json",
+                 "backlash/backlash.json", "score.json", "report/index.html", "view.rrd"):
+        assert (out / path).is_file() and (out / path).stat().st_size > 0, path
+    assert "report:" in proc.stderr and "recording:" in proc.stderr
+    demo_score = json.loads((out / "score.json").read_text())
+    demo_tables = _tables(proc.stdout)
+    assert "PCA-T²" in demo_tables and "s0002" in demo_tables
+
+    again = run_twin("score", out)
+    assert _tables(again.stdout) == demo_tables
+    assert json.loads((out / "score.json").read_text()) == demo_score
+
+    # What the demo must show: the injected onset is 172 h; PCA-T² detects after it, within
+    # three samples, with no false alarm on the healthy samples; backlash within 1 µm.
+    p1 = demo_score["phase1"]
+    assert p1["onset_hours"] == 172.0 and p1["n_samples"] == 25
+    t2 = p1["methods"]["pca_t2"]
+    print(f"\ndemo: PCA-T² detects at {t2['detection_hours']} h (onset 172 h), "
+          f"false alarms {t2['false_alarms']}/{t2['healthy_test_samples']}; Phase II errors "
+          + ", ".join(f"{r['error_um']:+.2f}" for r in demo_score["phase2"]["sessions"]) + " µm")
+    assert t2["detection_hours"] is not None and 172.0 < t2["detection_hours"] <= 202.0
+    assert t2["false_alarms"] == 0
+    p2 = demo_score["phase2"]
+    assert [r["session"] for r in p2["sessions"]] == ["s0000", "s0001", "s0002"]
+    assert p2["sessions"][2]["injected_delta_um"] > 1.5
+    assert p2["max_abs_error_um"] < 1.0
+
+
+def test_score_refuses_a_directory_without_truth_or_outputs(demo_run, tmp_path):
+    out, _ = demo_run
+    real = tmp_path / "real"
+    real.mkdir()
+    shutil.copy(out / "measurements.h5", real / "measurements.h5")
+    proc = run_twin("score", real, check=False)
+    assert proc.returncode == 2
+    assert f"{real / 'truth.h5'}: no such file; scoring needs the injected truth" in " ".join(proc.stderr.split())
+
+    shutil.copy(out / "truth.h5", real / "truth.h5")
+    proc = run_twin("score", real, check=False)
+    assert proc.returncode == 2
+    assert "found neither phase1/detection.json (twin detect) nor backlash/backlash.json" in " ".join(proc.stderr.split())
