@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.dataset import open_measurements, open_truth
-from analysis.phase2.backlash import CampaignBacklash, campaign_backlash
+from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash
 from analysis.phase2.traces import DOFS
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis
 
@@ -67,7 +67,7 @@ def write_error_motions(path: Path, ems) -> None:
 
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
         plots: bool = True, process_noise: float | str = 1e-23,
-        baseline_sessions: int = 1) -> BacklashRun:
+        baseline_sessions: int = 1, estimator: BacklashEstimator | None = None) -> BacklashRun:
     """Estimate the change of backlash of every Phase II session of ``directory``.
 
     Args:
@@ -78,6 +78,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         process_noise: Kalman process noise q in m²/h³, or ``"ml"`` (maximum likelihood).
         baseline_sessions: leading sessions known to share the initial backlash; the estimates
             are re-zeroed on their mean.
+        estimator: an unfitted backlash estimator (default :class:`BacklashEstimator()`, the
+            paper's method); its class is recorded in ``parameters.estimator``.
 
     Raises:
         DatasetError, FileNotFoundError, OSError: unreadable input (names file, key, channel).
@@ -87,7 +89,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     out = Path(out) if out is not None else directory / "backlash"
     with open_measurements(directory / "measurements.h5") as m:
         result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
-                                   baseline_sessions=baseline_sessions)
+                                   baseline_sessions=baseline_sessions, estimator=estimator)
         dial = m.dial_indicator()
     ses = result.sessions
     hours = [s.hours for s in ses]
@@ -120,7 +122,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         "sign": "positive = more backlash than in the reference session",
         "skipped_runs": [{"session": a, "run": b, "reason": c} for a, b, c in result.skipped_runs],
         "skipped_sessions": [{"session": a, "reason": b} for a, b in result.skipped_sessions],
-        "parameters": {"cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
+        "parameters": {"estimator": f"{type(est).__module__}.{type(est).__qualname__}",
+                       "cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
                        "baseline_sessions": result.baseline_sessions,
                        "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
                                               "pitch": result.baseline_offset_m[1] * 1e6},
