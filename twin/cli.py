@@ -326,7 +326,7 @@ def sweep(
 ) -> None:
     """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
     OUT/results.csv and plots. Default executor: all local cores (processes). Resumes if interrupted."""
-    from twin.sweep import Callbacks, SweepError, plan_sweep, run_sweep, summary
+    from twin.sweep import Callbacks, SweepError, method_summary, plan_sweep, run_sweep, summary
 
     if scheduler is not None and workers is not None:
         _fail("--scheduler and --workers exclude each other: --scheduler runs on an existing "
@@ -377,7 +377,17 @@ def sweep(
         table.add_column(col)
     for row in rows:
         table.add_row(*row)
-    Console(width=max(130, Console().width)).print(table)
+    out_console = Console(width=max(130, Console().width))
+    out_console.print(table)
+    header, rows = method_summary(df)
+    if rows:
+        table = Table(title=f"Phase I methods over all {len(df)} rows, at their own limits "
+                            f"(curves over the limit: {out / 'roc.csv'})")
+        for col in header:
+            table.add_column(col)
+        for row in rows:
+            table.add_row(*row)
+        out_console.print(table)
     console.print(f"{end['computed']} points computed, {end['reused']} reused, {end['failed']} failed; "
                   f"{end['simulated_units']} units simulated, {end['reused_units']} reused; "
                   f"{end['seconds']:.1f} s; wrote {out / 'results.parquet'}, {out / 'results.csv'} "

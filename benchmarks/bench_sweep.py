@@ -1,0 +1,90 @@
+"""Benchmark: wall time of a 16-point sweep on a dask LocalCluster of 1 and of 2 worker processes,
+and the speed-up (issue 5, check 8).
+
+The sweep is Phase II only (``scenarios/backlash-steps.toml`` reduced to 2 sessions of 2 runs at
+100 mm/s over 450 mm): 4 backlash steps x 2 IMU noise levels x 2 seeds = 16 campaigns, each
+simulated, analysed and scored by :func:`twin.harness.run_point` in a worker. Both runs go
+through ``twin sweep --workers N`` (a fresh output directory each, so nothing is reused); the
+times include starting the cluster and the workers' imports. The two result tables are compared
+(they must be identical).
+
+Usage: .venv/bin/python benchmarks/bench_sweep.py
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+SWEEP = """
+name = "bench-16"
+scenario = "{scenario}"
+seeds = [1, 2]
+[set]
+"phase2.session_hours" = [100.0, 300.0]
+"phase2.runs_per_session" = 2
+"degradation.table_hours" = [100.0, 300.0]
+"degradation.table_preload_fraction" = [1.0, 1.0]
+"degradation.table_backlash_um" = [0.0, 10.0]
+"campaign.total_hours" = 300.0
+[[grid]]
+key = "degradation.table_backlash_um[1]"
+values = [2.0, 5.0, 10.0, 20.0]
+[[grid]]
+key = "sensors.imu_acc_noise_ug_per_rthz"
+values = [7.0, 25.0]
+"""
+
+
+def run(sweep: Path, out: Path, workers: int) -> float:
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "twin.cli", "sweep", str(sweep), "-o", str(out),
+                    "--workers", str(workers)], cwd=REPO, check=True, capture_output=True,
+                   env=dict(os.environ, PYTHONPATH=str(REPO)))
+    return time.perf_counter() - t0
+
+
+def task_seconds(out: Path) -> list[float]:
+    from twin.sweep import read_log
+
+    return [r["seconds"] for r in read_log(out) if r["event"] == "point"]
+
+
+def main() -> None:
+    import numpy as np
+    import pandas as pd
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        sweep = tmp / "bench.toml"
+        sweep.write_text(SWEEP.format(scenario=REPO / "scenarios/backlash-steps.toml"))
+        times, per_task, loads = {}, {}, {}
+        for n in (1, 2):
+            loads[n] = os.getloadavg()[0]
+            times[n] = run(sweep, tmp / f"w{n}", n)
+            per_task[n] = task_seconds(tmp / f"w{n}")
+        a, b = (pd.read_parquet(tmp / f"w{n}" / "results.parquet") for n in (1, 2))
+        pd.testing.assert_frame_equal(a, b, check_exact=True)
+        print(f"sweep benchmark: 16 points (Phase II, 2 sessions x 2 runs at 100 mm/s over 450 mm), "
+              f"{os.cpu_count()} cores")
+        for n in (1, 2):
+            t = np.asarray(per_task[n])
+            print(f"  {n} worker{'s' if n > 1 else ' '}: {times[n]:6.1f} s wall "
+                  f"(task {t.mean():.1f} s mean, {t.min():.1f}-{t.max():.1f} s; load average "
+                  f"{loads[n]:.1f} before)")
+        print(f"  speed-up 2 vs 1 workers: {times[1] / times[2]:.2f}x; result tables identical "
+              f"({len(a)} rows)")
+        print(json.dumps({"wall_s_1": round(times[1], 1), "wall_s_2": round(times[2], 1),
+                          "speedup": round(times[1] / times[2], 2)}))
+
+
+if __name__ == "__main__":
+    main()
