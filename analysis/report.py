@@ -796,15 +796,22 @@ def _section_phase2(inp: Inputs, figs: _Figures) -> str:
                    "injected change (truth.h5) and the dial indicator.</p>")
         rows = [(r["session"], _f(r["hours"]), _f(r["injected_delta_um"], "{:.3f}"),
                  _f(r["estimated_delta_um"], "{:.3f}"), _f(r["error_um"], "{:+.3f}"),
+                 _f(r.get("injected_lost_motion_delta_um"), "{:.3f}"),
+                 _f(r.get("error_vs_lost_motion_um"), "{:+.3f}"),
                  _f(r.get("pitch_estimated_delta_um"), "{:.3f}"), _f(r.get("smoothed_um"), "{:.3f}"),
                  _f(r.get("dial_delta_um"), "{:.3f}")) for r in p2["sessions"]]
         out.append(_table(("session", "hours", "injected Δ (µm)", "estimated Δ (µm)", "error (µm)",
+                           "injected lost-motion Δ (µm)", "error vs lost motion (µm)",
                            "by pitch Δ (µm)", "Kalman-smoothed (µm)", "dial Δ (µm)"), rows,
                           "phase2-sessions"))
+        out.append("<p>Lost motion = clearance + 2·F/K, the elastic deflection of the nut under the "
+                   "rail friction F at the drive's axial stiffness K (truth.h5): what a reversal "
+                   "measures, and what grows beyond the clearance as the preload falls.</p>")
         prog = p2.get("prognosis") or {}
         summary = [("RMS error (µm)", _f(p2.get("rms_error_um"), "{:.3f}")),
                    ("largest |error| (µm)", _f(p2.get("max_abs_error_um"), "{:.3f}")),
                    ("mean error (bias, µm)", _f(p2.get("bias_um"), "{:+.3f}")),
+                   ("RMS error vs lost motion (µm)", _f(p2.get("rms_error_vs_lost_motion_um"), "{:.3f}")),
                    ("RMS error by pitch (µm)", _f(p2.get("pitch_rms_error_um"), "{:.3f}")),
                    (f"{_f(prog.get('limit_um'))} µm crossing: predicted (h)",
                     _f(prog.get("predicted_crossing_hours"), "{:.0f}")),

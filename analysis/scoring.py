@@ -10,7 +10,10 @@
   (the limit times 0.25 … 4) for detection-rate against false-alarm curves;
 - ``DIR/backlash/backlash.json`` and ``error_motions.h5`` (``twin backlash``): per session the
   estimated change of backlash against the injected one (both relative to the mean of the
-  baseline sessions), their RMS, largest and mean error; the predicted hour at which the change
+  baseline sessions), their RMS, largest and mean error; the same against the injected change of
+  *lost motion* (clearance plus the elastic deflection 2·F/K of the nut under the rail friction F
+  at the axial stiffness K of truth.h5, which is what a reversal of the table measures: the
+  estimate follows it as the preload, and with it K, falls); the predicted hour at which the change
   reaches the 10 µm limit against the hour the injected backlash does; the RMS error of the
   recovered straightness and angular error motions against the true ones after removal of the
   unobservable terms (methods.md section 1; E_XX is left out because the kinematic truth lacks
@@ -133,6 +136,17 @@ def _error_motion_errors(path: Path, truth) -> dict | None:
             "sessions": len(per[EM_DOFS[0]])}
 
 
+def _elastic_um(truth, hours: list[float]) -> np.ndarray | None:
+    """Elastic lost motion 2·F/K in µm at ``hours``: F the rail friction of the scenario (N), K the
+    axial stiffness of the drive from truth.h5's timeline (N/m). None if either is not there."""
+    friction = (truth.scenario().get("axis") or {}).get("rail_friction_N")
+    tl = truth.timeline()
+    if friction is None or "axial_stiffness_N_per_m" not in tl:
+        return None
+    k = np.interp(hours, tl["hours"], tl["axial_stiffness_N_per_m"])
+    return 2.0 * float(friction) / k * 1e6
+
+
 def score_phase2(directory: Path, truth) -> dict | None:
     """Phase II scores from ``DIR/backlash``; None if ``backlash.json`` is absent."""
     doc = _read_json(directory / "backlash" / "backlash.json")
@@ -148,8 +162,10 @@ def score_phase2(directory: Path, truth) -> dict | None:
             raise ScoreError(f"{directory / 'backlash' / 'backlash.json'} names session {n}, but "
                              f"truth.h5 cannot give its backlash: {exc}") from None
     ref = float(np.mean(injected[:k]))
-    rows, err, perr = [], [], []
-    for rec, b in zip(doc["sessions"], injected):
+    elastic = _elastic_um(truth, [r["hours"] for r in doc["sessions"]])
+    lost = None if elastic is None else np.asarray(injected) + elastic
+    rows, err, perr, lerr = [], [], [], []
+    for i, (rec, b) in enumerate(zip(doc["sessions"], injected)):
         est, pit = _none(rec.get("delta_backlash_um_shift")), _none(rec.get("delta_backlash_um_pitch"))
         row = {"session": rec["session"], "hours": rec["hours"], "injected_delta_um": b - ref,
                "estimated_delta_um": est, "error_um": None if est is None else est - (b - ref),
@@ -157,6 +173,12 @@ def score_phase2(directory: Path, truth) -> dict | None:
                "pitch_error_um": None if pit is None else pit - (b - ref),
                "smoothed_um": _none(rec.get("smoothed_um")),
                "dial_delta_um": _none(rec.get("dial_delta_um"))}
+        if lost is not None:
+            row["injected_lost_motion_delta_um"] = float(lost[i] - lost[:k].mean())
+            row["error_vs_lost_motion_um"] = (None if est is None else
+                                              est - row["injected_lost_motion_delta_um"])
+            if est is not None:
+                lerr.append(row["error_vs_lost_motion_um"])
         rows.append(row)
         if row["error_um"] is not None:
             err.append(row["error_um"])
@@ -173,6 +195,7 @@ def score_phase2(directory: Path, truth) -> dict | None:
         "max_abs_error_um": float(np.max(np.abs(err_a))) if len(err) else None,
         "bias_um": float(np.mean(err_a)) if len(err) else None,
         "pitch_rms_error_um": float(np.sqrt(np.mean(np.square(perr)))) if perr else None,
+        "rms_error_vs_lost_motion_um": float(np.sqrt(np.mean(np.square(lerr)))) if lerr else None,
         "prognosis": {"limit_um": LIMIT_UM, "predicted_crossing_hours": pred,
                       "true_crossing_hours": true_cross,
                       "error_hours": None if pred is None or true_cross is None else pred - true_cross},
@@ -225,7 +248,8 @@ def flat(doc: dict) -> dict[str, float | int | None]:
                 row[f"phase1.{name}.{key}"] = r[key]
     p2 = doc.get("phase2")
     if p2:
-        for key in ("rms_error_um", "max_abs_error_um", "bias_um", "pitch_rms_error_um", "skipped_runs"):
+        for key in ("rms_error_um", "max_abs_error_um", "bias_um", "pitch_rms_error_um",
+                    "rms_error_vs_lost_motion_um", "skipped_runs"):
             row[f"phase2.{key}"] = p2[key]
         for key, v in p2["prognosis"].items():
             if key != "limit_um":

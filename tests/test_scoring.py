@@ -46,6 +46,16 @@ def test_phase2_errors_against_the_injected_change(scored_dir):
     assert p2["max_abs_error_um"] == pytest.approx(1.0)
     assert p2["bias_um"] == pytest.approx(offsets.mean())
     assert p2["pitch_rms_error_um"] is None and doc["phase1"] is None
+    # Lost motion = clearance + 2 F / K (rail friction 12 N of the scenario, stiffness of truth.h5).
+    with open_truth(scored_dir / "truth.h5") as t:
+        tl = t.timeline()
+        elastic = 2 * t.scenario()["axis"]["rail_friction_N"] / np.interp(hours, tl["hours"],
+                                                                           tl["axial_stiffness_N_per_m"]) * 1e6
+    lost = b + elastic
+    assert [r["injected_lost_motion_delta_um"] for r in p2["sessions"]] == pytest.approx(lost - lost[:2].mean())
+    assert [r["error_vs_lost_motion_um"] for r in p2["sessions"]] == pytest.approx(
+        injected + offsets - (lost - lost[:2].mean()))
+    assert elastic[0] == pytest.approx(0.276, abs=0.002)  # 2 x 12 N / 86.8 N/µm, new nut
     # The demo's truth ends at 250 h with about 2 µm: the 10 µm limit is never reached.
     assert p2["prognosis"]["true_crossing_hours"] is None and p2["prognosis"]["error_hours"] is None
     row = flat(doc)

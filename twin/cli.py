@@ -98,11 +98,14 @@ def _score_tables(doc: dict) -> list[Table]:
         t = Table(title=f"Phase II: change of backlash against the injected one (RMS error "
                         f"{fmt(p2['rms_error_um'], '{:.2f}')} µm, largest "
                         f"{fmt(p2['max_abs_error_um'], '{:.2f}')} µm)")
-        for col in ("session", "hours", "injected Δ µm", "estimated Δ µm", "error µm", "dial Δ µm"):
+        for col in ("session", "hours", "injected Δ µm", "estimated Δ µm", "error µm",
+                    "lost-motion Δ µm", "error vs it µm", "dial Δ µm"):
             t.add_column(col)
         for r in p2["sessions"]:
             t.add_row(r["session"], fmt(r["hours"]), f"{r['injected_delta_um']:.2f}",
                       fmt(r["estimated_delta_um"], "{:.2f}"), fmt(r["error_um"], "{:+.2f}"),
+                      fmt(r.get("injected_lost_motion_delta_um"), "{:.2f}"),
+                      fmt(r.get("error_vs_lost_motion_um"), "{:+.2f}"),
                       fmt(r["dial_delta_um"], "{:.1f}"))
         tables.append(t)
         pr = p2["prognosis"]
