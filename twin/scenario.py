@@ -329,18 +329,24 @@ def from_dict(data: dict[str, Any], source: str = "scenario") -> Scenario:
         raise ScenarioError(" ".join(lines)) from None
 
 
-def load(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Scenario:
-    """Read a TOML scenario and apply ``KEY=VALUE`` overrides."""
+def read_toml(path: str | Path, what: str, error: type[Exception] = ValueError) -> dict[str, Any]:
+    """The TOML document of ``path`` (a scenario or a sweep file, named ``what`` in messages);
+    an unreadable file or invalid TOML raises ``error`` naming the file."""
     path = Path(path)
     try:
         text = path.read_text()
     except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read the scenario file ({exc.strerror}).") from None
+        raise error(f"{path}: cannot read the {what} ({exc.strerror}).") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}.") from None
-    data = copy.deepcopy(data)
+        raise error(f"{path}: not valid TOML: {exc}.") from None
+
+
+def load(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Scenario:
+    """Read a TOML scenario and apply ``KEY=VALUE`` overrides."""
+    path = Path(path)
+    data = copy.deepcopy(read_toml(path, "scenario file", ScenarioError))
     for item in overrides:
         key, value = parse_override(item)
         _set_dotted(data, key, value)

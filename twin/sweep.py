@@ -98,7 +98,7 @@ from pydantic import (
     model_validator,
 )
 
-from twin.scenario import ScenarioError, from_dict
+from twin.scenario import ScenarioError, from_dict, read_toml
 
 __all__ = [
     "LOG_NAME",
@@ -363,14 +363,7 @@ def _explain(err: dict, data: dict, source: str) -> str:
 def load_sweep(path: str | Path) -> SweepFile:
     """Read and validate a sweep file; raises :class:`SweepError` naming every problem."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise SweepError(f"{path}: cannot read the sweep file ({exc.strerror}).") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SweepError(f"{path}: not valid TOML: {exc}.") from None
+    data = read_toml(path, "sweep file", SweepError)
     try:
         return SweepFile.model_validate(data)
     except ValidationError as exc:
