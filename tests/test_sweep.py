@@ -27,6 +27,13 @@ STEPS = REPO / "scenarios/backlash-steps.toml"
 T0 = time.perf_counter()
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _print_wall_time():
+    """Print the module's wall time after its last test (with -s)."""
+    yield
+    print(f"\ntests/test_sweep.py wall time: {time.perf_counter() - T0:.1f} s")
+
+
 def sweep_text(scenario_rel: str, extra: str = "") -> str:
     return f"""
 name = "tiny"
@@ -344,7 +351,3 @@ def test_restart_with_another_sweep_file_exits_2(root, default_run):
     assert f"{default_run} holds the results of another sweep" in msg
     assert "`definition.grid[0].values`: [5.0, 15.0] there, [5.0, 12.0] in" in msg
     assert (default_run / "results.csv").read_text() == before
-
-
-def test_zz_wall_time():
-    print(f"\ntests/test_sweep.py wall time: {time.perf_counter() - T0:.1f} s")
