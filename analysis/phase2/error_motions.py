@@ -9,7 +9,8 @@
   ``dx_m`` (0.5 mm by default) over the stretch every speed covers at constant velocity;
 - ``slow``: the slow-speed component ``slow()`` of the paper: the same estimate from the slowest
   speed alone, on a fine grid (``slow_dx_m``, 10 µm by default) over the stretch that speed
-  covers, keeping spatial frequencies up to the sensor bandwidth (0.13 mm wavelength at 20 mm/s),
+  covers, keeping the whole sensor band (to 255 Hz of the accelerometer's 300 Hz: wavelengths
+  down to 0.08 mm at 20 mm/s, 0.39 mm at 100 mm/s; see ``SLOW_LOWPASS_FRACTION``),
   forward and reverse each against its own commanded position, NOT shifted against each other.
 
 Both are averaged over the usable runs of the session (the gridded signals are averaged, then
@@ -52,6 +53,14 @@ MICRO_G = 9.80665e-6  # m/s² per µg
 #: ANTIALIAS × the temporal frequency of the grid's Nyquist wavenumber; Butterworth order.
 LOWPASS_FRACTION = 0.6
 ANTIALIAS = 0.8
+#: The same for ``slow`` (what the backlash correlation sees): the whole sensor bandwidth, with
+#: ``slow_f_max_fraction`` = 1. At 100 mm/s the combined layer's 0.6 / 0.5 would cut the
+#: accelerometer at 150 Hz, i.e. wavelengths below 0.67 mm, and leave only the transition band of
+#: winfilt's 0.5 mm high-pass (0.67–2 mm), narrow and with the fusion's hard band edge at its top:
+#: 3x the noise of the shift and seed-dependent errors of up to 0.75 µm without noise. Sensor
+#: response errors at the band edge do not matter there: each direction is correlated with the
+#: same direction of the first session, through the same sensor.
+SLOW_LOWPASS_FRACTION = 1.0
 LOWPASS_ORDER = 8
 #: Zero-mean priors of the six error motions (rows DOFS) for the Wiener combination: generous
 #: versions of the guideway magnitudes of methods.md section 4 (straightness a few µm over 0.5 m,
@@ -278,7 +287,7 @@ def _fuse(layer: _Layer, sm: SensorModel, *, pool_wavelength_m: float | None,
 def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3,
                           slow_dx_m: float = 10e-6, on_bad_run: str = "raise",
                           trim_s: float = 0.1, trim_end_s: float = 0.005,
-                          f_max_fraction: float = 0.5,
+                          f_max_fraction: float = 0.5, slow_f_max_fraction: float = 1.0,
                           pool_wavelength_m: float | None = 0.05,
                           sensors: SensorModel | None = None) -> SessionErrorMotions:
     """Error motions of one Phase II session, averaged over its runs.
@@ -293,7 +302,11 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
             "skip": the run is left out and ``(run, reason)`` recorded in ``skipped``.
         trim_s: time dropped after the start of each constant-velocity part (carriage ringing), s.
         trim_end_s: time dropped before its end, s.
-        f_max_fraction: highest temporal frequency used, as a fraction of each sensor's bandwidth.
+        f_max_fraction: highest temporal frequency used in ``combined``, as a fraction of each
+            sensor's bandwidth.
+        slow_f_max_fraction: the same for ``slow`` (with the low-pass at
+            ``SLOW_LOWPASS_FRACTION`` of the bandwidth): 1, the whole band, so that at 100 mm/s
+            the wavelengths around winfilt's 0.5 mm cutoff reach the backlash correlation.
         pool_wavelength_m: in ``combined``, wavelengths above this come from both directions
             together (halves their noise variance; a backlash shift of 20 µm is a phase of
             0.0025 rad at 50 mm); None keeps the directions apart. ``slow`` never pools.
@@ -314,6 +327,7 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
         raise DatasetError(f"{m.label}: session {session} has no runs; expected at least one")
     kw = {"trim_s": trim_s, "trim_end_s": trim_end_s, "lowpass_fraction": LOWPASS_FRACTION,
           "antialias": ANTIALIAS, "order": LOWPASS_ORDER}
+    layer_kw = (kw, {**kw, "lowpass_fraction": SLOW_LOWPASS_FRACTION})  # combined, slow
     used: list[str] = []
     skipped: list[tuple[str, str]] = []
     expected: tuple[float, ...] | None = None
@@ -327,7 +341,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                 layers = [_new_layer(p, speeds, dx_m, trim_s, trim_end_s, "all speeds"),
                           _new_layer(p, speeds[:1], slow_dx_m, trim_s, trim_end_s,
                                      "the slowest speed")]
-            gridded = [_grid_run(p, layer, sm, label=label, **kw) for layer in layers]
+            gridded = [_grid_run(p, layer, sm, label=label, **lkw)
+                       for layer, lkw in zip(layers, layer_kw)]
         except BadRunError as e:
             if on_bad_run == "raise":
                 raise
@@ -346,6 +361,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
     fkw = {"lowpass_fraction": LOWPASS_FRACTION, "antialias": ANTIALIAS,
            "order": LOWPASS_ORDER, "f_max_fraction": f_max_fraction}
     combined = _fuse(layers[0], sm, pool_wavelength_m=pool_wavelength_m, **fkw)
-    slow = _fuse(layers[1], sm, pool_wavelength_m=None, **fkw)
+    slow = _fuse(layers[1], sm, pool_wavelength_m=None,
+                 **{**fkw, "lowpass_fraction": SLOW_LOWPASS_FRACTION,
+                    "f_max_fraction": slow_f_max_fraction})
     return SessionErrorMotions(session=session, hours=hours, runs=tuple(used),
                                combined=combined, slow=slow, skipped=tuple(skipped))
