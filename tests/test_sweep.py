@@ -1,6 +1,6 @@
 """``twin sweep`` (issue 5, checks 2, 3, 4 and 7).
 
-One tiny sweep (Phase II only: 2 sessions of 1 run at 100 mm/s over 150 mm; 2 backlash steps x
+One tiny sweep (Phase II only: 2 sessions of 1 run at 100 mm/s over 200 mm, 1 s dwell; 2 backlash steps x
 2 IMU noise levels x 2 seeds = 8 campaigns) is run once with the default executor (all local
 cores); that table is the reference of the other runs:
 - (2) the same sweep on ``--workers 2`` (a dask LocalCluster) gives an identical table;
@@ -42,8 +42,8 @@ seeds = [1, 2]
 [set]
 "phase2.session_hours" = [100.0, 300.0]
 "phase2.runs_per_session" = 1
-"phase2.end_mm" = 150.0
-"phase2.dwell_s" = 0.5
+"phase2.end_mm" = 200.0
+"phase2.dwell_s" = 1.0
 "dial_indicator.every_n_sessions" = 2
 "degradation.table_hours" = [100.0, 300.0]
 "degradation.table_preload_fraction" = [1.0, 1.0]
@@ -122,12 +122,13 @@ def test_default_table_recovers_the_injected_backlash(default_run):
     assert sorted(set(df["sensors.imu_acc_noise_ug_per_rthz"])) == [5.0, 20.0]
     assert {"phase2.rms_error_um", "phase2.bias_um", "phase2.error_motion.E_ZX.rms_um"} <= set(df.columns)
     # Each point's score: the estimated change of backlash of the second session against the
-    # injected one (5 or 15 µm): within 0.3 µm at 5 µg/√Hz, 0.6 µm at 20 µg/√Hz.
+    # injected one (5 or 15 µm). One run per session over 200 mm scatters by 0.20 µm (1σ) at
+    # 5 µg/√Hz and 0.65 µm at 20 µg/√Hz (8 noise draws each); the tolerance is 3σ.
     for _, row in df.iterrows():
         rec = json.loads((default_run / row["directory"] / "result.json").read_text())
         s1 = rec["score"]["phase2"]["sessions"][1]
         assert s1["injected_delta_um"] == pytest.approx(row["degradation.table_backlash_um[1]"])
-        tol = 0.3 if row["sensors.imu_acc_noise_ug_per_rthz"] == 5.0 else 0.6
+        tol = 0.6 if row["sensors.imu_acc_noise_ug_per_rthz"] == 5.0 else 2.0
         print(f"point {row['point']} seed {row['seed']}: injected {s1['injected_delta_um']:.1f} µm, "
               f"estimated {s1['estimated_delta_um']:.2f} µm")
         assert abs(s1["estimated_delta_um"] - s1["injected_delta_um"]) < tol
