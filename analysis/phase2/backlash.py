@@ -28,7 +28,7 @@ commanded position) a **positive change of backlash comes out positive**: ΔPosi
 sense if the high-pass-filtered E_XX is purely screw-fixed. At the IMU it is not: its content above
 the 0.5 mm cutoff mixes the motor's 8-per-revolution torque ripple and ball passing (screw-fixed)
 with the Abbe terms of pitch and yaw (rail-fixed): in the twin it shifts by about 0 % of the
-backlash at 20 mm/s (torque ripple dominates) but 60–70 % at 100 mm/s, so E_XX is left out of the
+backlash at 20 mm/s (torque ripple dominates) but about 90 % at 100 mm/s, so E_XX is left out of the
 default sum.
 
 Weighted sum (Eqs. 6–7): γ_ij = min(γ_ij1, γ_ij2), ΔBacklash_i = Σ_j γ_ij^σ ΔBacklash_ij /
