@@ -35,8 +35,10 @@ import numpy as np
 from analysis.dataset import DatasetError, open_truth
 from analysis.phase1.scoring import score_method
 from analysis.phase2.fusion import remove_unobservable
+from analysis.phase2.traces import DOFS
+from analysis.phase2.workflow import read_error_motions
 
-__all__ = ["ScoreError", "THRESHOLD_FACTORS", "flat", "score", "write_score"]
+__all__ = ["ScoreError", "THRESHOLD_FACTORS", "flat", "injected_change_um", "score", "write_score"]
 
 THRESHOLD_FACTORS = tuple(float(f) for f in np.round(np.logspace(-2, 2, 17, base=2), 6))
 LIMIT_UM = 10.0
@@ -112,23 +114,17 @@ def _error_motion_errors(path: Path, truth) -> dict | None:
     """Median over sessions of the RMS error of the recovered error motions (µm, µrad)."""
     if not path.is_file():
         return None
-    import h5py
-
     per = {d: [] for d in EM_DOFS}
-    with h5py.File(path, "r") as f:
-        dofs = [str(d) for d in f.attrs["dofs"]]
-        for name in f:
-            x = f[name]["x_m"][...]
-            mean = 0.5 * (f[name]["forward"][...] + f[name]["reverse"][...])
-            try:
-                xt, et, attrs = truth.session(name)
-            except DatasetError:
-                continue
-            ref = np.array([np.interp(x + attrs["origin_offset_m"], xt, et[i]) for i in range(6)])
-            err = remove_unobservable(mean, x) - remove_unobservable(ref, x)
-            rms = np.sqrt((err ** 2).mean(axis=1))
-            for d in EM_DOFS:
-                per[d].append(float(rms[dofs.index(d)]) * 1e6)
+    for name, (x, fwd, rev) in read_error_motions(path).items():
+        try:
+            xt, et, attrs = truth.session(name)
+        except DatasetError:
+            continue
+        ref = np.array([np.interp(x + attrs["origin_offset_m"], xt, et[i]) for i in range(6)])
+        err = remove_unobservable(0.5 * (fwd + rev), x) - remove_unobservable(ref, x)
+        rms = np.sqrt((err ** 2).mean(axis=1))
+        for d in EM_DOFS:
+            per[d].append(float(rms[DOFS.index(d)]) * 1e6)
     if not per[EM_DOFS[0]]:
         return None
     return {"rms_um": {d: float(np.median(per[d])) for d in EM_DOFS[:2]},
@@ -136,11 +132,23 @@ def _error_motion_errors(path: Path, truth) -> dict | None:
             "sessions": len(per[EM_DOFS[0]])}
 
 
-def _elastic_um(truth, hours: list[float]) -> np.ndarray | None:
+def injected_backlash_um(truth, sessions: list[str]) -> np.ndarray:
+    """The injected backlash (clearance, µm) of each Phase II session of truth.h5; raises
+    DatasetError naming a session truth.h5 does not hold."""
+    return np.array([float(truth.session(n)[2]["backlash_um"]) for n in sessions])
+
+
+def injected_change_um(truth, sessions: list[str], baseline_sessions: int = 1) -> np.ndarray:
+    """The injected change of backlash (µm) of each session against the mean of the first
+    ``baseline_sessions``: what the Phase II estimates, re-zeroed the same way, are compared with."""
+    b = injected_backlash_um(truth, sessions)
+    return b - b[:baseline_sessions].mean()
+
+
+def _elastic_um(scenario: dict, tl: dict, hours: list[float]) -> np.ndarray | None:
     """Elastic lost motion 2·F/K in µm at ``hours``: F the rail friction of the scenario (N), K the
-    axial stiffness of the drive from truth.h5's timeline (N/m). None if either is not there."""
-    friction = (truth.scenario().get("axis") or {}).get("rail_friction_N")
-    tl = truth.timeline()
+    axial stiffness of the drive from truth.h5's timeline ``tl`` (N/m). None if either is not there."""
+    friction = (scenario.get("axis") or {}).get("rail_friction_N")
     if friction is None or "axial_stiffness_N_per_m" not in tl:
         return None
     k = np.interp(hours, tl["hours"], tl["axial_stiffness_N_per_m"])
@@ -154,15 +162,14 @@ def score_phase2(directory: Path, truth) -> dict | None:
         return None
     k = int(doc.get("parameters", {}).get("baseline_sessions", 1))
     names = [r["session"] for r in doc["sessions"]]
-    injected = []
-    for n in names:
-        try:
-            injected.append(float(truth.session(n)[2]["backlash_um"]))
-        except DatasetError as exc:
-            raise ScoreError(f"{directory / 'backlash' / 'backlash.json'} names session {n}, but "
-                             f"truth.h5 cannot give its backlash: {exc}") from None
+    try:
+        injected = injected_backlash_um(truth, names)
+    except DatasetError as exc:
+        raise ScoreError(f"{directory / 'backlash' / 'backlash.json'} names sessions truth.h5 "
+                         f"cannot give the backlash of: {exc}") from None
     ref = float(np.mean(injected[:k]))
-    elastic = _elastic_um(truth, [r["hours"] for r in doc["sessions"]])
+    tl = truth.timeline()
+    elastic = _elastic_um(truth.scenario(), tl, [r["hours"] for r in doc["sessions"]])
     lost = None if elastic is None else np.asarray(injected) + elastic
     rows, err, perr, lerr = [], [], [], []
     for i, (rec, b) in enumerate(zip(doc["sessions"], injected)):
@@ -185,7 +192,6 @@ def score_phase2(directory: Path, truth) -> dict | None:
         if row["pitch_error_um"] is not None:
             perr.append(row["pitch_error_um"])
     err_a = np.asarray(err)
-    tl = truth.timeline()
     true_cross = _crossing(tl["hours"], tl["backlash_um"] - ref, LIMIT_UM)
     prog = doc.get("prognosis") or {}
     pred = _none(prog.get("crossing_hours"))

@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Callable
 
 from analysis.dataset import open_measurements
-from analysis.phase1.pipeline import N_BASELINE
 from analysis.scoring import score, write_score
 from twin.campaign import simulate_campaign
 from twin.scenario import Scenario
@@ -41,7 +40,8 @@ def analyse(directory: str | Path, reference: str | Path | None, *, plots: bool 
             on_step: Callable[[str], None] | None = None) -> Analysed:
     """Run the analyses the campaign in ``directory`` supports, then score it if it has truth.
 
-    Phase I needs more than :data:`N_BASELINE` samples and a reference data set directory;
+    Phase I needs more than the baseline samples (:data:`analysis.phase1.pipeline.N_BASELINE`)
+    and a reference data set directory;
     Phase II needs two sessions. ``process_noise`` of the backlash trend defaults to maximum
     likelihood, since campaigns run at different time scales (the CLI default 1e-23 m²/h³ is
     tuned to the paper's 8000 h).

@@ -49,6 +49,16 @@ def _plt():
     return plt
 
 
+def _save(fig, path: Path, title: str | None = None) -> Path:
+    """Give ``fig`` its title, lay it out, write it to ``path`` (PNG, 110 dpi) and close it."""
+    if title is not None:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    _plt().close(fig)
+    return path
+
+
 def _detected(df, method: str):
     return (df[f"phase1.{method}.delay_hours"] > 0).astype(float)
 
@@ -113,11 +123,7 @@ def _phase2_figure(plan, df, x: str, path: Path) -> Path | None:
         ax.grid(alpha=0.3)
     if group is not None:
         axes[0][0].legend(fontsize=7)
-    fig.suptitle(f"sweep {plan.name}: Phase II against {x} ({len(df)} rows)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, f"sweep {plan.name}: Phase II against {x} ({len(df)} rows)")
 
 
 def _phase1_figure(plan, df, x: str, methods: list[str], path: Path) -> Path | None:
@@ -140,11 +146,7 @@ def _phase1_figure(plan, df, x: str, methods: list[str], path: Path) -> Path | N
         ax.grid(alpha=0.3)
     axes[0][2].set_ylim(-0.05, 1.05)
     axes[0][0].legend(fontsize=7)
-    fig.suptitle(f"sweep {plan.name}: Phase I against {x} ({len(df)} rows)", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, f"sweep {plan.name}: Phase I against {x} ({len(df)} rows)")
 
 
 def roc_table(recs):
@@ -195,10 +197,7 @@ def _roc_figure(plan, roc, path: Path) -> Path | None:
     ax.legend(fontsize=7, title="circle: the method's own limit", title_fontsize=7)
     ax.set_title(f"sweep {plan.name}: detection vs false alarms, limit x 0.25 ... 4\n"
                  f"({int(roc['rows'].max())} rows)", fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def write_plots(plan, out: str | Path, df) -> list[Path]:

@@ -46,10 +46,11 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
-import h5py
 import numpy as np
 
-from analysis.dataset import DOFS, open_measurements, open_truth
+from analysis.dataset import DOFS, DatasetError, open_measurements, open_truth
+from analysis.phase2.workflow import read_error_motions
+from analysis.scoring import injected_change_um
 from twin.axis import Axis
 from twin.scenario import Scenario, ScenarioError, from_dict, to_axis
 
@@ -332,26 +333,9 @@ def _estimated_error_motions(path: Path, session: str):
     """``(x_m (n,) m, forward (6, n), reverse (6, n))`` in DOFS order (m and rad) of ``session``
     in ``error_motions.h5`` (written by ``twin backlash``), or None if the session is absent."""
     try:
-        with h5py.File(path, "r") as f:
-            if session not in f:
-                return None
-            dofs = [d.decode() if isinstance(d, bytes) else str(d) for d in f.attrs["dofs"]]
-            missing = [d for d in DOFS if d not in dofs]
-            if missing:
-                raise ViewError(f"{path}: /@dofs is {dofs}; expected all of {', '.join(DOFS)}")
-            order = [dofs.index(d) for d in DOFS]
-            g = f[session]
-            x = np.asarray(g["x_m"][...], dtype=np.float64)
-            fwd = np.asarray(g["forward"][...], dtype=np.float64)
-            rev = np.asarray(g["reverse"][...], dtype=np.float64)
-    except (OSError, KeyError) as exc:
-        raise ViewError(f"{path}: cannot read session {session} ({exc}); rerun `twin backlash` to "
-                        "rewrite it") from None
-    for key, arr in (("forward", fwd), ("reverse", rev)):
-        if x.ndim != 1 or len(x) < 2 or arr.shape != (len(dofs), len(x)):
-            raise ViewError(f"{path}: /{session}/{key} has shape {arr.shape} with x_m {x.shape}; "
-                            f"expected ({len(dofs)}, n) with n = len(x_m) >= 2")
-    return x, fwd[order], rev[order]
+        return read_error_motions(path).get(session)
+    except DatasetError as exc:
+        raise ViewError(str(exc)) from None
 
 
 def _stride(n: int, max_points: int) -> int:
@@ -569,11 +553,10 @@ def _log_backlash(r: _Recorder, doc: dict, truth, notes: list[str], truth_label:
         notes.append(f"{truth_label} lacks the reference session(s) {', '.join(base) or '-'} of "
                      "backlash.json: the injected backlash is left out")
         return
-    ref = float(np.mean([truth.session(s)[2]["backlash_um"] for s in base]))
-    pts = [(float(s["hours"]), truth.session(s["session"])[2]["backlash_um"] - ref)
-           for s in recs if s["session"] in have]
-    r.series("/hours/backlash/injected_delta_um", [p[0] for p in pts], [p[1] for p in pts], timeline="hours",
-             name="injected change (truth.h5, µm)", color=ORANGE, points=True)
+    shown = [s for s in recs if s["session"] in have]  # the baseline sessions lead the list
+    change = injected_change_um(truth, [s["session"] for s in shown], k)
+    r.series("/hours/backlash/injected_delta_um", [float(s["hours"]) for s in shown], list(change),
+             timeline="hours", name="injected change (truth.h5, µm)", color=ORANGE, points=True)
 
 
 def _blueprint(rrb, summary: ViewSummary, phase2_roots: list[str], phase1_roots: list[str],

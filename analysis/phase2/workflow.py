@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.dataset import open_measurements, open_truth
+from analysis.dataset import DatasetError, open_measurements, open_truth
 from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash
 from analysis.phase2.traces import DOFS
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis
@@ -63,6 +63,40 @@ def write_error_motions(path: Path, ems) -> None:
             g.create_dataset("forward", data=em.combined.forward)
             g.create_dataset("reverse", data=em.combined.reverse)
     tmp.replace(path)
+
+
+def read_error_motions(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The sessions of an ``error_motions.h5`` written by :func:`write_error_motions`:
+    ``{session: (x_m (n,) m, forward (6, n), reverse (6, n))}``, rows in :data:`DOFS` order
+    (m and rad) whatever order the file's ``dofs`` attribute gives.
+
+    Raises:
+        DatasetError: unreadable file, missing DOFs or inconsistent shapes (names file and key).
+    """
+    import h5py
+
+    out = {}
+    try:
+        with h5py.File(path, "r") as f:
+            dofs = [d.decode() if isinstance(d, bytes) else str(d) for d in f.attrs["dofs"]]
+            missing = [d for d in DOFS if d not in dofs]
+            if missing:
+                raise DatasetError(f"{path}: /@dofs is {dofs}; expected all of {', '.join(DOFS)}")
+            order = [dofs.index(d) for d in DOFS]
+            for name, g in f.items():
+                x = np.asarray(g["x_m"][...], dtype=np.float64)
+                fwd = np.asarray(g["forward"][...], dtype=np.float64)
+                rev = np.asarray(g["reverse"][...], dtype=np.float64)
+                for key, arr in (("forward", fwd), ("reverse", rev)):
+                    if x.ndim != 1 or len(x) < 2 or arr.shape != (len(dofs), len(x)):
+                        raise DatasetError(
+                            f"{path}: /{name}/{key} has shape {arr.shape} with x_m {x.shape}; "
+                            f"expected ({len(dofs)}, n) with n = len(x_m) >= 2")
+                out[name] = (x, fwd[order], rev[order])
+    except (OSError, KeyError) as exc:
+        raise DatasetError(f"{path}: cannot read the error motions ({exc}); rerun `twin backlash` "
+                           "to rewrite it") from None
+    return out
 
 
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
@@ -140,11 +174,12 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     figures: list[Path] = []
     if plots and ses:
         from analysis.phase2.report import write_figures
+        from analysis.scoring import injected_change_um
 
         injected = None
         if (directory / "truth.h5").exists():
             with open_truth(directory / "truth.h5") as t:
-                b = [t.session(s.session)[2]["backlash_um"] for s in ses]
-                injected = (hours, [v - b[0] for v in b])
+                injected = (hours, list(injected_change_um(t, [s.session for s in ses],
+                                                           result.baseline_sessions)))
         figures = write_figures(result, out, trend=trend, dial=dial_delta, injected=injected)
     return BacklashRun(doc=doc, result=result, trend=trend, prognosis=prog, figures=figures)
