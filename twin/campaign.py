@@ -50,6 +50,9 @@ def make_world(s: Scenario) -> World:
     # Separate streams for the rails, the screw and the motor, so that no other scenario key
     # changes what is drawn for one of them.
     rails_rng, screw_rng, motor_rng = (rng_for(s.seed, KIND_WORLD, i) for i in range(3))
+    # The effects' draws come from streams of their own (3: cogging phase), never from the above.
+    cogging_rng = rng_for(s.seed, KIND_WORLD, 3)
+    fx = s.effects
     rail_spec = geo.RailSpec(
         straightness_rms_vertical_m=g.straightness_rms_um * 1e-6,
         straightness_rms_lateral_m=g.lateral_straightness_rms_um * 1e-6,
@@ -95,9 +98,18 @@ def make_world(s: Scenario) -> World:
                  ripple_torque=s.axis.torque_ripple_Nm, ripple_per_rev=s.axis.torque_ripple_per_rev,
                  ripple_phase=float(motor_rng.uniform(0, 2 * math.pi)),
                  thermal_expansion=s.degradation.thermal_expansion_per_K,
+                 drag_temperature_coefficient=s.degradation.drag_temperature_coefficient_per_K,
                  imu_acc=imu_acc, imu_gyro=imu_gyro, nut_acc=nut_acc,
                  controller_fs=fs, encoder_counts_per_rev=se.encoder_counts_per_rev,
-                 torque_noise=se.torque_noise_Nm, position_cmd_fs=se.position_cmd_fs_hz)
+                 torque_noise=se.torque_noise_Nm, position_cmd_fs=se.position_cmd_fs_hz,
+                 cogging_torque=fx.cogging_Nm, cogging_per_rev=fx.cogging_per_rev,
+                 cogging_phase=float(cogging_rng.uniform(0, 2 * math.pi)),
+                 recirculation_impulse=fx.recirculation_impulse_N,
+                 recirculation_width=fx.recirculation_width,
+                 stribeck_excess=fx.stribeck_excess_N,
+                 stribeck_velocity=fx.stribeck_velocity_mm_s * 1e-3,
+                 base_modal_mass=fx.base_modal_mass_kg, base_frequency=fx.base_frequency_hz,
+                 base_damping_ratio=fx.base_damping_ratio)
 
 
 def wear_law(s: Scenario) -> deg.WearLaw:

@@ -192,6 +192,7 @@ def export_model(
 ) -> None:
     """Write the MJCF of the axis in its new, healthy state: a complete model that holds still,
     e.g. to open in MuJoCo's viewer (`python -m mujoco.viewer --mjcf models/linear_axis.xml`)."""
+    from twin.campaign import make_world
     from twin.model import build_mjcf
     from twin.scenario import Scenario, to_axis
 
@@ -200,7 +201,11 @@ def export_model(
     except ScenarioError as exc:
         _fail(str(exc))
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(build_mjcf(to_axis(s), timestep or s.phase1.timestep_s))
+    try:
+        text = build_mjcf(to_axis(s), timestep or s.phase1.timestep_s, make_world(s).base_mode)
+    except ValueError as exc:  # a base too light for the time step
+        _fail(str(exc))
+    out.write_text(text)
     console.print(f"wrote {out}")
 
 

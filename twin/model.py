@@ -1,11 +1,13 @@
 """The MuJoCo model of the linear axis: MJCF text built from :class:`twin.axis.Axis`.
 
-Degrees of freedom (8):
+Degrees of freedom (8, or 9 with a compliant machine base):
 - ``screw``: hinge of the motor rotor and screw about X (the servo acts here);
 - the carriage with its steel load, as one rigid body on six joints at its centre of mass:
   ``carriage_x`` (travel), ``carriage_y``, ``carriage_z``, ``carriage_roll`` (about X),
   ``carriage_pitch`` (about Y) and ``carriage_yaw`` (about Z);
-- ``lead_flank``: the prescribed cyclic lead error of the nut flanks (see below).
+- ``lead_flank``: the prescribed cyclic lead error of the nut flanks (see below);
+- ``base_x`` (only when a :class:`BaseMode` is given): a structural mode of the machine base
+  along X, see below.
 
 Couplings, all fixed tendons (linear in the joint coordinates, exact for the µm/µrad motions here):
 - ``ballnut``: L = x + z_n·pitch − R·θ − ε with R = lead/2π, ε the lead flank (z_n: nut axis height below the centre of
@@ -31,6 +33,22 @@ The servo is MuJoCo's ``<pid input="pos vel ff">`` actuator on the screw hinge (
 :class:`twin.axis.Servo`); a second motor on the hinge carries the torque ripple of the motor,
 which the controller does not know. Nut drag torque is Coulomb friction (``frictionloss``) plus
 viscous damping on the hinge; rail and seal friction is ``frictionloss`` on ``carriage_x``.
+
+Unmodelled-effect actuators (zero unless the scenario's ``[effects]`` switches them on, see
+:class:`twin.simulate.World`): ``nut_axial``, an axial force on the carriage at the nut site (ball
+recirculation impulses), and ``rail_stribeck``, a force on ``carriage_x`` (Stribeck friction in
+excess of the rail's Coulomb friction). The motor cogging torque shares the ``ripple`` motor.
+
+Machine base (optional, :class:`BaseMode`): a single-DOF modal model of a base/column mode along
+X (modal mass M, natural frequency f, damping ratio ζ; e.g. Altintas, *Manufacturing
+Automation*, 2nd ed., ch. 3): body ``base`` on the slide ``base_x`` with joint stiffness
+k = M(2πf)² and damping 2ζ√(kM) about 0, appended at the end of the worldbody so that the
+qpos/qvel indices above are unchanged. The screw's support bearings sit on the base, so
+``base_x`` enters the ball-nut tendon with coefficient −1 (L = x + z_n·pitch − R·θ − ε − x_b):
+the nut force drives the base, and the base motion moves the carriage through the nut. The
+accelerometers (absolute) see the resonance; the encoder (rotor angle relative to the base) only
+through the servo's reaction. The rails, their Coulomb friction and the prescribed rail errors
+stay on the ground (simplification: only the drive's support moves).
 
 Known simplifications: tendon damping (the contact's structural damping, ζ = 3 %) also acts
 inside the backlash gap, where it adds a drag c·v_rel (about 55 N for the ~9 mm/s at which a
@@ -65,7 +83,9 @@ CTRL_FLANK_POS, CTRL_FLANK_VEL, CTRL_FLANK_FF = 4, 5, 6
 CTRL_TRUCK_V = slice(7, 11)
 CTRL_TRUCK_L = slice(11, 15)
 CTRL_RUNOUT = slice(15, 17)
-NCTRL = 17
+CTRL_NUT_AXIAL = 17  # N, axial force on the carriage at the nut (ball recirculation impulses)
+CTRL_STRIBECK = 18  # N, force on carriage_x (Stribeck excess friction)
+NCTRL = 19
 FLANK_MASS = 1e5  # kg, see the module docstring
 
 # Sensor layout (indices into data.sensordata).
@@ -77,8 +97,34 @@ SENS_SERVO_FORCE = 12
 SENS_RIPPLE_FORCE = 13
 NSENS = 14
 
-# qpos / qvel indices.
-Q_SCREW, Q_X, Q_Y, Q_Z, Q_ROLL, Q_PITCH, Q_YAW, Q_FLANK = range(8)
+# qpos / qvel indices (Q_BASE exists only in a model with a :class:`BaseMode`).
+Q_SCREW, Q_X, Q_Y, Q_Z, Q_ROLL, Q_PITCH, Q_YAW, Q_FLANK, Q_BASE = range(9)
+BASE_MODE_MAX_OMEGA_DT = 1.0  # stability margin of the explicit base spring (limit 2)
+
+
+@dataclass(frozen=True)
+class BaseMode:
+    """A structural mode of the machine base along X as a single-DOF modal model.
+
+    Attributes:
+        mass: modal mass M, kg (> 0).
+        frequency: natural frequency of the base alone, f, Hz.
+        damping_ratio: ζ (0 < ζ < 1).
+    """
+
+    mass: float
+    frequency: float
+    damping_ratio: float
+
+    @property
+    def stiffness(self) -> float:
+        """k = M·(2πf)², N/m."""
+        return self.mass * (2.0 * math.pi * self.frequency) ** 2
+
+    @property
+    def damping(self) -> float:
+        """c = 2ζ·√(k·M), N·s/m."""
+        return 2.0 * self.damping_ratio * math.sqrt(self.stiffness * self.mass)
 
 
 @dataclass(frozen=True)
@@ -101,12 +147,42 @@ def _fmt(v: float) -> str:
     return repr(float(v))
 
 
-def build_mjcf(axis: Axis, timestep: float) -> str:
+def check_base_mode(axis: Axis, timestep: float, base: BaseMode) -> None:
+    """Raise ValueError (naming the scenario keys) when the base cannot be simulated at
+    ``timestep`` s: its mode coupled to the carriage through the ball nut of the new axis,
+    ω² ≤ (k_base + k_axial)/M, must keep ω·dt ≤ 1 for the explicit spring, i.e.
+    M ≥ k_axial·dt²/(1 − (ω_b·dt)²) and ω_b·dt < 1."""
+    k_axial = axis.screw.axial_stiffness(axis.screw.preload)
+    wdt = 2.0 * math.pi * base.frequency * timestep / BASE_MODE_MAX_OMEGA_DT
+    m_min = k_axial * (timestep / BASE_MODE_MAX_OMEGA_DT) ** 2 / max(1.0 - wdt**2, 1e-12)
+    if base.mass <= 0 or wdt >= 1.0 or base.mass < m_min:
+        raise ValueError(
+            f"effects.base_modal_mass_kg = {base.mass:g} with effects.base_frequency_hz = "
+            f"{base.frequency:g} cannot be simulated at a {timestep:g} s step: the base "
+            f"mode coupled to the ball nut (k = {k_axial:.3g} N/m) needs a modal mass >= "
+            f"{m_min:.3g} kg and 2π·f·dt < {BASE_MODE_MAX_OMEGA_DT:g} (explicit spring); use a "
+            "heavier base or a smaller time step")
+
+
+def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str:
     """MJCF text of the axis in its new (healthy, zero-backlash) state, a complete model that
     holds still when loaded on its own; other states are written into the compiled model by
-    :func:`apply_state`. ``timestep`` in s."""
+    :func:`apply_state`. ``timestep`` in s. ``base``: a compliant machine base (one more DOF,
+    ``base_x``, see the module docstring); None = rigid base, the 8-DOF model.
+
+    Raises ValueError when the base is too light for the time step (:func:`check_base_mode`)."""
     c, s = axis.carriage, axis.screw
     new = state_fields(axis, MechanicalState(preload=s.preload))
+    base_body, base_wrap = "", ""
+    if base is not None:
+        check_base_mode(axis, timestep, base)
+        base_body = (
+            f'    <body name="base">\n'
+            f'      <joint name="base_x" type="slide" axis="1 0 0" springref="0" '
+            f'stiffness="{_fmt(base.stiffness)}" damping="{_fmt(base.damping)}"/>\n'
+            f'      <inertial pos="0 0 0" mass="{_fmt(base.mass)}" diaginertia="1 1 1"/>\n'
+            f'    </body>\n')
+        base_wrap = '      <joint joint="base_x" coef="-1"/>\n'
 
     def spring(i: int) -> str:
         lo, hi = new.tendon_lengthspring[i]
@@ -181,14 +257,14 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
       <joint name="lead_flank" type="slide" axis="1 0 0"/>
       <inertial pos="0 0 0" mass="{_fmt(FLANK_MASS)}" diaginertia="1 1 1"/>
     </body>
-  </worldbody>
+{base_body}  </worldbody>
   <tendon>
     <fixed name="ballnut" {spring(0)}>
       <joint joint="carriage_x" coef="1"/>
       <joint joint="carriage_pitch" coef="{_fmt(zn)}"/>
       <joint joint="screw" coef="{_fmt(-r)}"/>
       <joint joint="lead_flank" coef="-1"/>
-    </fixed>
+{base_wrap}    </fixed>
 {''.join(truck_tendons)}  </tendon>
   <actuator>
     <pid name="servo" joint="screw" input="pos vel ff" kp="{_fmt(kp)}" kv="{_fmt(kd)}" ki="{_fmt(ki)}"
@@ -198,6 +274,8 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
          kv="{_fmt(flank_kv)}"/>
 {truck_motors}    <motor name="runout_y" site="nut" gear="0 1 0 0 0 0"/>
     <motor name="runout_z" site="nut" gear="0 0 1 0 0 0"/>
+    <motor name="nut_axial" site="nut" gear="1 0 0 0 0 0"/>
+    <motor name="rail_stribeck" joint="carriage_x" gear="1"/>
   </actuator>
   <sensor>
     <accelerometer name="imu_acc" site="imu"/>
@@ -211,11 +289,18 @@ def build_mjcf(axis: Axis, timestep: float) -> str:
 """
 
 
-def build_model(axis: Axis, timestep: float) -> mujoco.MjModel:
+def build_model(axis: Axis, timestep: float, base: BaseMode | None = None) -> mujoco.MjModel:
     """Compile the axis model; see :func:`build_mjcf`."""
-    model = mujoco.MjModel.from_xml_string(build_mjcf(axis, timestep))
+    model = mujoco.MjModel.from_xml_string(build_mjcf(axis, timestep, base))
     assert model.nu == NCTRL and model.actuator_ctrlnum[2] == 3, "control layout changed"
+    assert model.actuator_ctrladr[model.actuator("nut_axial").id] == CTRL_NUT_AXIAL, \
+        "control layout changed"
+    assert model.actuator_ctrladr[model.actuator("rail_stribeck").id] == CTRL_STRIBECK, \
+        "control layout changed"
     assert model.nsensordata == NSENS, "sensor layout changed"
+    assert model.nq == model.nv == (8 if base is None else 9), "joint layout changed"
+    if base is not None:
+        assert model.joint("base_x").qposadr[0] == Q_BASE, "joint layout changed"
     return model
 
 

@@ -115,6 +115,9 @@ class DegradationConfig(_Section):
     thermal_rise_K: float = Field(3.0, ge=0, le=50)
     thermal_time_constant_hours: float = Field(1.5, gt=0)
     thermal_expansion_per_K: float = Field(11.5e-6, ge=0)
+    drag_temperature_coefficient_per_K: float = Field(0.0, ge=0, le=0.2, description=(
+        "β in drag = drag(20 °C)·exp(−β·ΔT): the nut's lubricant thins as the screw warms "
+        "(0 = drag independent of temperature; about 0.03 /K for mineral greases)"))
 
     @model_validator(mode="after")
     def _table(self) -> "DegradationConfig":
@@ -197,6 +200,32 @@ class CampaignConfig(_Section):
     phase2: bool = True
 
 
+class EffectsConfig(_Section):
+    """Physical effects the nominal twin leaves out (all off by default; off = the nominal twin,
+    bit for bit). Used by the sim-to-real gap diagnosis (issue 6) as candidate explanations."""
+
+    cogging_Nm: float = Field(0.0, ge=0, le=1, description=(
+        "amplitude of the motor cogging torque, N·m, a second ripple component "
+        "cogging·sin(per_rev·θ + phase) on the motor (Zhu & Howe, IEEE Trans. Energy Conversion "
+        "15(4), 2000: period LCM(slots, poles) per revolution)"))
+    cogging_per_rev: int = Field(12, ge=1, le=100, description="cogging periods per motor revolution")
+    recirculation_impulse_N: float = Field(0.0, ge=0, le=200, description=(
+        "peak axial force on the nut of the raised-cosine impulses when balls re-enter the loaded "
+        "zone through the return, once per ball-pass period, opposing the motion"))
+    recirculation_width: float = Field(0.1, ge=0.02, le=0.5, description=(
+        "width of a recirculation impulse as a fraction of the ball-pass period"))
+    stribeck_excess_N: float = Field(0.0, ge=0, le=500, description=(
+        "static friction of the rails in excess of their Coulomb friction, N: "
+        "F = −ΔF·exp(−(v/v_s)²)·sign(v) at the commanded carriage velocity v "
+        "(Armstrong-Hélouvry, Dupont, Canudas de Wit, Automatica 30(7), 1994)"))
+    stribeck_velocity_mm_s: float = Field(2.0, ge=0.1, le=50, description="Stribeck velocity v_s, mm/s")
+    base_frequency_hz: float = Field(120.0, ge=10, le=1000, description=(
+        "natural frequency of a structural mode of the machine base along X, Hz"))
+    base_modal_mass_kg: float = Field(0.0, ge=0, le=1e5, description=(
+        "modal mass of the base mode, kg; 0 = rigid base (no extra degree of freedom)"))
+    base_damping_ratio: float = Field(0.03, gt=0, lt=1, description="damping ratio of the base mode")
+
+
 class Scenario(_Section):
     name: str = "unnamed"
     description: str = ""
@@ -209,6 +238,7 @@ class Scenario(_Section):
     phase2: Phase2Config = Field(default_factory=Phase2Config)
     dial_indicator: DialConfig = Field(default_factory=DialConfig)
     campaign: CampaignConfig = Field(default_factory=CampaignConfig)
+    effects: EffectsConfig = Field(default_factory=EffectsConfig)
 
     @model_validator(mode="after")
     def _strokes(self) -> "Scenario":
@@ -227,6 +257,16 @@ class Scenario(_Section):
             if a == b:
                 raise ValueError(f"{key}.start_mm = {a:g} equals {key}.end_mm: the stroke must "
                                  "have a non-zero length")
+        return self
+
+    @model_validator(mode="after")
+    def _base_mode(self) -> "Scenario":
+        fx = self.effects
+        if fx.base_modal_mass_kg > 0:
+            from twin.model import BaseMode, check_base_mode
+            base = BaseMode(fx.base_modal_mass_kg, fx.base_frequency_hz, fx.base_damping_ratio)
+            for cfg in (self.phase1, self.phase2):
+                check_base_mode(to_axis(self), cfg.timestep_s, base)
         return self
 
     @property

@@ -36,11 +36,11 @@ from scipy import signal
 from twin import geometry as geo
 from twin.axis import Axis
 from twin.drive import Move, Profile, command_profile, reciprocating
-from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, CTRL_POS,
-                        CTRL_RIPPLE, CTRL_RUNOUT, CTRL_TRUCK_L, CTRL_TRUCK_V, CTRL_VEL, FLANK_MASS,
-                        NCTRL, Q_SCREW, Q_X, SENS_IMU_ACC, SENS_IMU_GYRO, SENS_NUT1_ACC,
-                        SENS_NUT2_ACC, SENS_SERVO_FORCE, MechanicalState, apply_state, build_model,
-                        initial_state, stiffness_of)
+from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, CTRL_NUT_AXIAL,
+                        CTRL_POS, CTRL_RIPPLE, CTRL_RUNOUT, CTRL_STRIBECK, CTRL_TRUCK_L,
+                        CTRL_TRUCK_V, CTRL_VEL, FLANK_MASS, NCTRL, Q_SCREW, Q_X, SENS_IMU_ACC,
+                        SENS_IMU_GYRO, SENS_NUT1_ACC, SENS_NUT2_ACC, SENS_SERVO_FORCE, BaseMode,
+                        MechanicalState, apply_state, build_model, initial_state, stiffness_of)
 from twin.sensors import instruments as ins
 
 
@@ -60,6 +60,21 @@ class World:
         ripple_phase: rad.
         thermal_expansion: screw expansion coefficient, 1/K.
         sensors: instrument specifications.
+
+    Unmodelled effects (scenario section ``[effects]``; the defaults are off and leave every
+    array of the nominal twin unchanged):
+        cogging_torque: motor cogging amplitude, N·m, added to the ripple motor as
+            cogging·sin(cogging_per_rev·θ + cogging_phase) (PM-motor cogging has the period
+            LCM(slots, poles) per revolution: Zhu & Howe, IEEE Trans. Energy Conversion 15(4),
+            2000); cogging_phase: rad.
+        recirculation_impulse: peak axial force on the nut of the ball re-entry impulses, N;
+            recirculation_width: pulse width as a fraction of the ball-pass period (see
+            :func:`recirculation_force`).
+        stribeck_excess: static rail friction in excess of the Coulomb friction ΔF, N;
+            stribeck_velocity: Stribeck velocity v_s, m/s (see :func:`stribeck_force`).
+        base_modal_mass: modal mass of the machine base's X mode, kg (0 = rigid base);
+            base_frequency: its natural frequency, Hz; base_damping_ratio: ζ (see
+            :class:`twin.model.BaseMode`).
     """
 
     axis: Axis
@@ -70,6 +85,7 @@ class World:
     ripple_per_rev: int = 8
     ripple_phase: float = 0.0
     thermal_expansion: float = 11.5e-6
+    drag_temperature_coefficient: float = 0.0
     imu_acc: ins.AnalogAccelerometerSpec = field(default_factory=ins.AnalogAccelerometerSpec)
     imu_gyro: ins.DigitalGyroSpec = field(default_factory=ins.DigitalGyroSpec)
     nut_acc: ins.NutAccelerometerSpec = field(default_factory=ins.NutAccelerometerSpec)
@@ -78,6 +94,81 @@ class World:
     torque_noise: float = 0.005
     torque_resolution: float = 0.001
     position_cmd_fs: float = 1000.0
+    cogging_torque: float = 0.0
+    cogging_per_rev: int = 12
+    cogging_phase: float = 0.0
+    recirculation_impulse: float = 0.0
+    recirculation_width: float = 0.1
+    stribeck_excess: float = 0.0
+    stribeck_velocity: float = 2e-3
+    base_modal_mass: float = 0.0
+    base_frequency: float = 120.0
+    base_damping_ratio: float = 0.03
+
+    @property
+    def base_mode(self) -> BaseMode | None:
+        """The compliant machine base of the model, None for a rigid base (modal mass 0)."""
+        if self.base_modal_mass <= 0.0:
+            return None
+        return BaseMode(mass=self.base_modal_mass, frequency=self.base_frequency,
+                        damping_ratio=self.base_damping_ratio)
+
+
+def recirculation_force(theta: np.ndarray, v_cmd: np.ndarray, world: World) -> np.ndarray:
+    """Axial force of the ball re-entry impulses on the nut, (n,) N, for the commanded screw
+    angles ``theta`` (n,) rad and carriage velocities ``v_cmd`` (n,) m/s at the simulation
+    steps (n ≥ 2).
+
+    When balls re-enter the loaded zone through the return/deflector they strike the nut: one
+    impulse per ball-pass period, at the ball-pass phase u = (N_bp·θ + φ_bp)/2π of
+    :func:`twin.geometry.ball_pass` (pulse centred where u is an integer). Each is a raised
+    cosine p(d) = ½(1 + cos(2πd/w)) for |d| < w/2 (d = u − round(u), w the width as a fraction
+    of the period), of peak F, opposing the motion: F·p·(−sign v). The mean, F·w/2, is kept
+    (a one-sided contact force: it is a real drag of the recirculation). Zero at standstill.
+
+    The control is held over a step, so each step carries the pulse's mean over the step,
+    (C(u_{k+1}) − C(u_k))/(u_{k+1} − u_k) with C the integral of p: the impulse is delivered
+    exactly even when the pulse is shorter than a step (w·T = 0.28 ms at 400 mm/s for w = 0.1),
+    and the sampling does not alias its harmonics through the pulse's phase jitter."""
+    w = world
+    n_bp = geo.ball_pass_per_rev(w.screw)
+    width = w.recirculation_width
+    u = (n_bp * theta + w.screw.ball_pass_phase_rad) / (2.0 * math.pi)
+
+    def pulse(u):
+        d = u - np.round(u)
+        return np.where(np.abs(d) < width / 2, 0.5 * (1.0 + np.cos(2.0 * np.pi * d / width)), 0.0)
+
+    def integral(u):
+        k = np.floor(u + 0.5)
+        d = np.clip(u - k, -width / 2, width / 2)
+        return k * width / 2 + 0.5 * (d + width / 2) + width / (4.0 * np.pi) * np.sin(2.0 * np.pi * d / width)
+
+    # The last step continues the motion.
+    u_next = np.append(u[1:], 2.0 * u[-1] - u[-2] if u.size > 1 else u[-1])
+    du = u_next - u
+    small = np.abs(du) < 1e-9
+    mean = np.where(small, pulse(u),
+                    (integral(u_next) - integral(u)) / np.where(small, 1.0, du))
+    return -w.recirculation_impulse * mean * np.sign(v_cmd)
+
+
+def stribeck_force(v_cmd: np.ndarray, world: World) -> np.ndarray:
+    """Stribeck friction of the rails in excess of their Coulomb friction, (n,) N, on
+    ``carriage_x``: F = −ΔF·exp(−(v/v_s)²)·sign(v) (Stribeck curve: Armstrong-Hélouvry, Dupont,
+    Canudas de Wit, Automatica 30(7), 1994), of magnitude ΔF at the start of a motion and at
+    reversals, vanishing in the cruise.
+
+    Approximation: v is the COMMANDED carriage velocity ``v_cmd`` (n,) m/s, so the force is an
+    open-loop input (the model's Coulomb part, ``frictionloss``, is the true-velocity one). The
+    carriage follows the command within µm; its velocity differs from the commanded one by
+    0.5 mm/s rms over the Phase I routine, with transients at the acceleration steps (where the
+    axial mode rings) of up to 5 mm/s at 4 m/s² and 15 mm/s at 19.6 m/s² (measured, new axis).
+    For v_s of a few mm/s the force is therefore the Stribeck friction of the ideal motion, not
+    the flicker the ringing would give; a true stick phase (a carriage held by static friction
+    while the servo winds up) is not modelled."""
+    v = np.asarray(v_cmd, dtype=float)
+    return -world.stribeck_excess * np.exp(-(v / world.stribeck_velocity) ** 2) * np.sign(v)
 
 
 @dataclass(frozen=True)
@@ -97,7 +188,8 @@ class Condition:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """A rollout, row k at t_k = k·dt (state and sensors). t (n,) s; qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m]; qvel (n, 8);
+    """A rollout, row k at t_k = k·dt (state and sensors). t (n,) s; qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m]
+    (n, 9) with a compliant base (``base_x`` m last); qvel likewise;
     sens (n, 14) MuJoCo sensors (see :mod:`twin.model`); cmd: the commanded profile (controller
     frame); theta_cmd (n,) rad."""
 
@@ -133,7 +225,7 @@ class Simulator:
     def __init__(self, world: World, timestep: float):
         self.world = world
         self.timestep = timestep
-        self.model = build_model(world.axis, timestep)
+        self.model = build_model(world.axis, timestep, world.base_mode)
         self.data = mujoco.MjData(self.model)
         self._state_size = mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
 
@@ -141,6 +233,11 @@ class Simulator:
         """Relative lead deviation: cumulative lead error + thermal growth α·ΔT (m/m)."""
         w = self.world
         return w.screw.cumulative_lead_error_m_per_m + w.thermal_expansion * cond.temperature_rise
+
+    def drag_scale(self, cond: Condition) -> float:
+        """Nut drag torque relative to the cold screw: exp(−β·ΔT), β the lubricant's viscosity
+        temperature coefficient (Reynolds' viscosity relation)."""
+        return math.exp(-self.world.drag_temperature_coefficient * cond.temperature_rise)
 
     def flank_motion(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Prescribed flank displacement ε (n,) m, its velocity and acceleration, for the screw
@@ -158,9 +255,10 @@ class Simulator:
         return 1.0 / self.timestep
 
     def controls(self, cond: Condition, cmd: Profile, x_rail: np.ndarray) -> np.ndarray:
-        """(n, NCTRL) control array: servo set-points, torque ripple, the prescribed lead flank
-        and the rail and runout errors as force pairs K·e (see :mod:`twin.model`), rails looked
-        up at ``x_rail`` (n,) m."""
+        """(n, NCTRL) control array: servo set-points, torque ripple (+ cogging), the prescribed
+        lead flank, the rail and runout errors as force pairs K·e (see :mod:`twin.model`), rails
+        looked up at ``x_rail`` (n,) m, and the recirculation and Stribeck forces of the
+        world's effects (zero when off)."""
         w, ax = self.world, self.world.axis
         r = ax.screw.radius_per_rad
         k = stiffness_of(ax, cond.mech)
@@ -170,6 +268,13 @@ class Simulator:
         ctrl[:, CTRL_VEL] = cmd.v / r
         ctrl[:, CTRL_FF] = ax.servo.torque_feedforward * ax.total_inertia() * cmd.a / r
         ctrl[:, CTRL_RIPPLE] = w.ripple_torque * np.sin(w.ripple_per_rev * theta + w.ripple_phase)
+        if w.cogging_torque > 0.0:
+            ctrl[:, CTRL_RIPPLE] += w.cogging_torque * np.sin(w.cogging_per_rev * theta
+                                                              + w.cogging_phase)
+        if w.recirculation_impulse > 0.0:
+            ctrl[:, CTRL_NUT_AXIAL] = recirculation_force(theta, cmd.v, w)
+        if w.stribeck_excess > 0.0:
+            ctrl[:, CTRL_STRIBECK] = stribeck_force(cmd.v, w)
         # Cyclic lead error and ball pass move the nut's flanks (the lead_flank coordinate);
         # the cumulative and thermal parts are in the tendon's lead coefficient.
         flank, flank_v, flank_a = self.flank_motion(theta)
@@ -224,7 +329,8 @@ class Simulator:
         models, s0s, x_rails = [], [], []
         for cond, xc in zip(conds, x_cmd):
             model = self.model if not models else copy.deepcopy(self.model)
-            mech = replace(cond.mech, lead_stretch=self.lead_stretch(cond))
+            mech = replace(cond.mech, lead_stretch=self.lead_stretch(cond),
+                           drag_scale=self.drag_scale(cond))
             apply_state(model, self.world.axis, mech)
             stretch = 1.0 + mech.lead_stretch
             # Start at rest on the rails, in contact on the flank of the first motion; first guess

@@ -28,6 +28,8 @@ the stationary parts, group-delay compensation, trimming of the ringing after ea
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import math
 from dataclasses import dataclass
 
@@ -289,7 +291,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                           trim_s: float = 0.1, trim_end_s: float = 0.005,
                           f_max_fraction: float = 0.5, slow_f_max_fraction: float = 1.0,
                           pool_wavelength_m: float | None = 0.05,
-                          sensors: SensorModel | None = None) -> SessionErrorMotions:
+                          sensors: SensorModel | None = None,
+                          runs: Sequence[str] | None = None) -> SessionErrorMotions:
     """Error motions of one Phase II session, averaged over its runs.
 
     Args:
@@ -311,6 +314,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
             together (halves their noise variance; a backlash shift of 20 µm is a phase of
             0.0025 rad at 50 mm); None keeps the directions apart. ``slow`` never pools.
         sensors: IMU figures; default :func:`sensor_model` of ``m``.
+        runs: the run names to use (default all runs of the session); an unknown name raises
+            :class:`analysis.dataset.DatasetError` naming it.
 
     Returns:
         :class:`SessionErrorMotions`; ``combined`` on the stretch every speed covers at constant
@@ -323,6 +328,12 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
     sm = sensors or sensor_model(m)
     hours = m.session_hours(session)
     names = m.phase2_runs(session)
+    if runs is not None:
+        unknown = [r for r in runs if r not in names]
+        if unknown:
+            raise DatasetError(f"{m.label}: session {session} has no run {', '.join(unknown)}; "
+                               f"expected one of {', '.join(names)}")
+        names = [r for r in names if r in set(runs)]
     if not names:
         raise DatasetError(f"{m.label}: session {session} has no runs; expected at least one")
     kw = {"trim_s": trim_s, "trim_end_s": trim_end_s, "lowpass_fraction": LOWPASS_FRACTION,
