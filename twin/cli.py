@@ -406,6 +406,132 @@ def sweep(
 # --- end of twin sweep -------------------------------------------------------------------------
 
 
+# --- twin diagnose (issue 6) -------------------------------------------------------------------
+def _progress_callback(progress: Progress, tasks: dict):
+    def on_progress(what: str, done: int, total: int) -> None:
+        if what not in tasks:
+            tasks[what] = progress.add_task(what, total=total)
+        progress.update(tasks[what], completed=done)
+    return on_progress
+
+
+def _print_diagnosis(res: dict) -> None:
+    out = Console(width=max(110, Console().width))
+    out.print(f"[bold]{res['verdict']}[/]: {res['n_significant_calibration']} of "
+              f"{res['n_statistics']} statistics beyond the twin's seed-to-seed spread on the "
+              f"calibration part (Holm, α = {res['alpha']:g}); held-out gap "
+              f"{res['heldout_gap_before']:.1f} (critical {res['heldout_gap_critical']:.1f})")
+    sig = [r for r in res["regions"] if r["significant"]][:4]
+    if sig:
+        out.print("where: " + "; ".join(
+            f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² {r['calibration_gap']:.0f})"
+            for r in sig))
+    for i, a in enumerate(res["added"]):
+        pars = ", ".join(f"{k} = {v:.3g} [{a['interval'][k][0]:.3g}, {a['interval'][k][1]:.3g}]"
+                         for k, v in a["params"].items())
+        out.print(f"effect {i + 1}: [bold]{a['effect']}[/] ({pars}): held-out gap "
+                  f"{a['heldout_gap_before']:.1f} -> {a['heldout_gap_after']:.1f} "
+                  f"(-{100 * a['heldout_reduction']:.0f} %, gain {a['gain']:.1f} > {a['gain_threshold']:.1f})")
+    if res["ranking"] and not res["added"]:
+        best = res["ranking"][0]
+        out.print(f"no effect of the library reduces the held-out gap significantly (best: "
+                  f"{best['effect']}, -{100 * best['heldout_reduction']:.0f} %)")
+    if res["verdict"] != "no significant gap":
+        out.print(f"held-out gap {res['heldout_gap_before']:.1f} -> {res['heldout_gap_after']:.1f} "
+                  f"(shrink {100 * res['heldout_shrink']:.0f} %)"
+                  + ("; still beyond the spread: " + "; ".join(
+                      f"{r['domain']} {r['channel']} {r['family']} {r['bin']}"
+                      for r in res["residual"].get("top_regions", [])[:3])
+                     if res["residual"].get("significant") else ""))
+
+
+@app.command()
+def diagnose(
+    real_dir: Path = typer.Argument(..., help="directory with the recording's measurements.h5 (no truth needed)"),
+    scenario: Path = typer.Option(..., "--scenario", help="the scenario meant to describe the recorded axis"),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default REAL_DIR/diagnosis)"),
+    overrides: list[str] = typer.Option([], "--set", help="scenario override KEY=VALUE (repeatable)"),
+    seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the seed-to-seed spread"),
+    alpha: float = typer.Option(0.01, "--alpha", min=1e-9, max=0.5, help="family-wise error rate"),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
+    cache: Optional[Path] = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
+) -> None:
+    """Where the twin and the recording differ, which effect of the library explains it, and how
+    far the gap shrinks once it is added (held-out data). Writes OUT/diagnosis.json and
+    OUT/report/ (gap maps before and after)."""
+    from analysis.dataset import DatasetError
+    from twin.diagnose import run_diagnosis
+
+    try:
+        s = load(scenario, overrides)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    if not (real_dir / "measurements.h5").is_file():
+        _fail(f"{real_dir}: no measurements.h5; expected a recording in the dataset format "
+              "(docs/dataset-format.md)")
+    out = out or real_dir / "diagnosis"
+    console.print(f"diagnosing {real_dir} against scenario [bold]{s.name}[/] "
+                  f"({seeds} twin seeds) -> {out}")
+    t0 = time.perf_counter()
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=False) as progress:
+        cb = _progress_callback(progress, {})
+        try:
+            res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
+                                cache=cache, on_progress=lambda d, n: cb("simulations", d, n))
+        except (DatasetError, ValueError) as exc:
+            progress.stop()
+            _fail(str(exc))
+    _print_diagnosis(res)
+    console.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'diagnosis.json'} and "
+                  f"{out / 'report' / 'index.html'}")
+
+
+@app.command("diagnose-benchmark")
+def diagnose_benchmark(
+    out: Path = typer.Option(Path("runs/diagnose-benchmark"), "-o", "--out"),
+    scenario: Path = typer.Option(SCENARIOS / "diagnose-bench.toml", "--scenario",
+                                  help="nominal scenario of the benchmark"),
+    per_cell: int = typer.Option(1, "--per-cell", min=1, help="cases per effect and magnitude"),
+    nulls: int = typer.Option(10, "--nulls", min=0),
+    open_set: int = typer.Option(5, "--open-set", min=0),
+    pairs: int = typer.Option(5, "--pairs", min=0),
+    rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
+    seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the spread"),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1),
+) -> None:
+    """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
+    nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
+    from twin.gap_benchmark import plan_cases, run_benchmark
+
+    try:
+        s = load(scenario)
+    except ScenarioError as exc:
+        _fail(str(exc))
+    cases = plan_cases(rng_seed, per_cell, nulls, open_set, pairs)
+    console.print(f"benchmark of the gap diagnosis: {len(cases)} cases on scenario "
+                  f"[bold]{s.name}[/] -> {out}")
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=False) as progress:
+        res = run_benchmark(out, s, cases, seeds=seeds, workers=workers,
+                            on_progress=_progress_callback(progress, {}))
+    table = Table(title=f"blind benchmark ({res['n_cases']} cases, {res['wall_time_s']['total']:.0f} s)")
+    for col in ("case", "injected", "magnitude", "verdict", "first ranked", "added", "held-out shrink", "correct"):
+        table.add_column(col)
+    for r in res["cases"]:
+        table.add_row(r["id"], "+".join(r["injected"]) or "-", r["magnitude"] or "-", r["verdict"],
+                      r["ranking"][0] if r["ranking"] else "-", "+".join(r["added"]) or "-",
+                      f"{100 * r['heldout_shrink']:.0f} %", "yes" if r["correct"] else "NO")
+    Console(width=max(130, Console().width)).print(table)
+    fmt = lambda v: "n/a" if v is None else f"{100 * v:.0f} %"  # noqa: E731
+    console.print(f"top-1 accuracy {fmt(res['top1_accuracy'])}, median held-out shrink "
+                  f"{fmt(res['median_heldout_shrink'])}, null cases correct "
+                  f"{fmt(res['null_correct_fraction'])}, open-set correct "
+                  f"{fmt(res['open_set_correct_fraction'])}, pairs both in top 3 "
+                  f"{fmt(res['pair_both_top3_fraction'])}; wrote {out / 'benchmark.json'}")
+# --- end of twin diagnose ----------------------------------------------------------------------
+
+
 # --- twin view (helper: view) ------------------------------------------------------------------
 @app.command()
 def view(

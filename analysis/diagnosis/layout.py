@@ -1,0 +1,89 @@
+"""Is a recording laid out as the scenario describes? The diagnosis compares statistic by
+statistic, so the recording must have the scenario's Phase I samples and captures, its Phase II
+sessions and runs, every channel, and the same sampling rates and motion speeds. A recording
+that differs is refused with every difference named (resampling would change the statistics
+the twin is judged on: spectra up to the Nyquist frequency, the sensors' anti-aliasing).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from analysis.dataset import DatasetError, open_measurements
+
+RATE_TOLERANCE = 1e-3  # relative
+
+
+class LayoutError(DatasetError):
+    """A recording that does not match the scenario; the message names every difference."""
+
+
+def _phase1_layout(m) -> tuple[dict, list[str]]:
+    out, problems = {}, []
+    for name in m.phase1_captures():
+        try:
+            c = m.phase1(name)
+        except DatasetError as e:
+            problems.append(str(e))
+            continue
+        out.setdefault(c.sample, []).append((name, c.fs_hz, len(c.speed)))
+    return out, problems
+
+
+def _phase2_layout(m) -> tuple[dict, list[str]]:
+    out, problems = {}, []
+    for s in m.phase2_sessions():
+        runs = []
+        for r in m.phase2_runs(s):
+            try:
+                run = m.phase2(s, r)
+            except DatasetError as e:
+                problems.append(str(e))
+                continue
+            runs.append((r, {"imu_acc": run.imu_acc_fs_hz, "imu_gyro": run.imu_gyro_fs_hz,
+                             "position_cmd": run.position_cmd_fs_hz}))
+        out[s] = runs
+    return out, problems
+
+
+def compare(real_path: str | Path, twin_path: str | Path) -> None:
+    """Raise :class:`LayoutError` unless ``real_path`` (the recording's measurements.h5) has the
+    layout of ``twin_path`` (the scenario simulated once)."""
+    problems: list[str] = []
+    with open_measurements(real_path) as real, open_measurements(twin_path) as twin:
+        r1, p = _phase1_layout(real)
+        problems += p
+        t1, _ = _phase1_layout(twin)
+        if len(r1) != len(t1):
+            problems.append(f"{real_path}: {len(r1)} Phase I sample(s); the scenario has {len(t1)}")
+        for (sr, caps_r), (st, caps_t) in zip(sorted(r1.items()), sorted(t1.items())):
+            if len(caps_r) != len(caps_t):
+                problems.append(f"{real_path}: Phase I sample {sr} has {len(caps_r)} capture(s); "
+                                f"the scenario has {len(caps_t)}")
+            for (name, fs, n), (_, fs_t, n_t) in zip(caps_r, caps_t):
+                if abs(fs - fs_t) > RATE_TOLERANCE * fs_t:
+                    problems.append(f"{real_path}: /phase1/{name} is sampled at {fs:g} Hz; the "
+                                    f"scenario's channels are at {fs_t:g} Hz (phase1.fs_hz)")
+                elif abs(n - n_t) > 0.01 * n_t:
+                    problems.append(f"{real_path}: /phase1/{name} has {n} samples "
+                                    f"({n / fs:g} s); the scenario's captures have {n_t} "
+                                    f"({n_t / fs_t:g} s, phase1.capture_s)")
+        r2, p = _phase2_layout(real)
+        problems += p
+        t2, _ = _phase2_layout(twin)
+        if len(r2) != len(t2):
+            problems.append(f"{real_path}: {len(r2)} Phase II session(s); the scenario has {len(t2)}")
+        for (sr, runs_r), (_, runs_t) in zip(r2.items(), t2.items()):
+            if len(runs_r) != len(runs_t):
+                problems.append(f"{real_path}: Phase II session {sr} has {len(runs_r)} run(s); "
+                                f"the scenario has {len(runs_t)}")
+            for (rn, rates), (_, rates_t) in zip(runs_r, runs_t):
+                for ch, fs in rates.items():
+                    if abs(fs - rates_t[ch]) > RATE_TOLERANCE * rates_t[ch]:
+                        problems.append(f"{real_path}: /phase2/{sr}/{rn}/{ch} is sampled at "
+                                        f"{fs:g} Hz; the scenario has {rates_t[ch]:g} Hz")
+    if problems:
+        shown = problems[:8] + ([f"... and {len(problems) - 8} more"] if len(problems) > 8 else [])
+        raise LayoutError("the recording does not match the scenario, so it cannot be compared "
+                          "statistic by statistic (fix the scenario, e.g. with --set, or the "
+                          "recording): " + "; ".join(shown))

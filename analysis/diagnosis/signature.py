@@ -1,0 +1,370 @@
+"""The signature of a recording: the statistics the sim-to-real gap is judged on.
+
+One vector of named statistics per part of a recording (``"cal"``: the even-numbered Phase I
+captures of each sample and Phase II runs of each session, used to fit; ``"heldout"``: the
+odd-numbered ones, used only to measure). The same function reads a real ``measurements.h5`` and
+a simulated one, so twin and machine are compared statistic by statistic.
+
+Each statistic belongs to a region: (domain, channel, family, bin) and the operating hours of the
+Phase I sample or Phase II session it comes from. Families:
+
+- ``band``: log10 of the power in a frequency band (Welch PSD; Phase I over the whole capture,
+  Phase II over the constant-velocity cruises at each speed), channel × band;
+- ``phase``: log10 RMS of the signal high-passed at 20 Hz (Phase I) or 2 Hz (Phase II) within one
+  operating phase: steady (cruise), transient (acceleration/deceleration), reversal (±20 ms
+  around a stop or start), dwell (standstill);
+- ``level``: mean |torque| in each Phase I operating phase (N·m), and the dwell mean of each IMU
+  channel (m/s², rad/s: gravity projection and bias);
+- ``feature``: the 46 Phase I features of the paper (section IV), per sample (line amplitudes
+  and band energies as log10);
+- ``position``: log10 RMS of each error motion (mean of forward and reverse, detrended) in four
+  segments of the stroke, per session;
+- ``lag``: log10 of the RMS over the sessions after the first of the shift (µm) of E_XX (the only
+  profile that repeats from session to session in a few runs: lead harmonics and ball pass,
+  band-passed to 2–40 mm) in each stroke segment against the first session, found by
+  cross-correlation; an origin that moves between sessions shifts every segment alike.
+
+Logs of powers and RMS values make the statistics closer to Gaussian from seed to seed, which the
+gap test (:mod:`analysis.diagnosis.gap`) assumes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal
+
+from analysis.dataset import DatasetError, Measurements, open_measurements
+from analysis.phase1.features import FEATURE_NAMES, sample_features, summarise_capture, transient_templates
+from analysis.phase2.error_motions import session_error_motions
+from analysis.phase2.imu_runs import segment_run
+from analysis.phase2.traces import DOFS
+
+PARTS = ("cal", "heldout")
+PHASE1_CHANNELS = ("speed", "torque", "acc1_x", "acc1_y", "acc1_z", "acc2_x", "acc2_y", "acc2_z")
+PHASE1_BANDS_HZ = (10, 30, 60, 100, 150, 200, 300, 400, 500, 700, 1000, 1500, 2000, 3000, 4500)
+PHASE2_CHANNELS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
+PHASE2_BANDS_HZ = (2, 5, 10, 20, 40, 80, 150, 250, 400, 700)
+OPERATING_PHASES = ("steady", "transient", "reversal", "dwell")
+POSITION_SEGMENTS = 4
+LAG_SEARCH_M = 7e-3  # largest shift between sessions searched for, m (origins within ±3 mm)
+SIGNATURE_VERSION = 2  # bump when a statistic changes: simulation caches are keyed on it
+LAG_DOFS = ("E_XX",)  # the only motion whose profile repeats between sessions of a few runs
+LAG_BAND_M = (2e-3, 40e-3)  # wavelengths correlated for the shift, m
+_TINY = 1e-30
+
+
+class SignatureError(DatasetError):
+    """A recording whose signature cannot be computed; the message names file, item and value."""
+
+
+@dataclass(frozen=True)
+class Region:
+    """Where a statistic lives. domain: "phase1" | "phase2"; channel: e.g. "torque", "acc_x",
+    "E_BX"; family: band | phase | level | feature | position | lag; bin: e.g. "300-400 Hz",
+    "steady", "50-125 mm"; hours: operating hours of its sample/session (NaN: all sessions)."""
+
+    domain: str
+    channel: str
+    family: str
+    bin: str
+    hours: float = float("nan")
+
+    @property
+    def key(self) -> tuple[str, str, str, str]:
+        """The region without its hours: the unit the gap maps and the localisation report."""
+        return (self.domain, self.channel, self.family, self.bin)
+
+    @property
+    def pool_key(self) -> tuple[str, ...]:
+        """The statistics whose seed-to-seed variances are pooled: the same region at every
+        hour; for the between-session shifts, every stroke segment too (one statistic per
+        segment and none per hour, so that the variance has more than K − 1 degrees of freedom)."""
+        return self.key[:3] if self.family == "lag" else self.key
+
+    def label(self) -> str:
+        return f"{self.domain} {self.channel} {self.family} {self.bin}"
+
+
+@dataclass
+class Signature:
+    """values (n,) statistics of one part of a recording; regions (n,) where each lives."""
+
+    values: np.ndarray
+    regions: list[Region] = field(default_factory=list)
+
+    def names(self) -> list[str]:
+        return [f"{r.label()} @{r.hours:g} h" for r in self.regions]
+
+
+class _Builder:
+    def __init__(self) -> None:
+        self.values: list[float] = []
+        self.regions: list[Region] = []
+
+    def add(self, value: float, region: Region) -> None:
+        self.values.append(float(value))
+        self.regions.append(region)
+
+    def build(self) -> Signature:
+        return Signature(np.asarray(self.values, dtype=float), self.regions)
+
+
+def _part_of(names: list[str], part: str) -> list[str]:
+    """Even-indexed names for "cal", odd for "heldout"."""
+    if part not in PARTS:
+        raise ValueError(f"part is {part!r}; expected one of {PARTS}")
+    return names[0::2] if part == "cal" else names[1::2]
+
+
+def _band_labels(edges) -> list[str]:
+    return [f"{a:g}-{b:g} Hz" for a, b in zip(edges[:-1], edges[1:])]
+
+
+def _band_powers(x: np.ndarray, fs: float, edges, nperseg: int) -> np.ndarray:
+    """log10 power (unit²) in each band of ``edges`` Hz of the columns of x (n, c) → (c, nb)."""
+    nper = min(nperseg, x.shape[0])
+    f, p = signal.welch(x, fs=fs, nperseg=nper, axis=0, detrend="constant")
+    df = f[1] - f[0]
+    out = np.empty((x.shape[1], len(edges) - 1))
+    for i, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        sel = (f >= a) & (f < b)
+        out[:, i] = np.log10(p[sel].sum(axis=0) * df + _TINY) if sel.any() else np.nan
+    return out
+
+
+def _highpass(x: np.ndarray, fs: float, fc: float) -> np.ndarray:
+    sos = signal.butter(4, fc, "highpass", fs=fs, output="sos")
+    return signal.sosfiltfilt(sos, x, axis=0)
+
+
+def _phase_masks(moving: np.ndarray, steady: np.ndarray, fs: float, window_s: float = 0.02
+                 ) -> dict[str, np.ndarray]:
+    """Boolean (n,) masks of the four operating phases from moving/steady masks."""
+    edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
+    reversal = np.zeros_like(moving)
+    w = max(1, int(round(window_s * fs)))
+    for e in edges:
+        reversal[max(0, e - w):e + w + 1] = True
+    return {"steady": steady & ~reversal, "transient": moving & ~steady & ~reversal,
+            "reversal": reversal, "dwell": ~moving & ~reversal}
+
+
+def _log_rms(x: np.ndarray) -> np.ndarray:
+    return np.log10(np.sqrt(np.mean(x ** 2, axis=0)) + 1e-15)
+
+
+# ---------------------------------------------------------------------------------------------
+# Phase I
+
+
+def _phase1_capture_stats(c) -> np.ndarray:
+    """(n_stats,) statistics of one capture in the order of :func:`_phase1_regions`."""
+    fs = float(c.fs_hz)
+    x = np.column_stack([c.speed, c.torque, c.acc1, c.acc2])  # (n, 8)
+    bands = _band_powers(x, fs, PHASE1_BANDS_HZ, int(round(0.1 * fs)))
+    plateau = float(np.percentile(np.abs(c.speed), 99))
+    moving = np.abs(c.speed) > 0.02 * plateau
+    steady = np.abs(c.speed) >= 0.98 * plateau
+    masks = _phase_masks(moving, steady, fs)
+    hp = _highpass(x, fs, 20.0)
+    phase = np.full((8, len(OPERATING_PHASES)), np.nan)
+    level = np.full(len(OPERATING_PHASES), np.nan)
+    for j, name in enumerate(OPERATING_PHASES):
+        m = masks[name]
+        if m.sum() >= 8:
+            phase[:, j] = _log_rms(hp[m])
+            level[j] = float(np.mean(np.abs(c.torque[m])))
+    return np.concatenate([bands.ravel(), phase.ravel(), level])
+
+
+def _phase1_regions(hours: float) -> list[Region]:
+    out = [Region("phase1", ch, "band", b, hours) for ch in PHASE1_CHANNELS
+           for b in _band_labels(PHASE1_BANDS_HZ)]
+    out += [Region("phase1", ch, "phase", ph, hours) for ch in PHASE1_CHANNELS for ph in OPERATING_PHASES]
+    out += [Region("phase1", "torque", "level", ph, hours) for ph in OPERATING_PHASES]
+    return out
+
+
+def _phase1(m: Measurements, part: str, b: _Builder) -> None:
+    names = m.phase1_captures()
+    if not names:
+        return
+    by_sample: dict[int, list] = {}
+    for n in names:
+        c = m.phase1(n)
+        by_sample.setdefault(c.sample, []).append(c)
+    templates = None
+    for sample in sorted(by_sample):
+        caps = _part_of(by_sample[sample], part)
+        if not caps:
+            raise SignatureError(
+                f"{m.label}: Phase I sample {sample} has {len(by_sample[sample])} capture(s); the "
+                "diagnosis needs at least 2 per sample (even ones to fit, odd ones held out)")
+        hours = float(np.mean([c.hours for c in caps]))
+        stats = np.nanmean([_phase1_capture_stats(c) for c in caps], axis=0)
+        for v, r in zip(stats, _phase1_regions(hours)):
+            b.add(v, r)
+        summaries = [summarise_capture(c, m.label) for c in caps]
+        if templates is None:
+            templates = transient_templates(summaries)
+        feats = sample_features(summaries, templates)
+        for name, v in zip(FEATURE_NAMES, feats):
+            # Line amplitudes and band energies are positive and skewed: log10 makes them
+            # closer to Gaussian from seed to seed.
+            if name.startswith(("amp", "band")):
+                v = np.log10(v + 1e-15)
+            b.add(v, Region("phase1", "features", "feature", name, hours))
+
+
+# ---------------------------------------------------------------------------------------------
+# Phase II
+
+
+def _phase2_run_stats(run) -> tuple[dict, np.ndarray]:
+    """Band powers per speed {speed_mm_s: (6, nb)} (acc x y z, gyro x y z) and the (6·4 + 6,)
+    phase statistics (log RMS per channel and phase, then the dwell mean per channel)."""
+    seg = segment_run(run.position_cmd, run.position_cmd_fs_hz)
+    pos_t = np.arange(run.position_cmd.size) / run.position_cmd_fs_hz
+    v = np.gradient(run.position_cmd, pos_t)
+    bands: list[dict[float, np.ndarray]] = []
+    phase_stats, levels = [], []
+    for arr, fs in ((run.imu_acc, run.imu_acc_fs_hz), (run.imu_gyro, run.imu_gyro_fs_hz)):
+        t = np.arange(arr.shape[0]) / fs
+        cruise = np.zeros(t.size, bool)
+        per_speed: dict[float, list[np.ndarray]] = {}
+        for mo in seg.motions:
+            sel = (t >= mo.t0_s + 0.1) & (t <= mo.t1_s - 0.005)
+            cruise |= sel
+            if sel.sum() >= 64:
+                per_speed.setdefault(round(mo.speed_m_s * 1e3, 1), []).append(
+                    _band_powers(arr[sel], fs, PHASE2_BANDS_HZ, 256))
+        bands.append({k: np.mean(p, axis=0) for k, p in per_speed.items()})
+        moving = np.interp(t, pos_t, (np.abs(v) > 1e-9).astype(float)) > 0.5
+        still = np.zeros(t.size, bool)
+        for t0, t1 in seg.still:
+            still |= (t >= t0) & (t <= t1)
+        masks = _phase_masks(moving, cruise, fs)
+        masks["dwell"] &= still
+        hp = _highpass(arr, fs, 2.0)
+        for name in OPERATING_PHASES:
+            mk = masks[name]
+            phase_stats.append(_log_rms(hp[mk]) if mk.sum() >= 8 else np.full(3, np.nan))
+        levels.append(arr[still].mean(axis=0) if still.any() else np.full(3, np.nan))
+    speeds = sorted(set(bands[0]) & set(bands[1]))
+    by_speed = {sp: np.vstack([bands[0][sp], bands[1][sp]]) for sp in speeds}
+    # phase_stats: acc (steady, transient, reversal, dwell), then gyro, each (3,) over x y z
+    ph = np.stack(phase_stats).reshape(2, len(OPERATING_PHASES), 3).transpose(0, 2, 1).reshape(6, -1)
+    return by_speed, np.concatenate([ph.ravel(), np.concatenate(levels)])
+
+
+def _segments(x: np.ndarray, margin: float) -> list[tuple[float, float]]:
+    lo, hi = x[0] + margin, x[-1] - margin
+    edges = np.linspace(lo, hi, POSITION_SEGMENTS + 1)
+    return list(zip(edges[:-1], edges[1:]))
+
+
+def _profile(em) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of forward and reverse of the combined error motions: x (n,) m, (6, n)."""
+    c = em.combined
+    return c.x_m, 0.5 * (c.forward + c.reverse)
+
+
+def _bandpass_profile(x: np.ndarray, prof: np.ndarray) -> np.ndarray:
+    """The profiles (6, n) band-passed to the wavelengths LAG_BAND_M (zero phase)."""
+    fs = 1.0 / (x[1] - x[0])
+    sos = signal.butter(4, [1.0 / LAG_BAND_M[1], 1.0 / LAG_BAND_M[0]], "bandpass", fs=fs, output="sos")
+    return signal.sosfiltfilt(sos, prof, axis=1)
+
+
+def _lag(ref_x: np.ndarray, ref: np.ndarray, x: np.ndarray, y: np.ndarray, lo: float, hi: float) -> float:
+    """Shift d (m) such that y(u) ≈ ref(u + d) on [lo, hi]: cross-correlation peak with a
+    parabolic sub-sample refinement. Both on the same uniform grid step."""
+    dx = ref_x[1] - ref_x[0]
+    sel = (x >= lo) & (x < hi)
+    seg = y[sel] - y[sel].mean()
+    n_lag = int(round(LAG_SEARCH_M / dx))
+    i0 = int(round((x[sel][0] - ref_x[0]) / dx))
+    a, bnd = i0 - n_lag, i0 + seg.size + n_lag
+    if a < 0 or bnd > ref.size:
+        return np.nan
+    win = ref[a:bnd] - ref[a:bnd].mean()
+    cc = signal.correlate(win, seg, mode="valid")  # (2·n_lag + 1,)
+    k = int(np.argmax(cc))
+    frac = 0.0
+    if 0 < k < cc.size - 1:
+        c0, c1, c2 = cc[k - 1], cc[k], cc[k + 1]
+        den = c0 - 2 * c1 + c2
+        frac = 0.5 * (c0 - c2) / den if den != 0 else 0.0
+    return float((k - n_lag + frac) * dx)
+
+
+def _phase2(m: Measurements, part: str, b: _Builder) -> None:
+    sessions = m.phase2_sessions()
+    if not sessions:
+        return
+    profiles = []
+    for s in sessions:
+        runs = _part_of(m.phase2_runs(s), part)
+        if not runs:
+            raise SignatureError(
+                f"{m.label}: Phase II session {s} has {len(m.phase2_runs(s))} run(s); the "
+                "diagnosis needs at least 2 per session (even ones to fit, odd ones held out)")
+        hours = m.session_hours(s)
+        stats = [_phase2_run_stats(m.phase2(s, r)) for r in runs]
+        speeds = sorted(stats[0][0])
+        for sp in speeds:
+            p = np.mean([st[0][sp] for st in stats if sp in st[0]], axis=0)  # (6, nb)
+            for ci, ch in enumerate(PHASE2_CHANNELS):
+                for bi, lab in enumerate(_band_labels(PHASE2_BANDS_HZ)):
+                    b.add(p[ci, bi], Region("phase2", ch, "band", f"{lab} @{sp:g} mm/s", hours))
+        rest = np.nanmean([st[1] for st in stats], axis=0)
+        k = 0
+        for ch in PHASE2_CHANNELS:
+            for ph in OPERATING_PHASES:
+                b.add(rest[k], Region("phase2", ch, "phase", ph, hours))
+                k += 1
+        for ch in PHASE2_CHANNELS:
+            b.add(rest[k], Region("phase2", ch, "level", "dwell mean", hours))
+            k += 1
+        # The fine `slow` layer (10 µm grid) is not used here: computed on the coarse grid.
+        em = session_error_motions(m, s, runs=runs, slow_dx_m=0.5e-3)
+        x, prof = _profile(em)
+        profiles.append((x, _bandpass_profile(x, prof)))
+        for lo, hi in _segments(x, LAG_SEARCH_M):
+            sel = (x >= lo) & (x < hi)
+            lab = f"{lo * 1e3:.0f}-{hi * 1e3:.0f} mm"
+            for j, dof in enumerate(DOFS):
+                seg = signal.detrend(prof[j, sel])
+                b.add(np.log10(np.sqrt(np.mean(seg ** 2)) + 1e-15),
+                      Region("phase2", dof, "position", lab, hours))
+    if len(profiles) < 2:
+        return
+    ref_x, ref = profiles[0]
+    segs = _segments(ref_x, LAG_SEARCH_M + 4e-3)
+    lags = np.full((len(profiles) - 1, len(segs), len(LAG_DOFS)), np.nan)
+    for i, (x, prof) in enumerate(profiles[1:]):
+        for k, (lo, hi) in enumerate(segs):
+            for j, dof in enumerate(LAG_DOFS):
+                r = DOFS.index(dof)
+                lags[i, k, j] = _lag(ref_x, ref[r], x, prof[r], lo, hi)
+    rms = np.sqrt(np.nanmean(lags ** 2, axis=0))
+    for k, (lo, hi) in enumerate(segs):
+        for j, dof in enumerate(LAG_DOFS):
+            # log10 of the RMS shift in µm plus 10 µm (about the shift's scatter in a few runs)
+            b.add(np.log10(rms[k, j] * 1e6 + 10.0),
+                  Region("phase2", dof, "lag", f"{lo * 1e3:.0f}-{hi * 1e3:.0f} mm"))
+
+
+def signature(path, part: str) -> Signature:
+    """The signature of one part ("cal" or "heldout") of the recording ``path`` (a
+    ``measurements.h5``). Raises :class:`SignatureError` / :class:`analysis.dataset.DatasetError`
+    naming the file and item when the recording cannot be used."""
+    b = _Builder()
+    with open_measurements(path) as m:
+        _phase1(m, part, b)
+        _phase2(m, part, b)
+    if not b.values:
+        raise SignatureError(f"{path}: no Phase I capture and no Phase II session; expected at least one")
+    return b.build()

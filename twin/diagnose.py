@@ -1,0 +1,298 @@
+"""Sim-to-real gap diagnosis: simulate what the diagnosis needs and hand the signatures to
+:mod:`analysis.diagnosis`.
+
+For a recording and the scenario meant to describe it, :func:`run_diagnosis`
+
+1. simulates the scenario once and refuses a recording whose layout differs (captures per
+   sample, sessions, runs, channels, sampling rates: :mod:`analysis.diagnosis.layout`);
+2. simulates the scenario with ``seeds`` seeds (the twin's spread);
+3. simulates each candidate effect of the library on its parameter grid with the first of those
+   seeds (common random numbers: its response is the difference to that seed's nominal run);
+4. computes the signature (both parts) of every simulation and of the recording, and runs
+   :func:`analysis.diagnosis.attribution.diagnose`;
+5. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
+
+Every simulation is a campaign of the scenario (``twin.campaign.simulate_campaign``, whose
+Phase II rollouts are ``mujoco.rollout`` calls), cached by the hash of its scenario under
+``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
+the blind benchmark, reuses them. Simulations run in parallel on ``workers`` processes, each
+with one BLAS thread; results do not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from analysis.diagnosis import attribution, layout
+from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
+from analysis.diagnosis.report import write_diagnosis_report
+from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, signature
+from twin.campaign import simulate_campaign
+from twin.effects import LIBRARY, Effect
+from twin.scenario import Scenario, from_dict
+
+DEFAULT_SEEDS = 8
+SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
+
+
+def twin_seeds(s: Scenario, k: int) -> list[int]:
+    """The k seeds of the twin's spread (distinct from the scenario's own seed)."""
+    return [(s.seed + SEED_STRIDE * (i + 1)) % 2**32 for i in range(k)]
+
+
+def with_seed(s: Scenario, seed: int) -> Scenario:
+    data = s.model_dump(mode="json")
+    data["seed"] = int(seed)
+    return from_dict(data)
+
+
+def with_effects(s: Scenario, effects: dict[str, dict[str, float]]) -> Scenario:
+    """The scenario with the library's effects {name: {param: value}} added."""
+    for name, values in effects.items():
+        if name not in LIBRARY:
+            raise ValueError(f"unknown effect {name!r}; the library has {', '.join(LIBRARY)}")
+        s = LIBRARY[name].apply(s, values)
+    return s
+
+
+# ---------------------------------------------------------------------------------------------
+# Cached evaluation of one scenario
+
+
+def _key(s: Scenario) -> str:
+    """Cache key: the scenario and the version of the statistics."""
+    return hashlib.sha256(f"{SIGNATURE_VERSION}:{s.to_json()}".encode()).hexdigest()[:20]
+
+
+def _regions_json(regions: list[Region]) -> str:
+    return json.dumps([[r.domain, r.channel, r.family, r.bin, r.hours] for r in regions])
+
+
+def _regions_from(text: str) -> list[Region]:
+    return [Region(d, c, f, b, float(h) if h is not None else float("nan"))
+            for d, c, f, b, h in json.loads(text)]
+
+
+def evaluate(scenario_json: str, cache_dir: str, keep: bool = False) -> str:
+    """Simulate the scenario (if not cached) and store the signatures of both parts; returns
+    the path of ``signature.npz`` (``cal``, ``heldout``: (n,) values; ``regions``: JSON)."""
+    from threadpoolctl import threadpool_limits
+
+    s = from_dict(json.loads(scenario_json))
+    d = Path(cache_dir) / _key(s)
+    out = d / "signature.npz"
+    if out.exists():
+        return str(out)
+    d.mkdir(parents=True, exist_ok=True)
+    with threadpool_limits(1):
+        simulate_campaign(s, d / "campaign", workers=1)
+        sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
+    fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz")
+    os.close(fd)
+    np.savez(tmp, cal=sigs["cal"].values, heldout=sigs["heldout"].values,
+             regions=np.array(_regions_json(sigs["cal"].regions)))
+    os.replace(tmp, out)
+    (d / "scenario.json").write_text(scenario_json)
+    if not keep:
+        shutil.rmtree(d / "campaign", ignore_errors=True)
+    return str(out)
+
+
+def load_signatures(path: str) -> dict[str, Signature]:
+    with np.load(path) as z:
+        regions = _regions_from(str(z["regions"]))
+        return {p: Signature(z[p].copy(), regions) for p in PARTS}
+
+
+def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
+                 on_progress: Callable[[int, int], None] | None = None,
+                 keep: bool = False) -> list[dict[str, Signature]]:
+    """Signatures of every scenario (cached), in order, on ``workers`` processes."""
+    payloads = [s.to_json() for s in scenarios]
+    paths: list[str | None] = [None] * len(payloads)
+    todo = []
+    for i, p in enumerate(payloads):
+        f = Path(cache_dir) / _key(scenarios[i]) / "signature.npz"
+        if f.exists():
+            paths[i] = str(f)
+        else:
+            todo.append(i)
+    done = len(payloads) - len(todo)
+    if on_progress:
+        on_progress(done, len(payloads))
+    # Identical scenarios in one call are simulated once.
+    unique: dict[str, list[int]] = {}
+    for i in todo:
+        unique.setdefault(payloads[i], []).append(i)
+    if workers <= 1 or len(unique) <= 1:
+        for payload, idx in unique.items():
+            path = evaluate(payload, str(cache_dir), keep)
+            for i in idx:
+                paths[i] = path
+            done += len(idx)
+            if on_progress:
+                on_progress(done, len(payloads))
+    else:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+            futures = {pool.submit(evaluate, payload, str(cache_dir), keep): idx
+                       for payload, idx in unique.items()}
+            from concurrent.futures import as_completed
+            for fut in as_completed(futures):
+                path = fut.result()
+                for i in futures[fut]:
+                    paths[i] = path
+                done += len(futures[fut])
+                if on_progress:
+                    on_progress(done, len(payloads))
+    return [load_signatures(p) for p in paths]  # type: ignore[arg-type]
+
+
+# ---------------------------------------------------------------------------------------------
+# Candidate grids
+
+
+@dataclass(frozen=True)
+class GridPoint:
+    effect: str
+    index: tuple[int, ...]
+    values: dict[str, float]
+
+
+def grid_points(effect: Effect) -> list[GridPoint]:
+    """Every point of the effect's parameter grid (the product of its parameters' grids)."""
+    axes = [p.grid for p in effect.params]
+    out = []
+    for index in np.ndindex(*[len(a) for a in axes]):
+        out.append(GridPoint(effect.name, tuple(int(i) for i in index),
+                             {p.name: float(p.grid[i]) for p, i in zip(effect.params, index)}))
+    return out
+
+
+def candidate_scenarios(nominal: Scenario, library: list[str]
+                        ) -> tuple[list[Scenario], list[tuple[GridPoint, int | None]]]:
+    """The scenarios to simulate for the candidates' responses: one per grid point where the
+    effect is present. Returns (scenarios, [(grid point, index into scenarios or None if the
+    point is the nominal twin)])."""
+    scen: list[Scenario] = []
+    points: list[tuple[GridPoint, int | None]] = []
+    for name in library:
+        eff = LIBRARY[name]
+        for gp in grid_points(eff):
+            if eff.is_off(gp.values):
+                points.append((gp, None))
+            else:
+                points.append((gp, len(scen)))
+                scen.append(eff.apply(nominal, gp.values))
+    return scen, points
+
+
+def responses(library: list[str], points, grid_sigs: list[dict[str, Signature]],
+              nominal: dict[str, Signature]) -> list[CandidateResponse]:
+    """The candidates' response arrays (grid shape + (n,)) from the simulated signatures."""
+    out = []
+    for name in library:
+        eff = LIBRARY[name]
+        shape = tuple(len(p.grid) for p in eff.params)
+        n = nominal["cal"].values.size
+        delta = {p: np.zeros(shape + (n,)) for p in PARTS}
+        for gp, i in points:
+            if gp.effect != name or i is None:
+                continue
+            for p in PARTS:
+                delta[p][gp.index] = grid_sigs[i][p].values - nominal[p].values
+        axes = [ParamAxis(p.name, tuple(p.grid), p.discrete) for p in eff.params]
+        out.append(CandidateResponse(name, axes, delta))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The diagnosis
+
+
+@dataclass
+class TwinEnsemble:
+    """What the diagnosis simulated for one nominal scenario: the seeds' signatures and the
+    candidates' responses (reusable for every recording of that scenario)."""
+
+    nominal: Scenario
+    seeds: list[int]
+    twin: dict[str, list[Signature]]
+    candidates: list[CandidateResponse]
+
+
+def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
+                   workers: int | None = None, library: list[str] | None = None,
+                   on_progress: Callable[[int, int], None] | None = None) -> TwinEnsemble:
+    """Simulate the twin's spread and the candidates' responses (cached)."""
+    library = list(LIBRARY) if library is None else list(library)
+    workers = workers or os.cpu_count() or 1
+    seed_list = twin_seeds(nominal, seeds)
+    seeded = [with_seed(nominal, sd) for sd in seed_list]
+    cand_scen, points = candidate_scenarios(seeded[0], library)
+    sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress)
+    twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
+    cands = responses(library, points, sigs[len(seeded):], sigs[0])
+    return TwinEnsemble(nominal, seed_list, twin, cands)
+
+
+def check_layout(real_dir: Path, nominal: Scenario, cache: Path) -> None:
+    """Refuse a recording whose layout differs from the scenario's (raises
+    :class:`analysis.diagnosis.layout.LayoutError` naming every difference)."""
+    s0 = with_seed(nominal, twin_seeds(nominal, 1)[0])
+    d = Path(cache) / "layout" / _key(s0)
+    if not (d / "measurements.h5").exists():
+        simulate_campaign(s0, d, workers=1)
+    layout.compare(Path(real_dir) / "measurements.h5", d / "measurements.h5")
+
+
+def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
+                        library: list[str] | None = None, alpha: float = 0.01
+                        ) -> tuple[dict, dict[str, np.ndarray]]:
+    """The diagnosis of a recording's signatures against an ensemble; ``library`` restricts
+    the candidates (the blind benchmark's open-set cases)."""
+    cands = [c for c in ens.candidates if library is None or c.name in library]
+    return attribution.diagnose(real, ens.twin, cands, alpha=alpha)
+
+
+def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,
+                  workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
+                  library: list[str] | None = None, plots: bool = True,
+                  on_progress: Callable[[int, int], None] | None = None) -> dict:
+    """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
+    (and OUT/report/ with ``plots``) and returns its content."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Path(cache) if cache else out / "cache"
+    check_layout(real_dir, nominal, cache)
+    real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
+    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress)
+    result, delta = diagnose_signatures(real, ens, library, alpha)
+    result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
+              "library": {c.name: {"title": LIBRARY[c.name].title, "source": LIBRARY[c.name].source,
+                                   "params": {p.name: {"low": p.low, "high": p.high}
+                                              for p in LIBRARY[c.name].params}}
+                          for c in ens.candidates},
+              **result}
+    (out / "diagnosis.json").write_text(json.dumps(result, indent=1, default=_json_default))
+    if plots:
+        write_diagnosis_report(out / "report", result, real, ens.twin, delta)
+    return result
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    raise TypeError(type(o).__name__)

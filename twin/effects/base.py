@@ -1,0 +1,127 @@
+"""What an effect of the library is: named physical parameters with prior ranges, each mapped to
+scenario keys, and the grid on which the diagnosis simulates its response.
+
+An effect is absent when all its parameters are at their ``off`` value; :meth:`Effect.apply`
+returns the scenario with the effect added (``add``: the value is added to the scenario's own,
+``scale``: multiplies it, ``set``: replaces it; ``index`` picks an element of a list key).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from twin.scenario import Scenario, from_dict
+
+
+@dataclass(frozen=True)
+class Param:
+    """One physical parameter of an effect.
+
+    name: with its unit (``rise_K``); keys: the scenario keys it sets (dotted, optional
+    ``[i]``); mode: add | scale | set; low, high: prior range of a present effect (the blind
+    benchmark draws from it); grid: values simulated for the fit (ascending; includes ``off``
+    where the effect can be absent); off: the value that leaves the scenario unchanged (None:
+    none, e.g. a cogging order); discrete: no interpolation between grid values; log: draw
+    log-uniformly in the benchmark."""
+
+    name: str
+    keys: tuple[str, ...]
+    mode: Literal["add", "scale", "set"]
+    low: float
+    high: float
+    grid: tuple[float, ...]
+    off: float | None = 0.0
+    discrete: bool = False
+    log: bool = False
+
+
+@dataclass(frozen=True)
+class Effect:
+    """An unmodelled effect: name, one-line title, parameters, and scenario keys set whenever
+    the effect is present (``fixed``, e.g. a material constant). ``source``: the physical source
+    (the module docstring has the details); amplitude: the parameter whose off value removes
+    the effect whatever the others are (e.g. a cogging torque of zero, whatever its order)."""
+
+    name: str
+    title: str
+    params: tuple[Param, ...]
+    source: str
+    fixed: dict[str, Any] = field(default_factory=dict)
+    amplitude: str | None = None
+
+    def is_off(self, values: dict[str, float]) -> bool:
+        """Absent: its ``amplitude`` parameter at its off value, or (no amplitude parameter)
+        every parameter at its off value."""
+        if self.amplitude is not None:
+            p = next(p for p in self.params if p.name == self.amplitude)
+            return values[p.name] == p.off
+        return all(p.off is not None and values[p.name] == p.off for p in self.params)
+
+    def apply(self, s: Scenario, values: dict[str, float]) -> Scenario:
+        """The scenario ``s`` with this effect at ``values`` {param name: value}."""
+        unknown = set(values) - {p.name for p in self.params}
+        if unknown:
+            raise ValueError(f"effect {self.name}: unknown parameter(s) {sorted(unknown)}; "
+                             f"allowed {[p.name for p in self.params]}")
+        data = copy.deepcopy(s.model_dump(mode="json"))
+        if self.is_off({p.name: values.get(p.name, p.off) for p in self.params}):
+            return s
+        for key, v in self.fixed.items():
+            _set(data, key, v)
+        for p in self.params:
+            v = values.get(p.name, p.off)
+            for key in p.keys:
+                cur = _get(data, key)
+                new = {"add": lambda: cur + v, "scale": lambda: cur * v, "set": lambda: v}[p.mode]()
+                _set(data, key, int(new) if isinstance(cur, int) and not isinstance(cur, bool)
+                     and float(new).is_integer() else new)
+        return from_dict(data, source=f"scenario with effect {self.name}")
+
+    def draw(self, rng: np.random.Generator, magnitude: str) -> dict[str, float]:
+        """Random values inside the prior range: ``magnitude`` "low" draws in the lower half of
+        each continuous range, "high" in the upper half (log halves for log parameters)."""
+        out = {}
+        for p in self.params:
+            if p.discrete:
+                choices = [v for v in p.grid if v != p.off]
+                out[p.name] = float(rng.choice(choices))
+                continue
+            lo, hi = (math.log(p.low), math.log(p.high)) if p.log else (p.low, p.high)
+            mid = 0.5 * (lo + hi)
+            a, b = (lo, mid) if magnitude == "low" else (mid, hi)
+            v = rng.uniform(a, b)
+            v = math.exp(v) if p.log else v
+            out[p.name] = float(v)
+        return out
+
+
+def _split(key: str) -> tuple[list[str], int | None]:
+    idx = None
+    if key.endswith("]"):
+        key, _, i = key[:-1].partition("[")
+        idx = int(i)
+    return key.split("."), idx
+
+
+def _get(data: dict, key: str) -> Any:
+    parts, idx = _split(key)
+    node: Any = data
+    for p in parts:
+        node = node[p]
+    return node[idx] if idx is not None else node
+
+
+def _set(data: dict, key: str, value: Any) -> None:
+    parts, idx = _split(key)
+    node: Any = data
+    for p in parts[:-1]:
+        node = node.setdefault(p, {})
+    if idx is not None:
+        node[parts[-1]][idx] = value
+    else:
+        node[parts[-1]] = value

@@ -1,0 +1,186 @@
+"""The blind benchmark of the gap diagnosis: "real" recordings made by the twin with an effect
+(or none) the diagnosis is not told about, diagnosed against the nominal scenario, and scored.
+
+Cases (:func:`plan_cases`, every draw from ``rng_seed``):
+
+- ``single``: each effect of the library at two magnitudes: parameter values drawn uniformly in
+  the lower ("low") or upper ("high") half of the effect's prior range (log-uniformly for
+  log-scaled parameters; discrete ones uniformly among their grid values), ``per_cell`` cases
+  per effect and magnitude;
+- ``null``: the nominal twin with another seed;
+- ``open_set``: an effect removed from the diagnosis's library for that case;
+- ``pair``: two effects at once.
+
+Every case has its own seed (10 000 + case number), different from the twin's seeds. The
+diagnosis sees only the signatures computed from each recording's ``measurements.h5``; the
+benchmark alone knows what was injected (the case plan, also stored in the recording's
+``truth.h5`` scenario) and scores:
+
+- ``top1_accuracy``: single cases whose first added effect (the first-ranked candidate, with a
+  significant held-out gain) is the injected one;
+- ``median_heldout_shrink``: median over single cases of 1 − G_after/G_before on held-out data;
+- ``null_correct_fraction``: null cases with verdict "no significant gap";
+- ``open_set_correct_fraction``: open-set cases that report an unexplained gap and add no effect
+  reducing the held-out gap by ``HIGH_SCORE`` or more;
+- ``pair_both_top3_fraction``: pair cases with both effects among the first three of the ranking.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
+from analysis.diagnosis.signature import PARTS
+from twin.diagnose import (DEFAULT_SEEDS, build_ensemble, diagnose_signatures, evaluate_all,
+                           with_effects, with_seed)
+from twin.effects import LIBRARY
+from twin.scenario import Scenario
+
+HIGH_SCORE = 0.5  # an added wrong effect removing this much of the gap counts as a wrong answer
+CASE_SEED0 = 10_000
+
+
+@dataclass
+class Case:
+    """One benchmark case: id, kind (single | null | open_set | pair), injected effects
+    {name: {param: value}}, magnitude (single cases), seed, and the library the diagnosis may
+    use."""
+
+    id: str
+    kind: str
+    effects: dict[str, dict[str, float]]
+    magnitude: str
+    seed: int
+    library: list[str]
+
+
+def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_set: int = 5,
+               pairs: int = 5, library: list[str] | None = None) -> list[Case]:
+    """The benchmark's cases (deterministic in ``rng_seed``)."""
+    lib = list(LIBRARY) if library is None else list(library)
+    rng = np.random.default_rng(rng_seed)
+    cases: list[Case] = []
+
+    def add(kind, effects, magnitude="", library=lib):
+        n = len(cases)
+        cases.append(Case(f"{kind}-{n:03d}", kind, effects, magnitude, CASE_SEED0 + n, list(library)))
+
+    for name in lib:
+        for mag in ("low", "high"):
+            for _ in range(per_cell):
+                add("single", {name: LIBRARY[name].draw(rng, mag)}, mag)
+    for _ in range(nulls):
+        add("null", {})
+    for name in rng.permutation(lib)[:open_set]:
+        mag = str(rng.choice(["low", "high"]))
+        add("open_set", {str(name): LIBRARY[str(name)].draw(rng, mag)}, mag,
+            [n for n in lib if n != name])
+    for _ in range(pairs):
+        a, b = (str(n) for n in rng.choice(lib, 2, replace=False))
+        add("pair", {a: LIBRARY[a].draw(rng, "high"), b: LIBRARY[b].draw(rng, "high")}, "high")
+    return cases
+
+
+def _score_case(case: Case, res: dict) -> dict:
+    ranking = [r["effect"] for r in res["ranking"]]
+    added = res["added"]
+    top = next((r for r in res["regions"] if r["significant"]), None)
+    row = {"id": case.id, "kind": case.kind, "injected": sorted(case.effects),
+           "values": case.effects, "magnitude": case.magnitude, "seed": case.seed,
+           "verdict": res["verdict"], "ranking": ranking[:3],
+           "added": [a["effect"] for a in added],
+           "fitted": {a["effect"]: a["params"] for a in added},
+           "heldout_gap_before": res["heldout_gap_before"],
+           "heldout_gap_after": res["heldout_gap_after"],
+           "heldout_shrink": res["heldout_shrink"],
+           "n_significant": res["n_significant_calibration"],
+           "top_region": ([top["domain"], top["channel"], top["family"], top["bin"]] if top else None)}
+    if case.kind == "single":
+        row["correct"] = bool(added and added[0]["effect"] == next(iter(case.effects)))
+    elif case.kind == "null":
+        row["correct"] = res["verdict"] == NO_GAP
+    elif case.kind == "open_set":
+        row["correct"] = (res["verdict"] == UNEXPLAINED
+                          and not any(a["heldout_reduction"] >= HIGH_SCORE for a in added))
+    else:
+        row["correct"] = bool(res["verdict"] != NO_GAP and set(case.effects) <= set(ranking[:3]))
+    return row
+
+
+def _fit_errors(singles: list[dict]) -> dict[str, float]:
+    """Median |fitted − injected| / |injected| of each continuous parameter over the single
+    cases where the injected effect was added first."""
+    errs: dict[str, list[float]] = {}
+    for r in singles:
+        name = r["injected"][0]
+        if not r["correct"]:
+            continue
+        for p in LIBRARY[name].params:
+            if p.discrete:
+                continue
+            true, fit = r["values"][name][p.name], r["fitted"][name][p.name]
+            errs.setdefault(f"{name}.{p.name}", []).append(abs(fit - true) / abs(true))
+    return {k: float(np.median(v)) for k, v in sorted(errs.items())}
+
+
+def _fraction(rows, kind) -> float | None:
+    sel = [r["correct"] for r in rows if r["kind"] == kind]
+    return float(np.mean(sel)) if sel else None
+
+
+def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int = DEFAULT_SEEDS,
+                  workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
+                  on_progress: Callable[[str, int, int], None] | None = None) -> dict:
+    """Simulate, diagnose and score every case; writes OUT/benchmark.json and
+    OUT/benchmark_cases.csv and returns the summary."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Path(cache) if cache else out / "cache"
+    workers = workers or os.cpu_count() or 1
+    t0 = time.perf_counter()
+    prog = (lambda what: (lambda d, n: on_progress(what, d, n))) if on_progress else (lambda what: None)
+    ens = build_ensemble(nominal, cache, seeds, workers, None, prog("twin and candidates"))
+    t_ens = time.perf_counter() - t0
+    reals = [with_seed(with_effects(nominal, c.effects), c.seed) for c in cases]
+    sigs = evaluate_all(reals, cache, workers, prog("recordings"))
+    t_real = time.perf_counter() - t0 - t_ens
+    rows = []
+    for case, sig in zip(cases, sigs):
+        res, _ = diagnose_signatures({p: sig[p] for p in PARTS}, ens, case.library, alpha)
+        rows.append(_score_case(case, res))
+    t_all = time.perf_counter() - t0
+    singles = [r for r in rows if r["kind"] == "single"]
+    summary = {
+        "scenario": nominal.name, "twin_seeds": ens.seeds, "alpha": alpha,
+        "n_cases": len(rows),
+        "top1_accuracy": _fraction(rows, "single"),
+        "median_heldout_shrink": float(np.median([r["heldout_shrink"] for r in singles])) if singles else None,
+        "null_correct_fraction": _fraction(rows, "null"),
+        "open_set_correct_fraction": _fraction(rows, "open_set"),
+        "pair_both_top3_fraction": _fraction(rows, "pair"),
+        "fitted_relative_error": _fit_errors(singles),
+        "per_effect_top1": {name: float(np.mean([r["correct"] for r in singles if r["injected"] == [name]]))
+                            for name in sorted({r["injected"][0] for r in singles})},
+        "wall_time_s": {"twin_and_candidates": t_ens, "recordings": t_real,
+                        "diagnoses": t_all - t_ens - t_real, "total": t_all},
+        "cases": rows,
+        "plan": [asdict(c) for c in cases],
+    }
+    (out / "benchmark.json").write_text(json.dumps(summary, indent=1, default=float))
+    with open(out / "benchmark_cases.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["id", "kind", "injected", "magnitude", "verdict", "ranking", "added",
+                    "heldout_shrink", "correct"])
+        for r in rows:
+            w.writerow([r["id"], r["kind"], "+".join(r["injected"]) or "-", r["magnitude"],
+                        r["verdict"], " > ".join(r["ranking"]), "+".join(r["added"]) or "-",
+                        f"{r['heldout_shrink']:.3f}", r["correct"]])
+    return summary
