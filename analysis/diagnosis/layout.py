@@ -12,6 +12,8 @@ from pathlib import Path
 from analysis.dataset import DatasetError, open_measurements
 
 RATE_TOLERANCE = 1e-3  # relative
+SCENARIO_RATE_KEYS = {"imu_acc": "sensors.imu_acc_fs_hz", "imu_gyro": "sensors.imu_gyro_fs_hz",
+                      "position_cmd": "sensors.position_cmd_fs_hz"}
 
 
 class LayoutError(DatasetError):
@@ -73,6 +75,7 @@ def compare(real_path: str | Path, twin_path: str | Path) -> None:
         t2, _ = _phase2_layout(twin)
         if len(r2) != len(t2):
             problems.append(f"{real_path}: {len(r2)} Phase II session(s); the scenario has {len(t2)}")
+        rate_issues: dict[tuple[str, float, float], list[str]] = {}
         for (sr, runs_r), (_, runs_t) in zip(r2.items(), t2.items()):
             if len(runs_r) != len(runs_t):
                 problems.append(f"{real_path}: Phase II session {sr} has {len(runs_r)} run(s); "
@@ -80,8 +83,11 @@ def compare(real_path: str | Path, twin_path: str | Path) -> None:
             for (rn, rates), (_, rates_t) in zip(runs_r, runs_t):
                 for ch, fs in rates.items():
                     if abs(fs - rates_t[ch]) > RATE_TOLERANCE * rates_t[ch]:
-                        problems.append(f"{real_path}: /phase2/{sr}/{rn}/{ch} is sampled at "
-                                        f"{fs:g} Hz; the scenario has {rates_t[ch]:g} Hz")
+                        rate_issues.setdefault((ch, fs, rates_t[ch]), []).append(f"/phase2/{sr}/{rn}/{ch}")
+        for (ch, fs, fs_t), where in rate_issues.items():
+            more = f" (and {len(where) - 1} more run(s))" if len(where) > 1 else ""
+            problems.append(f"{real_path}: {where[0]} is sampled at {fs:g} Hz{more}; the scenario "
+                            f"has {fs_t:g} Hz ({SCENARIO_RATE_KEYS[ch]})")
     if problems:
         shown = problems[:8] + ([f"... and {len(problems) - 8} more"] if len(problems) > 8 else [])
         raise LayoutError("the recording does not match the scenario, so it cannot be compared "
