@@ -526,8 +526,9 @@ def diagnose_benchmark(
     fmt = lambda v: "n/a" if v is None else f"{100 * v:.0f} %"  # noqa: E731
     console.print(f"top-1 accuracy {fmt(res['top1_accuracy'])}, median held-out shrink "
                   f"{fmt(res['median_heldout_shrink'])}, null cases correct "
-                  f"{fmt(res['null_correct_fraction'])}, open-set correct "
-                  f"{fmt(res['open_set_correct_fraction'])}, pairs both in top 3 "
+                  f"{fmt(res['null_correct_fraction'])}, open-set unexplained "
+                  f"{fmt(res['open_set_correct_fraction'])} (and no wrong effect removing half "
+                  f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), pairs both in top 3 "
                   f"{fmt(res['pair_both_top3_fraction'])}; wrote {out / 'benchmark.json'}")
 # --- end of twin diagnose ----------------------------------------------------------------------
 

@@ -7,7 +7,9 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
    sample, sessions, runs, channels, sampling rates: :mod:`analysis.diagnosis.layout`);
 2. simulates the scenario with ``seeds`` seeds (the twin's spread);
 3. simulates each candidate effect of the library on its parameter grid with the first of those
-   seeds (common random numbers: its response is the difference to that seed's nominal run);
+   seeds (common random numbers: its response is the difference to that seed's nominal run;
+   an effect with random draws of its own, like the origin of each session, with every seed,
+   its response averaged);
 4. computes the signature (both parts) of every simulation and of the recording, and runs
    :func:`analysis.diagnosis.attribution.diagnose`;
 5. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
@@ -179,38 +181,44 @@ def grid_points(effect: Effect) -> list[GridPoint]:
     return out
 
 
-def candidate_scenarios(nominal: Scenario, library: list[str]
-                        ) -> tuple[list[Scenario], list[tuple[GridPoint, int | None]]]:
+def candidate_scenarios(seeded: list[Scenario], library: list[str]
+                        ) -> tuple[list[Scenario], list[tuple[GridPoint, list[int]]]]:
     """The scenarios to simulate for the candidates' responses: one per grid point where the
-    effect is present. Returns (scenarios, [(grid point, index into scenarios or None if the
-    point is the nominal twin)])."""
+    effect is present, with the first twin seed (all seeds for a random effect). Returns
+    (scenarios, [(grid point, indices into scenarios, one per seed used; empty where the point
+    is the nominal twin)])."""
     scen: list[Scenario] = []
-    points: list[tuple[GridPoint, int | None]] = []
+    points: list[tuple[GridPoint, list[int]]] = []
     for name in library:
         eff = LIBRARY[name]
+        bases = seeded if eff.random else seeded[:1]
         for gp in grid_points(eff):
-            if eff.is_off(gp.values):
-                points.append((gp, None))
-            else:
-                points.append((gp, len(scen)))
-                scen.append(eff.apply(nominal, gp.values))
+            idx: list[int] = []
+            if not eff.is_off(gp.values):
+                for base in bases:
+                    idx.append(len(scen))
+                    scen.append(eff.apply(base, gp.values))
+            points.append((gp, idx))
     return scen, points
 
 
 def responses(library: list[str], points, grid_sigs: list[dict[str, Signature]],
-              nominal: dict[str, Signature]) -> list[CandidateResponse]:
-    """The candidates' response arrays (grid shape + (n,)) from the simulated signatures."""
+              nominal: list[dict[str, Signature]]) -> list[CandidateResponse]:
+    """The candidates' response arrays (grid shape + (n,)): the change of every statistic
+    against the same seed's nominal twin (common random numbers), averaged over the seeds
+    used."""
     out = []
     for name in library:
         eff = LIBRARY[name]
         shape = tuple(len(p.grid) for p in eff.params)
-        n = nominal["cal"].values.size
+        n = nominal[0]["cal"].values.size
         delta = {p: np.zeros(shape + (n,)) for p in PARTS}
-        for gp, i in points:
-            if gp.effect != name or i is None:
+        for gp, idx in points:
+            if gp.effect != name or not idx:
                 continue
             for p in PARTS:
-                delta[p][gp.index] = grid_sigs[i][p].values - nominal[p].values
+                delta[p][gp.index] = np.mean([grid_sigs[i][p].values - nominal[k][p].values
+                                              for k, i in enumerate(idx)], axis=0)
         axes = [ParamAxis(p.name, tuple(p.grid), p.discrete) for p in eff.params]
         out.append(CandidateResponse(name, axes, delta))
     return out
@@ -239,10 +247,10 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     workers = workers or os.cpu_count() or 1
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
-    cand_scen, points = candidate_scenarios(seeded[0], library)
+    cand_scen, points = candidate_scenarios(seeded, library)
     sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress)
     twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
-    cands = responses(library, points, sigs[len(seeded):], sigs[0])
+    cands = responses(library, points, sigs[len(seeded):], sigs[:len(seeded)])
     return TwinEnsemble(nominal, seed_list, twin, cands)
 
 

@@ -21,7 +21,7 @@ Phase I sample or Phase II session it comes from. Families:
   segments of the stroke, per session;
 - ``lag``: log10 of the RMS over the sessions after the first of the shift (µm) of E_XX (the only
   profile that repeats from session to session in a few runs: lead harmonics and ball pass,
-  band-passed to 2–40 mm) in each stroke segment against the first session, found by
+  band-passed to 1.5–6 mm) in each stroke segment against the first session, found by
   cross-correlation; an origin that moves between sessions shifts every segment alike.
 
 Logs of powers and RMS values make the statistics closer to Gaussian from seed to seed, which the
@@ -49,9 +49,9 @@ PHASE2_BANDS_HZ = (2, 5, 10, 20, 40, 80, 150, 250, 400, 700)
 OPERATING_PHASES = ("steady", "transient", "reversal", "dwell")
 POSITION_SEGMENTS = 4
 LAG_SEARCH_M = 7e-3  # largest shift between sessions searched for, m (origins within ±3 mm)
-SIGNATURE_VERSION = 2  # bump when a statistic changes: simulation caches are keyed on it
+SIGNATURE_VERSION = 3  # bump when a statistic changes: simulation caches are keyed on it
 LAG_DOFS = ("E_XX",)  # the only motion whose profile repeats between sessions of a few runs
-LAG_BAND_M = (2e-3, 40e-3)  # wavelengths correlated for the shift, m
+LAG_BAND_M = (1.5e-3, 6e-3)  # wavelengths correlated for the shift, m: lead harmonics 2-4
 _TINY = 1e-30
 
 

@@ -27,7 +27,9 @@ class Param:
     benchmark draws from it); grid: values simulated for the fit (ascending; includes ``off``
     where the effect can be absent); off: the value that leaves the scenario unchanged (None:
     none, e.g. a cogging order); discrete: no interpolation between grid values; log: draw
-    log-uniformly in the benchmark."""
+    log-uniformly in the benchmark; factor: scenario units per parameter unit (e.g. 1e-6 for a
+    scale error in ppm on a dimensionless key); signed: the range applies to |value|, the sign
+    is drawn too."""
 
     name: str
     keys: tuple[str, ...]
@@ -38,12 +40,16 @@ class Param:
     off: float | None = 0.0
     discrete: bool = False
     log: bool = False
+    factor: float = 1.0
+    signed: bool = False
 
 
 @dataclass(frozen=True)
 class Effect:
     """An unmodelled effect: name, one-line title, parameters, and scenario keys set whenever
-    the effect is present (``fixed``, e.g. a material constant). ``source``: the physical source
+    the effect is present (``fixed``, e.g. a material constant). ``random``: the effect draws
+    random values from the scenario's seed (e.g. an origin per session), so its response is
+    averaged over the twin's seeds rather than taken from one. ``source``: the physical source
     (the module docstring has the details); amplitude: the parameter whose off value removes
     the effect whatever the others are (e.g. a cogging torque of zero, whatever its order)."""
 
@@ -53,6 +59,7 @@ class Effect:
     source: str
     fixed: dict[str, Any] = field(default_factory=dict)
     amplitude: str | None = None
+    random: bool = False
 
     def is_off(self, values: dict[str, float]) -> bool:
         """Absent: its ``amplitude`` parameter at its off value, or (no amplitude parameter)
@@ -77,7 +84,8 @@ class Effect:
             v = values.get(p.name, p.off)
             for key in p.keys:
                 cur = _get(data, key)
-                new = {"add": lambda: cur + v, "scale": lambda: cur * v, "set": lambda: v}[p.mode]()
+                u = v * p.factor
+                new = {"add": lambda: cur + u, "scale": lambda: cur * u, "set": lambda: u}[p.mode]()
                 _set(data, key, int(new) if isinstance(cur, int) and not isinstance(cur, bool)
                      and float(new).is_integer() else new)
         return from_dict(data, source=f"scenario with effect {self.name}")
@@ -96,6 +104,8 @@ class Effect:
             a, b = (lo, mid) if magnitude == "low" else (mid, hi)
             v = rng.uniform(a, b)
             v = math.exp(v) if p.log else v
+            if p.signed:
+                v *= float(rng.choice([-1.0, 1.0]))
             out[p.name] = float(v)
         return out
 

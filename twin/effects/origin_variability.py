@@ -21,4 +21,5 @@ EFFECT = Effect(
                   grid=(0.0, 0.5, 1.5, 3.0)),),
     source="manual origin setting before each session (paper section III/V; ISO 230-2)",
     amplitude="spread_mm",
+    random=True,
 )
