@@ -159,3 +159,39 @@ def test_screw_cools_during_pauses():
     warm = temperature_at(short, [855.5])[0]
     print("after a 15-min stop:", warm)
     assert 2.5 < warm < 3.0  # a short stop leaves the screw nearly warm
+
+
+def test_batched_campaigns_equal_campaigns_simulated_alone(tmp_path):
+    """Campaigns of one plan simulated together (one mujoco.rollout call per capture and
+    session; different seeds, effects, a base with an extra degree of freedom, other servo
+    gains) give exactly the arrays each gives alone."""
+    import pytest
+
+    from twin.campaign import simulate_campaign, simulate_campaigns_batched
+    from twin.diagnose import with_effects, with_seed
+    from twin.scenario import load
+
+    nom = load(REPO / "scenarios" / "diagnose-bench.toml",
+               ["campaign.total_hours=60", "phase2.session_hours=[50.0]"])
+    ss = [with_seed(nom, 5),
+          with_effects(with_seed(nom, 5), {"cogging": {"torque_Nm": 0.05, "per_rev": 12}}),
+          with_effects(with_seed(nom, 6), {"base_resonance": {"frequency_hz": 125, "modal_mass_kg": 1000}}),
+          with_effects(with_seed(nom, 6), {"servo_dynamics": {"bandwidth_factor": 0.5}})]
+    simulate_campaigns_batched(ss, [tmp_path / f"b{i}" for i in range(len(ss))])
+    for i, s in enumerate(ss):
+        simulate_campaign(s, tmp_path / f"a{i}", workers=1)
+
+    def arrays(path):
+        out = {}
+        with h5py.File(path) as f:
+            f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
+        return out
+
+    for i in range(len(ss)):
+        a, b = (arrays(tmp_path / f"{k}{i}" / "measurements.h5") for k in "ab")
+        assert a.keys() == b.keys() and len(a) == 16
+        for k in a:
+            assert np.array_equal(a[k], b[k]), (i, k)
+    other = load(REPO / "scenarios" / "quick.toml")
+    with pytest.raises(ValueError, match="has another plan than"):
+        simulate_campaigns_batched([ss[0], other], [tmp_path / "c0", tmp_path / "c1"])

@@ -17,7 +17,7 @@ import pytest
 
 from analysis.diagnosis import gap
 from analysis.diagnosis.signature import Region, Signature
-from tests.conftest import REPO, run_twin
+from conftest import REPO, run_twin
 
 BENCH_SCENARIO = REPO / "scenarios" / "diagnose-bench.toml"
 

@@ -28,7 +28,8 @@ from twin.scenario import Scenario, from_dict, nominal_axis_description, to_axis
 from twin.sensors import instruments as ins
 from twin.sensors.instruments import MICRO_G
 from twin.simulate import (Condition, Simulator, World, dial_indicator, phase1_capture,
-                           phase2_measure, phase2_trajectory, true_error_motions)
+                           phase1_measure, phase1_profile, phase2_command, phase2_measure,
+                           phase2_trajectory, run_many, true_error_motions)
 
 KIND_WORLD, KIND_PHASE1, KIND_PHASE2, KIND_DIAL, KIND_ORIGIN = range(5)
 RAIL_MARGIN = 0.15  # m of rail modelled beyond each end of the travel
@@ -246,11 +247,34 @@ _SIMULATORS: dict[tuple[str, float], Simulator] = {}
 def _simulator(s: Scenario, key: str, timestep: float) -> Simulator:
     sim = _SIMULATORS.get((key, timestep))
     if sim is None:
-        if len(_SIMULATORS) > 8:
+        if len(_SIMULATORS) > 16:
             _SIMULATORS.clear()
         sim = Simulator(make_world(s), timestep)
         _SIMULATORS[(key, timestep)] = sim
     return sim
+
+
+def _store_phase1(store: ds.PartStore, unit: Unit, sig: dict) -> None:
+    store.write("phase1", unit.name,
+                attrs={"hours": unit.hours, "sample": unit.sample, "fs_hz": sig["fs_hz"]},
+                datasets={k: sig[k] for k in ("speed", "torque", "acc1", "acc2")})
+
+
+def _store_phase2(s: Scenario, sim: Simulator, store: ds.PartStore, unit: Unit, cond: Condition,
+                  traj) -> None:
+    datasets, dattrs = {}, {}
+    for r in range(s.runs_per_session):
+        m = phase2_measure(sim, traj, rng_for(s.seed, KIND_PHASE2, unit.index, r))
+        for key in ("imu_acc", "imu_gyro", "position_cmd"):
+            datasets[f"r{r:04d}/{key}"] = m[key]
+            dattrs[f"r{r:04d}/{key}"] = {"fs_hz": m[f"{key}_fs_hz"]}
+    x, e = true_error_motions(sim.world, s.phase2, cond)
+    datasets["truth/x_m"], datasets["truth/E"] = x, e
+    store.write("phase2", unit.name,
+                attrs={"hours": unit.hours, "backlash_um": cond.mech.backlash * 1e6,
+                       "origin_offset_m": cond.origin_offset, "preload_N": cond.mech.preload,
+                       "temperature_rise_K": cond.temperature_rise},
+                datasets=datasets, dataset_attrs=dattrs)
 
 
 def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
@@ -262,27 +286,12 @@ def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
     if unit.kind == "phase1":
         sim = _simulator(s, scenario_json, s.phase1.timestep_s)
         cond = condition_at(s, unit.hours)
-        sig = phase1_capture(sim, s.phase1, cond, rng_for(s.seed, KIND_PHASE1, unit.index))
-        store.write("phase1", unit.name,
-                    attrs={"hours": unit.hours, "sample": unit.sample, "fs_hz": sig["fs_hz"]},
-                    datasets={k: sig[k] for k in ("speed", "torque", "acc1", "acc2")})
+        _store_phase1(store, unit, phase1_capture(sim, s.phase1, cond,
+                                                  rng_for(s.seed, KIND_PHASE1, unit.index)))
     elif unit.kind == "phase2":
         sim = _simulator(s, scenario_json, s.phase2.timestep_s)
         cond = condition_at(s, unit.hours, origin_offset(s, unit.index))
-        traj = phase2_trajectory(sim, s.phase2, cond)
-        datasets, dattrs = {}, {}
-        for r in range(s.runs_per_session):
-            m = phase2_measure(sim, traj, rng_for(s.seed, KIND_PHASE2, unit.index, r))
-            for key in ("imu_acc", "imu_gyro", "position_cmd"):
-                datasets[f"r{r:04d}/{key}"] = m[key]
-                dattrs[f"r{r:04d}/{key}"] = {"fs_hz": m[f"{key}_fs_hz"]}
-        x, e = true_error_motions(sim.world, s.phase2, cond)
-        datasets["truth/x_m"], datasets["truth/E"] = x, e
-        store.write("phase2", unit.name,
-                    attrs={"hours": unit.hours, "backlash_um": cond.mech.backlash * 1e6,
-                           "origin_offset_m": cond.origin_offset, "preload_N": cond.mech.preload,
-                           "temperature_rise_K": cond.temperature_rise},
-                    datasets=datasets, dataset_attrs=dattrs)
+        _store_phase2(s, sim, store, unit, cond, phase2_trajectory(sim, s.phase2, cond))
     elif unit.kind == "dial":
         sim = _simulator(s, scenario_json, s.phase2.timestep_s)
         cond = condition_at(s, unit.hours)
@@ -293,6 +302,53 @@ def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
                     datasets={"repeats_um": np.asarray(res.repeats_um)})
     else:
         raise ValueError(f"unknown unit kind {unit.kind!r}")
+    return unit.name
+
+
+def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -> str:
+    """Simulate one unit of several campaigns of the same plan (scenarios differing in their
+    seed, effects, sensors...) with batched rollouts: the captures or sessions whose models share
+    a structure and whose commands are equal go into one ``mujoco.rollout`` call
+    (:func:`twin.simulate.run_many`); each campaign's part is what :func:`run_unit` stores.
+    Dial-indicator units run one by one."""
+    import json
+
+    if unit.kind not in ("phase1", "phase2"):
+        for j, d in zip(scenario_jsons, out_dirs):
+            run_unit(j, unit, d)
+        return unit.name
+    ss = [from_dict(json.loads(j)) for j in scenario_jsons]
+    items = []  # (scenario, simulator, condition, command, rng or None, store)
+    for s, j, d in zip(ss, scenario_jsons, out_dirs):
+        store = ds.PartStore(d)
+        if unit.kind == "phase1":
+            sim = _simulator(s, j, s.phase1.timestep_s)
+            rng = rng_for(s.seed, KIND_PHASE1, unit.index)
+            cmd = phase1_profile(s.phase1, sim.fs, rng)
+            items.append((s, sim, condition_at(s, unit.hours), cmd, rng, store))
+        else:
+            sim = _simulator(s, j, s.phase2.timestep_s)
+            cond = condition_at(s, unit.hours, origin_offset(s, unit.index))
+            items.append((s, sim, cond, phase2_command(sim, s.phase2), None, store))
+    groups: list[list[int]] = []
+    for i, (_, sim, _, cmd, _, _) in enumerate(items):
+        for g in groups:
+            _, sim0, _, cmd0, _, _ = items[g[0]]
+            if sim.structure() == sim0.structure() and cmd.x.shape == cmd0.x.shape \
+                    and np.array_equal(cmd.x, cmd0.x) and np.array_equal(cmd.v, cmd0.v):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    passes = 1 if unit.kind == "phase1" else 2
+    for g in groups:
+        trajs = run_many([(items[i][1], items[i][2]) for i in g], items[g[0]][3], passes)
+        for i, traj in zip(g, trajs):
+            s, sim, cond, _, rng, store = items[i]
+            if unit.kind == "phase1":
+                _store_phase1(store, unit, phase1_measure(sim, s.phase1, traj, rng))
+            else:
+                _store_phase2(s, sim, store, unit, cond, traj)
     return unit.name
 
 
@@ -430,3 +486,27 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
                     on_progress(done, len(units), name)
     assemble(s, out, units)
     return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo)}
+
+
+def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | Path]) -> None:
+    """Simulate several campaigns of the same plan in this process with batched rollouts
+    (:func:`run_unit_batch`): the same files as :func:`simulate_campaign` of each, unit for unit
+    (tests/test_campaign.py). Parts already stored are kept; a campaign whose plan differs from
+    the first one's raises ValueError."""
+    units = plan(scenarios[0])
+    outs = [Path(d) for d in out_dirs]
+    for s, out in zip(scenarios, outs):
+        if plan(s) != units:
+            raise ValueError(f"simulate_campaigns_batched: scenario {s.name!r} (seed {s.seed}) has "
+                             f"another plan than {scenarios[0].name!r}; batch only campaigns of "
+                             "the same plan")
+        out.mkdir(parents=True, exist_ok=True)
+        _claim(out, s)
+        ds.PartStore(out).remove_temporaries()
+    payloads = [s.to_json() for s in scenarios]
+    for u in units:
+        todo = [i for i, out in enumerate(outs) if not ds.PartStore(out).has(u.kind, u.name)]
+        if todo:
+            run_unit_batch([payloads[i] for i in todo], u, [str(outs[i]) for i in todo])
+    for s, out in zip(scenarios, outs):
+        assemble(s, out, units)

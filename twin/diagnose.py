@@ -14,11 +14,14 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
    :func:`analysis.diagnosis.attribution.diagnose`;
 5. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
 
-Every simulation is a campaign of the scenario (``twin.campaign.simulate_campaign``, whose
-Phase II rollouts are ``mujoco.rollout`` calls), cached by the hash of its scenario under
+Every simulation is a campaign of the scenario, cached by the hash of its scenario under
 ``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
-the blind benchmark, reuses them. Simulations run in parallel on ``workers`` processes, each
-with one BLAS thread; results do not depend on the number of workers.
+the blind benchmark, reuses them. Campaigns are simulated in batches of up to ``BATCH`` with
+batched rollouts (:func:`twin.campaign.simulate_campaigns_batched`: the grid values of a
+candidate, or the seeds of the spread, share one ``mujoco.rollout`` call per capture and
+session), the batches in parallel on ``workers`` processes, each with one BLAS thread; each
+campaign's files are those it gives simulated alone, so results depend neither on the batching
+nor on the number of workers.
 """
 
 from __future__ import annotations
@@ -40,11 +43,12 @@ from analysis.diagnosis import attribution, layout
 from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
 from analysis.diagnosis.report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, signature
-from twin.campaign import simulate_campaign
+from twin.campaign import simulate_campaign, simulate_campaigns_batched
 from twin.effects import LIBRARY, Effect
 from twin.scenario import Scenario, from_dict
 
 DEFAULT_SEEDS = 8
+BATCH = 6  # campaigns simulated together (batched rollouts) in one task
 SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
 
 
@@ -86,29 +90,31 @@ def _regions_from(text: str) -> list[Region]:
             for d, c, f, b, h in json.loads(text)]
 
 
-def evaluate(scenario_json: str, cache_dir: str, keep: bool = False) -> str:
-    """Simulate the scenario (if not cached) and store the signatures of both parts; returns
-    the path of ``signature.npz`` (``cal``, ``heldout``: (n,) values; ``regions``: JSON)."""
+def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool = False) -> list[str]:
+    """Simulate the scenarios not yet cached (one campaign each, batched rollouts:
+    :func:`twin.campaign.simulate_campaigns_batched`) and store the signatures of both parts;
+    returns the paths of their ``signature.npz`` (``cal``, ``heldout``: (n,) values;
+    ``regions``: JSON)."""
     from threadpoolctl import threadpool_limits
 
-    s = from_dict(json.loads(scenario_json))
-    d = Path(cache_dir) / _key(s)
-    out = d / "signature.npz"
-    if out.exists():
-        return str(out)
-    d.mkdir(parents=True, exist_ok=True)
+    ss = [from_dict(json.loads(j)) for j in scenario_jsons]
+    dirs = [Path(cache_dir) / _key(s) for s in ss]
+    todo = [i for i, d in enumerate(dirs) if not (d / "signature.npz").exists()]
     with threadpool_limits(1):
-        simulate_campaign(s, d / "campaign", workers=1)
-        sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
-    fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz")
-    os.close(fd)
-    np.savez(tmp, cal=sigs["cal"].values, heldout=sigs["heldout"].values,
-             regions=np.array(_regions_json(sigs["cal"].regions)))
-    os.replace(tmp, out)
-    (d / "scenario.json").write_text(scenario_json)
-    if not keep:
-        shutil.rmtree(d / "campaign", ignore_errors=True)
-    return str(out)
+        if todo:
+            simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
+        for i in todo:
+            d = dirs[i]
+            sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
+            fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz")
+            os.close(fd)
+            np.savez(tmp, cal=sigs["cal"].values, heldout=sigs["heldout"].values,
+                     regions=np.array(_regions_json(sigs["cal"].regions)))
+            os.replace(tmp, d / "signature.npz")
+            (d / "scenario.json").write_text(scenario_jsons[i])
+            if not keep:
+                shutil.rmtree(d / "campaign", ignore_errors=True)
+    return [str(d / "signature.npz") for d in dirs]
 
 
 def load_signatures(path: str) -> dict[str, Signature]:
@@ -133,28 +139,34 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
     done = len(payloads) - len(todo)
     if on_progress:
         on_progress(done, len(payloads))
-    # Identical scenarios in one call are simulated once.
+    # Identical scenarios in one call are simulated once; the others in batches of campaigns of
+    # the same plan (one mujoco.rollout call per capture or session of a batch), a batch per task.
     unique: dict[str, list[int]] = {}
     for i in todo:
         unique.setdefault(payloads[i], []).append(i)
-    if workers <= 1 or len(unique) <= 1:
-        for payload, idx in unique.items():
-            path = evaluate(payload, str(cache_dir), keep)
-            for i in idx:
+    keys = list(unique)
+    size = max(1, min(BATCH, -(-len(keys) // max(workers, 1))))
+    batches = [keys[k:k + size] for k in range(0, len(keys), size)]
+
+    def record(batch: list[str], result: list[str]) -> int:
+        n = 0
+        for payload, path in zip(batch, result):
+            for i in unique[payload]:
                 paths[i] = path
-            done += len(idx)
+                n += 1
+        return n
+
+    if workers <= 1 or len(batches) <= 1:
+        for batch in batches:
+            done += record(batch, evaluate(batch, str(cache_dir), keep))
             if on_progress:
                 on_progress(done, len(payloads))
     else:
+        from concurrent.futures import as_completed
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            futures = {pool.submit(evaluate, payload, str(cache_dir), keep): idx
-                       for payload, idx in unique.items()}
-            from concurrent.futures import as_completed
+            futures = {pool.submit(evaluate, batch, str(cache_dir), keep): batch for batch in batches}
             for fut in as_completed(futures):
-                path = fut.result()
-                for i in futures[fut]:
-                    paths[i] = path
-                done += len(futures[fut])
+                done += record(futures[fut], fut.result())
                 if on_progress:
                     on_progress(done, len(payloads))
     return [load_signatures(p) for p in paths]  # type: ignore[arg-type]

@@ -307,67 +307,90 @@ class Simulator:
 
     def run_batch(self, conds: list[Condition], cmd: Profile, passes: int = 2,
                   nthread: int | None = None) -> list[Trajectory]:
-        """Roll out several conditions under one command in one ``mujoco.rollout`` call.
+        """Roll out several conditions under one command in one ``mujoco.rollout`` call
+        (:func:`run_many` with this simulator for every condition)."""
+        return run_many([(self, c) for c in conds], cmd, passes, nthread)
 
-        The models of different conditions differ only in float fields (see
-        :func:`twin.model.apply_state`), so they batch; ``nthread`` threads share the work (the
-        GIL is released). The first condition uses this simulator's model, the others copies.
+    def structure(self) -> tuple:
+        """What must agree for models to share one ``mujoco.rollout`` call."""
+        m = self.model
+        return (m.nq, m.nv, m.nu, m.na, m.nsensordata, self.timestep)
 
-        Row k of a trajectory is the state at t_k = k·dt, before step k, which is also when
-        MuJoCo evaluates the sensors of step k (``sens`` row k)."""
-        r = self.world.axis.screw.radius_per_rad
-        zn = self.world.axis.carriage.nut_height - self.world.axis.carriage.com_height
-        x_cmd = [cmd.x + c.origin_offset for c in conds]
-        # Direction of the last motion at every instant: the flank the carriage rests on.
-        moving = np.flatnonzero(cmd.v)
-        direction = np.sign(cmd.v)
-        if moving.size:
-            held = np.maximum.accumulate(np.where(direction != 0, np.arange(direction.size), -1))
-            direction = np.where(held >= 0, direction[np.maximum(held, 0)], np.sign(cmd.v[moving[0]]))
-        else:
-            direction = np.ones_like(cmd.v)
-        models, s0s, x_rails = [], [], []
-        for cond, xc in zip(conds, x_cmd):
-            model = self.model if not models else copy.deepcopy(self.model)
-            mech = replace(cond.mech, lead_stretch=self.lead_stretch(cond),
-                           drag_scale=self.drag_scale(cond))
-            apply_state(model, self.world.axis, mech)
-            stretch = 1.0 + mech.lead_stretch
-            # Start at rest on the rails, in contact on the flank of the first motion; first guess
-            # of the true position: the carriage trails the screw by half the clearance.
-            theta0 = xc[0] / r
-            x0 = stretch * xc[0] - 0.5 * cond.mech.backlash * direction[0]
-            pose = self.rest_pose(x0)
-            flank0 = self.flank_motion(np.array([theta0, theta0]))[0][0]
-            models.append(model)
-            s0s.append(initial_state(model, x0 + flank0 - zn * pose[3], theta0, flank0, pose))
-            x_rails.append(stretch * xc - 0.5 * cond.mech.backlash * direction)
-        nthread = nthread or min(len(conds), os.cpu_count() or 1)
-        datas = [self.data] + [mujoco.MjData(self.model) for _ in range(nthread - 1)]
-        nq, nv = self.model.nq, self.model.nv
-        # Let the small transient of the analytic rest pose (the x–pitch coupling of the nut,
-        # ~25 nm) ring out before t = 0, holding the first command, so that no instrument
-        # starts from a disturbed first sample.
-        n_settle = int(round(SETTLE_TIME / self.timestep))
-        hold = Profile(t=np.arange(n_settle) * self.timestep, x=np.full(n_settle, cmd.x[0]),
-                       v=np.zeros(n_settle), a=np.zeros(n_settle))
-        ctrl = np.stack([self.controls(c, hold, np.full(n_settle, xr[0]))
-                         for c, xr in zip(conds, x_rails)])
-        settled, _ = rollout.rollout(models, datas, np.stack(s0s), ctrl)
-        s0s = list(settled[:, -1, :])
-        for s0 in s0s:
-            s0[0] = 0.0  # time
-        for _ in range(max(passes, 1)):
-            ctrl = np.stack([self.controls(c, cmd, xr) for c, xr in zip(conds, x_rails)])
-            state, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
-            # Rollout row k is the state after step k; prepend the initial state so that row k
-            # is the state at t_k, the one step k (its rails, its sensors) sees.
-            state = np.concatenate([np.stack(s0s)[:, None, :], state[:, :-1, :]], axis=1)
-            x_rails = [st[:, 1 + Q_X] for st in state]
-        t = np.arange(cmd.t.size) * self.timestep
-        return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
-                           cmd=cmd, theta_cmd=xc / r)
-                for st, se, xc in zip(state, sens, x_cmd)]
+
+def run_many(items: list[tuple["Simulator", Condition]], cmd: Profile, passes: int = 2,
+             nthread: int | None = None) -> list[Trajectory]:
+    """Roll out several (simulator, condition) pairs under one command in one
+    ``mujoco.rollout`` call.
+
+    The simulators may hold different worlds (rails, effects, servo, sensors: anything but the
+    model's structure, see :meth:`Simulator.structure`); the models of different conditions
+    differ only in float fields (see :func:`twin.model.apply_state`), so they batch; ``nthread``
+    threads share the work (the GIL is released). A simulator's own model serves its first
+    item, copies the others. Each item's trajectory is the one a rollout of it alone gives.
+
+    Row k of a trajectory is the state at t_k = k·dt, before step k, which is also when
+    MuJoCo evaluates the sensors of step k (``sens`` row k)."""
+    first = items[0][0]
+    for sim, _ in items[1:]:
+        if sim.structure() != first.structure():
+            raise ValueError(f"run_many: models of different structure {sim.structure()} and "
+                             f"{first.structure()} (nq, nv, nu, na, nsensordata, timestep) "
+                             "cannot share a rollout")
+    x_cmd = [cmd.x + c.origin_offset for _, c in items]
+    # Direction of the last motion at every instant: the flank the carriage rests on.
+    moving = np.flatnonzero(cmd.v)
+    direction = np.sign(cmd.v)
+    if moving.size:
+        held = np.maximum.accumulate(np.where(direction != 0, np.arange(direction.size), -1))
+        direction = np.where(held >= 0, direction[np.maximum(held, 0)], np.sign(cmd.v[moving[0]]))
+    else:
+        direction = np.ones_like(cmd.v)
+    models, s0s, x_rails, used = [], [], [], set()
+    for (sim, cond), xc in zip(items, x_cmd):
+        model = sim.model if id(sim) not in used else copy.deepcopy(sim.model)
+        used.add(id(sim))
+        ax = sim.world.axis
+        r = ax.screw.radius_per_rad
+        zn = ax.carriage.nut_height - ax.carriage.com_height
+        mech = replace(cond.mech, lead_stretch=sim.lead_stretch(cond),
+                       drag_scale=sim.drag_scale(cond))
+        apply_state(model, ax, mech)
+        stretch = 1.0 + mech.lead_stretch
+        # Start at rest on the rails, in contact on the flank of the first motion; first guess
+        # of the true position: the carriage trails the screw by half the clearance.
+        theta0 = xc[0] / r
+        x0 = stretch * xc[0] - 0.5 * cond.mech.backlash * direction[0]
+        pose = sim.rest_pose(x0)
+        flank0 = sim.flank_motion(np.array([theta0, theta0]))[0][0]
+        models.append(model)
+        s0s.append(initial_state(model, x0 + flank0 - zn * pose[3], theta0, flank0, pose))
+        x_rails.append(stretch * xc - 0.5 * cond.mech.backlash * direction)
+    nthread = nthread or min(len(items), os.cpu_count() or 1)
+    datas = [first.data] + [mujoco.MjData(first.model) for _ in range(nthread - 1)]
+    nq, nv = first.model.nq, first.model.nv
+    # Let the small transient of the analytic rest pose (the x–pitch coupling of the nut,
+    # ~25 nm) ring out before t = 0, holding the first command, so that no instrument
+    # starts from a disturbed first sample.
+    n_settle = int(round(SETTLE_TIME / first.timestep))
+    hold = Profile(t=np.arange(n_settle) * first.timestep, x=np.full(n_settle, cmd.x[0]),
+                   v=np.zeros(n_settle), a=np.zeros(n_settle))
+    ctrl = np.stack([sim.controls(c, hold, np.full(n_settle, xr[0]))
+                     for (sim, c), xr in zip(items, x_rails)])
+    settled, _ = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+    s0s = list(settled[:, -1, :])
+    for s0 in s0s:
+        s0[0] = 0.0  # time
+    for _ in range(max(passes, 1)):
+        ctrl = np.stack([sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails)])
+        state, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+        # Rollout row k is the state after step k; prepend the initial state so that row k
+        # is the state at t_k, the one step k (its rails, its sensors) sees.
+        state = np.concatenate([np.stack(s0s)[:, None, :], state[:, :-1, :]], axis=1)
+        x_rails = [st[:, 1 + Q_X] for st in state]
+    t = np.arange(cmd.t.size) * first.timestep
+    return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
+                       cmd=cmd, theta_cmd=xc / sim.world.axis.screw.radius_per_rad)
+            for st, se, xc, (sim, _) in zip(state, sens, x_cmd, items)]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -398,9 +421,14 @@ def phase1_capture(sim: Simulator, cfg, cond: Condition, rng: np.random.Generato
 
     Returns a dict of the eight signals at the controller/DAQ rate: ``speed`` (n,) rad/s,
     ``torque`` (n,) N·m, ``acc1``/``acc2`` (n, 3) m/s² (float32), and ``fs_hz``."""
-    w = sim.world
     cmd = phase1_profile(cfg, sim.fs, rng)
-    traj = sim.run(cond, cmd, passes=1)
+    return phase1_measure(sim, cfg, sim.run(cond, cmd, passes=1), rng)
+
+
+def phase1_measure(sim: Simulator, cfg, traj: Trajectory, rng: np.random.Generator) -> dict:
+    """The eight Phase I signals of a simulated capture (see :func:`phase1_capture`; ``rng``
+    continues the capture's generator after :func:`phase1_profile`)."""
+    w = sim.world
     fs = sim.fs
     nut = traj.sens[:, np.r_[SENS_NUT1_ACC, SENS_NUT2_ACC]]
     fs_nut = fs
@@ -441,10 +469,14 @@ def phase2_moves(cfg) -> list[Move]:
     return moves
 
 
+def phase2_command(sim: Simulator, cfg) -> Profile:
+    """The commanded profile of one Phase II run at the simulation rate."""
+    return command_profile(phase2_moves(cfg), sim.fs, lead_in=PHASE2_LEAD_IN)
+
+
 def phase2_trajectory(sim: Simulator, cfg, cond: Condition) -> Trajectory:
     """The deterministic motion of one Phase II run (two passes, see module docstring)."""
-    cmd = command_profile(phase2_moves(cfg), sim.fs, lead_in=PHASE2_LEAD_IN)
-    return sim.run(cond, cmd, passes=2)
+    return sim.run(cond, phase2_command(sim, cfg), passes=2)
 
 
 def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -> dict:
