@@ -426,6 +426,10 @@ def _print_diagnosis(res: dict) -> None:
         out.print("where: " + "; ".join(
             f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² {r['calibration_gap']:.0f})"
             for r in sig))
+    hours = sorted(res.get("hours", []), key=lambda h: -h["heldout_gap_before"])
+    if hours and res["verdict"] != "no significant gap":
+        out.print("when: " + ", ".join(f"{h['hours']:g} h (mean t² {h['heldout_gap_before']:.0f})"
+                                       for h in hours[:3]) + " (held-out, worst first)")
     for i, a in enumerate(res["added"]):
         pars = ", ".join(f"{k} = {v:.3g} [{a['interval'][k][0]:.3g}, {a['interval'][k][1]:.3g}]"
                          for k, v in a["params"].items())
