@@ -304,15 +304,22 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                                               for p in LIBRARY[c.name].params}}
                           for c in ens.candidates},
               **result}
-    (out / "diagnosis.json").write_text(json.dumps(result, indent=1, default=_json_default))
+    (out / "diagnosis.json").write_text(json.dumps(json_safe(result), indent=1, allow_nan=False))
     if plots:
         write_diagnosis_report(out / "report", result, real, ens.twin, delta)
     return result
 
 
-def _json_default(o):
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.bool_):
+def json_safe(o):
+    """``o`` with numpy scalars as Python numbers and NaN/inf as None (strict JSON)."""
+    if isinstance(o, dict):
+        return {str(k): json_safe(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [json_safe(v) for v in o]
+    if isinstance(o, (np.bool_, bool)):
         return bool(o)
-    raise TypeError(type(o).__name__)
+    if isinstance(o, (np.integer, int)):
+        return int(o)
+    if isinstance(o, (np.floating, float)):
+        return float(o) if np.isfinite(o) else None
+    return o

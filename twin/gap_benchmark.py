@@ -43,7 +43,7 @@ import numpy as np
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
 from twin.diagnose import (DEFAULT_SEEDS, build_ensemble, diagnose_signatures, evaluate_all,
-                           with_effects, with_seed)
+                           json_safe, with_effects, with_seed)
 from twin.effects import LIBRARY
 from twin.scenario import Scenario
 
@@ -182,7 +182,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
         "cases": rows,
         "plan": [asdict(c) for c in cases],
     }
-    (out / "benchmark.json").write_text(json.dumps(summary, indent=1, default=float))
+    (out / "benchmark.json").write_text(json.dumps(json_safe(summary), indent=1, allow_nan=False))
     with open(out / "benchmark_cases.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["id", "kind", "injected", "magnitude", "verdict", "ranking", "added",
