@@ -502,10 +502,12 @@ def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | P
                              "the same plan")
         out.mkdir(parents=True, exist_ok=True)
         _claim(out, s)
-        ds.PartStore(out).remove_temporaries()
     payloads = [s.to_json() for s in scenarios]
+    stores = [ds.PartStore(out) for out in outs]
+    for st in stores:
+        st.remove_temporaries()
     for u in units:
-        todo = [i for i, out in enumerate(outs) if not ds.PartStore(out).has(u.kind, u.name)]
+        todo = [i for i, st in enumerate(stores) if not st.has(u.kind, u.name)]
         if todo:
             run_unit_batch([payloads[i] for i in todo], u, [str(outs[i]) for i in todo])
     for s, out in zip(scenarios, outs):

@@ -3,8 +3,9 @@
 
 For a recording and the scenario meant to describe it, :func:`run_diagnosis`
 
-1. simulates the scenario once and refuses a recording whose layout differs (captures per
-   sample, sessions, runs, channels, sampling rates: :mod:`analysis.diagnosis.layout`);
+1. simulates the scenario once (the first seed of the spread) and refuses a recording whose
+   layout differs (captures per sample, sessions, runs, channels, sampling rates:
+   :mod:`analysis.diagnosis.layout`);
 2. simulates the scenario with ``seeds`` seeds (the twin's spread);
 3. simulates each candidate effect of the library on its parameter grid with the first of those
    seeds (common random numbers: its response is the difference to that seed's nominal run;
@@ -31,7 +32,7 @@ import json
 import os
 import shutil
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -43,7 +44,7 @@ from analysis.diagnosis import attribution, layout
 from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
 from analysis.diagnosis.report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, signature
-from twin.campaign import simulate_campaign, simulate_campaigns_batched
+from twin.campaign import simulate_campaigns_batched
 from twin.effects import LIBRARY, Effect
 from twin.scenario import Scenario, from_dict
 
@@ -92,7 +93,8 @@ def _regions_from(text: str) -> list[Region]:
 
 def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool = False) -> list[str]:
     """Simulate the scenarios not yet cached (one campaign each, batched rollouts:
-    :func:`twin.campaign.simulate_campaigns_batched`) and store the signatures of both parts;
+    :func:`twin.campaign.simulate_campaigns_batched`) and store the signatures of both parts
+    and the campaign's layout (``layout.json``, :func:`analysis.diagnosis.layout.describe`);
     returns the paths of their ``signature.npz`` (``cal``, ``heldout``: (n,) values;
     ``regions``: JSON)."""
     from threadpoolctl import threadpool_limits
@@ -105,6 +107,7 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool = False) -> l
             simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
         for i in todo:
             d = dirs[i]
+            (d / "layout.json").write_text(json.dumps(layout.describe(d / "campaign" / "measurements.h5")))
             sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
             fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz")
             os.close(fd)
@@ -162,7 +165,6 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
             if on_progress:
                 on_progress(done, len(payloads))
     else:
-        from concurrent.futures import as_completed
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
             futures = {pool.submit(evaluate, batch, str(cache_dir), keep): batch for batch in batches}
             for fut in as_completed(futures):
@@ -267,13 +269,19 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
 
 
 def check_layout(real_dir: Path, nominal: Scenario, cache: Path) -> None:
-    """Refuse a recording whose layout differs from the scenario's (raises
-    :class:`analysis.diagnosis.layout.LayoutError` naming every difference)."""
+    """Refuse a scenario without the two parts, or a recording whose layout differs from the
+    scenario's (raises :class:`analysis.diagnosis.layout.LayoutError` naming every difference).
+    The scenario's layout is that of its first twin seed, simulated once (and cached for the
+    spread)."""
+    for key, n, on in (("phase1.captures_per_sample", nominal.captures_per_sample, nominal.campaign.phase1),
+                       ("phase2.runs_per_session", nominal.runs_per_session, nominal.campaign.phase2)):
+        if on and n < 2:
+            raise ValueError(f"scenario {nominal.name}: {key} gives {n}; the diagnosis needs at "
+                             "least 2 (even ones to fit, odd ones held out)")
     s0 = with_seed(nominal, twin_seeds(nominal, 1)[0])
-    d = Path(cache) / "layout" / _key(s0)
-    if not (d / "measurements.h5").exists():
-        simulate_campaign(s0, d, workers=1)
-    layout.compare(Path(real_dir) / "measurements.h5", d / "measurements.h5")
+    sig = evaluate([s0.to_json()], str(cache))[0]
+    twin = json.loads((Path(sig).parent / "layout.json").read_text())
+    layout.compare(Path(real_dir) / "measurements.h5", twin)
 
 
 def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
@@ -297,7 +305,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     check_layout(real_dir, nominal, cache)
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress)
-    result, delta = diagnose_signatures(real, ens, library, alpha)
+    result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
               "library": {c.name: {"title": LIBRARY[c.name].title, "source": LIBRARY[c.name].source,
                                    "params": {p.name: {"low": p.low, "high": p.high}
@@ -306,7 +314,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
               **result}
     (out / "diagnosis.json").write_text(json.dumps(json_safe(result), indent=1, allow_nan=False))
     if plots:
-        write_diagnosis_report(out / "report", result, real, ens.twin, delta)
+        write_diagnosis_report(out / "report", result, real["heldout"].regions, t_heldout)
     return result
 
 

@@ -206,10 +206,10 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
              ) -> tuple[dict, dict[str, np.ndarray]]:
     """The whole diagnosis on signatures.
 
-    Returns (summary, delta): a JSON-able dict (see ``twin diagnose``: verdict, statistics
-    counts, regions with their held-out gap before/after, the first-round ranking of every
-    candidate, the effects added in order, and the residual) and the predicted change of every
-    statistic by the added effects, {"cal", "heldout"}: (n,)."""
+    Returns (summary, t_heldout): a JSON-able dict (see ``twin diagnose``: verdict, statistics
+    counts, regions with their held-out gap before/after, the ranking of every candidate, the
+    effects added in order, and the residual) and the held-out t of every statistic against the
+    twin as it is and with the added effects, {"before", "after"}: (n,) (for the gap maps)."""
     for part in ("cal", "heldout"):
         for i, s in enumerate(twin[part]):
             g.check_same(real[part], s, f"the recording's {part} part", f"twin seed {i} ({part})")
@@ -235,7 +235,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
         out.update(verdict=NO_GAP, ranking=[], added=[], heldout_gap_after=g_before,
                    heldout_shrink=0.0, regions=_regions(regions, z0, z0, select, sig_keys, gaps_cal),
                    hours=_hours(regions, z0, z0, select), residual={"significant": False})
-        return out, {p: np.zeros_like(z0[p]) for p in z0}
+        return out, {"before": z0["heldout"], "after": z0["heldout"]}
     delta = {p: np.zeros_like(z0[p]) for p in z0}
     z = dict(z0)
     remaining = list(candidates)
@@ -273,7 +273,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
                                                       g.region_gaps(z["cal"], regions))
                                   if r["significant"]][:5]},
     )
-    return out, delta
+    return out, {"before": z0["heldout"], "after": z["heldout"]}
 
 
 def _regions(regions, z_before, z_after, select, sig_keys, gaps_cal) -> list[dict]:
@@ -298,11 +298,3 @@ def _hours(regions, z_before, z_after, select) -> list[dict]:
     a = g.hours_gaps(z_after["heldout"], regions, select)
     return [{"hours": h, "heldout_gap_before": v, "heldout_gap_after": a.get(h, float("nan"))}
             for h, v in b.items()]
-
-
-def z_maps(real: dict[str, Signature], twin: dict[str, list[Signature]],
-           delta_heldout: np.ndarray | None = None) -> tuple[np.ndarray, list]:
-    """Held-out t_j of the real recording against the twin (plus ``delta_heldout``) and the
-    regions, for the gap maps of the report."""
-    sp = g.spread(twin["heldout"])
-    return g.zscores(real["heldout"], sp, delta_heldout), real["heldout"].regions

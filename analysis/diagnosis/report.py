@@ -17,9 +17,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from analysis.diagnosis import gap as g  # noqa: E402
 from analysis.diagnosis.signature import (OPERATING_PHASES, PHASE1_BANDS_HZ, PHASE1_CHANNELS,  # noqa: E402
-                                          PHASE2_CHANNELS, Signature, _band_labels)
+                                          PHASE2_CHANNELS, Region, _band_labels)
 from analysis.phase2.traces import DOFS  # noqa: E402
 
 
@@ -57,16 +56,14 @@ def _pair(path: Path, before: np.ndarray, after: np.ndarray, rows, cols, what: s
     plt.close(fig)
 
 
-def write_diagnosis_report(out_dir: Path, result: dict, real: dict[str, Signature],
-                           twin: dict[str, list[Signature]], delta: dict[str, np.ndarray]) -> list[Path]:
-    """Write the gap maps, the ranking chart and ``index.html`` into ``out_dir``; returns the
-    PNG paths."""
+def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
+                           t_heldout: dict[str, np.ndarray]) -> list[Path]:
+    """Write the gap maps, the ranking chart and ``index.html`` into ``out_dir``; ``regions``
+    (n,) and ``t_heldout`` {"before", "after"}: (n,) as returned by
+    :func:`analysis.diagnosis.attribution.diagnose`. Returns the PNG paths."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    sp = g.spread(twin["heldout"])
-    z_b = g.zscores(real["heldout"], sp)
-    z_a = g.zscores(real["heldout"], sp, delta["heldout"])
-    regions = real["heldout"].regions
+    z_b, z_a = t_heldout["before"], t_heldout["after"]
     pngs = []
 
     bands = _band_labels(PHASE1_BANDS_HZ)

@@ -49,7 +49,7 @@ PHASE2_BANDS_HZ = (2, 5, 10, 20, 40, 80, 150, 250, 400, 700)
 OPERATING_PHASES = ("steady", "transient", "reversal", "dwell")
 POSITION_SEGMENTS = 4
 LAG_SEARCH_M = 7e-3  # largest shift between sessions searched for, m (origins within ±3 mm)
-SIGNATURE_VERSION = 3  # bump when a statistic changes: simulation caches are keyed on it
+SIGNATURE_VERSION = 4  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
 LAG_DOFS = ("E_XX",)  # the only motion whose profile repeats between sessions of a few runs
 LAG_BAND_M = (1.5e-3, 6e-3)  # wavelengths correlated for the shift, m: lead harmonics 2-4
 _TINY = 1e-30
@@ -93,9 +93,6 @@ class Signature:
 
     values: np.ndarray
     regions: list[Region] = field(default_factory=list)
-
-    def names(self) -> list[str]:
-        return [f"{r.label()} @{r.hours:g} h" for r in self.regions]
 
 
 class _Builder:

@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from twin.scenario import Scenario, from_dict
+from twin.scenario import Scenario, _set_dotted, from_dict
 
 
 @dataclass(frozen=True)
@@ -127,11 +127,9 @@ def _get(data: dict, key: str) -> Any:
 
 
 def _set(data: dict, key: str, value: Any) -> None:
-    parts, idx = _split(key)
-    node: Any = data
-    for p in parts[:-1]:
-        node = node.setdefault(p, {})
-    if idx is not None:
-        node[parts[-1]][idx] = value
+    """Set a dotted key (as ``--set`` does), or one element of a list key ``a.b[i]``."""
+    if key.endswith("]"):
+        base, _, i = key[:-1].partition("[")
+        _get(data, base)[int(i)] = value
     else:
-        node[parts[-1]] = value
+        _set_dotted(data, key, value)
