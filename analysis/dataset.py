@@ -270,7 +270,8 @@ def _check_unit(label: str, key: str, attrs: Mapping[str, Any], unit: str) -> No
         raise DatasetError(f"{label}: {key}@unit is missing; expected {unit!r}")
     got = _as_str(attrs["unit"])
     if got != unit:
-        raise DatasetError(f"{label}: {key}@unit is {_fmt(attrs['unit'])}; expected {unit!r} (convert to SI before writing)")
+        raise DatasetError(
+            f"{label}: {key}@unit is {_fmt(attrs['unit'])}; expected {unit!r} (convert to SI before writing)")
 
 
 def _check_name(label: str, key: str, name: str, what: str) -> None:
@@ -680,7 +681,7 @@ def assemble_measurements(
             attrs["fs_hz"] = _attr_fs(label, attrs, gkey)
             arrays = _channels(label, gkey, datasets, PHASE1_CHANNELS)
             n = None
-            for ch, (unit, _, cols) in PHASE1_CHANNELS.items():
+            for ch, (_unit, _, cols) in PHASE1_CHANNELS.items():
                 n = _check_shape(label, f"{gkey}/{ch}", arrays[ch].shape, _dims(cols, "n"), n, "len(speed)")
             g = g1.create_group(name)
             _write_attrs(g, attrs)
@@ -716,7 +717,8 @@ def assemble_measurements(
                 if "speeds_mm_s" in rattrs:
                     sp = np.asarray(rattrs["speeds_mm_s"], dtype=float).reshape(-1)
                     if not np.all(np.isfinite(sp)):
-                        raise DatasetError(f"{label}: {rkey}@speeds_mm_s is {sp.tolist()}; expected finite speeds in mm/s")
+                        raise DatasetError(
+                            f"{label}: {rkey}@speeds_mm_s is {sp.tolist()}; expected finite speeds in mm/s")
                     rattrs["speeds_mm_s"] = sp
                 gr = gs.create_group(rname)
                 _write_attrs(gr, rattrs)
@@ -909,7 +911,8 @@ class _Reader:
         try:
             return dict(obj.attrs.items())
         except (OSError, KeyError, RuntimeError) as e:
-            raise DatasetError(f"{self.label}: attributes of {key} could not be read; the file may be corrupt ({e})") from None
+            raise DatasetError(
+                f"{self.label}: attributes of {key} could not be read; the file may be corrupt ({e})") from None
 
     def _names(self, key: str) -> list[str]:
         if key not in self._f:
@@ -936,7 +939,8 @@ class _Reader:
         try:
             arr = np.asarray(ds[()], dtype=np.float64)
         except OSError as e:
-            raise DatasetError(f"{self.label}: {key} could not be read; the file may be truncated or corrupt ({e})") from None
+            raise DatasetError(
+                f"{self.label}: {key} could not be read; the file may be truncated or corrupt ({e})") from None
         _check_finite(self.label, key, arr)
         return arr, attrs
 
@@ -1020,7 +1024,8 @@ class Measurements(_Reader):
         if "speeds_mm_s" in rattrs:
             sp = np.asarray(rattrs["speeds_mm_s"])
             if sp.dtype.kind not in "fiu" or not np.all(np.isfinite(sp)):
-                raise DatasetError(f"{self.label}: {rkey}@speeds_mm_s is {_fmt(rattrs['speeds_mm_s'])}; expected finite speeds in mm/s")
+                raise DatasetError(f"{self.label}: {rkey}@speeds_mm_s is {_fmt(rattrs['speeds_mm_s'])}; "
+                                   "expected finite speeds in mm/s")
             speeds = tuple(float(v) for v in sp.reshape(-1))
         return Phase2Run(session, run, hours, speeds_mm_s=speeds, **out)
 
@@ -1060,7 +1065,8 @@ class Truth(_Reader):
             raise DatasetError(f"{self.label}: /@onset_hours is missing; expected a number of hours (NaN if none)")
         x = _as_number(attrs["onset_hours"])
         if x is None:
-            raise DatasetError(f"{self.label}: /@onset_hours is {_fmt(attrs['onset_hours'])}; expected a number of hours (NaN if none)")
+            raise DatasetError(f"{self.label}: /@onset_hours is {_fmt(attrs['onset_hours'])}; "
+                               "expected a number of hours (NaN if none)")
         return None if np.isnan(x) else x
 
     def scenario(self) -> dict:

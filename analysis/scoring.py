@@ -172,7 +172,7 @@ def score_phase2(directory: Path, truth) -> dict | None:
     elastic = _elastic_um(truth.scenario(), tl, [r["hours"] for r in doc["sessions"]])
     lost = None if elastic is None else np.asarray(injected) + elastic
     rows, err, perr, lerr = [], [], [], []
-    for i, (rec, b) in enumerate(zip(doc["sessions"], injected)):
+    for i, (rec, b) in enumerate(zip(doc["sessions"], injected, strict=True)):
         est, pit = _none(rec.get("delta_backlash_um_shift")), _none(rec.get("delta_backlash_um_pitch"))
         row = {"session": rec["session"], "hours": rec["hours"], "injected_delta_um": b - ref,
                "estimated_delta_um": est, "error_um": None if est is None else est - (b - ref),

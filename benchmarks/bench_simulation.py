@@ -54,7 +54,7 @@ def main() -> None:
     for dt in (s.phase1.timestep_s, 1e-4):
         sim = Simulator(world, dt)
         p1 = s.phase1.model_copy(update={"timestep_s": dt})
-        wall, _ = timed(lambda: phase1_capture(sim, p1, cond, cp.rng_for(0, 1, 0)))
+        wall, _ = timed(lambda sim=sim, p1=p1: phase1_capture(sim, p1, cond, cp.rng_for(0, 1, 0)))
         sim_seconds = p1.capture_s + 0.3
         rtf_pipeline = sim_seconds / wall
         # Bare stepping of the same model: rollout in C, same number of steps, holding still.
@@ -64,7 +64,7 @@ def main() -> None:
         s0 = initial_state(model, 0.11, theta)
         ctrl = np.zeros((nstep, model.nu))
         ctrl[:, 0] = theta
-        wall_bare, _ = timed(lambda: rollout.rollout(model, data, s0, ctrl))
+        wall_bare, _ = timed(lambda model=model, data=data, s0=s0, ctrl=ctrl: rollout.rollout(model, data, s0, ctrl))
         rtf_bare = nstep / wall_bare * dt
         print(f"Phase I capture, step {dt * 1e3:g} ms: pipeline {wall:.3f} s wall -> "
               f"{rtf_pipeline:.1f}x real time (one core); bare mj_step {nstep / wall_bare:,.0f} "

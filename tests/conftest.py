@@ -49,3 +49,10 @@ def demo_run(tmp_path_factory):
     proc = run_twin("demo", "-o", out, *DEMO_SMALL, check=False, timeout=900)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return out, proc
+
+
+def pytest_collection_modifyitems(config, items):
+    """`slow` campaigns may take up to an hour each; the default timeout (pyproject) is 15 min."""
+    for item in items:
+        if item.get_closest_marker("slow") and not item.get_closest_marker("timeout"):
+            item.add_marker(pytest.mark.timeout(3600))

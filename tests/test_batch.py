@@ -17,7 +17,7 @@ def test_batched_conditions_equal_single_runs():
     conds = [cp.condition_at(s, h, 0.001 * i) for i, h in enumerate([100.0, 4000.0, 7000.0])]
     assert conds[2].mech.backlash > 5e-6 > conds[0].mech.backlash
     batch = sim.run_batch(conds, cmd)
-    for cond, b in zip(conds, batch):
+    for cond, b in zip(conds, batch, strict=True):
         single = sim.run(cond, cmd)
         np.testing.assert_array_equal(single.qpos, b.qpos)
         np.testing.assert_array_equal(single.sens, b.sens)

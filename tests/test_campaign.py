@@ -10,9 +10,9 @@ import time
 
 import h5py
 import numpy as np
+from conftest import REPO, SMALL, run_twin
 
 from analysis.dataset import PartStore, measurement_keys, open_measurements, open_truth, truth_mentions
-from conftest import REPO, SMALL, run_twin
 
 
 def _arrays(path):

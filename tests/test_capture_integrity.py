@@ -5,8 +5,8 @@ import ast
 from pathlib import Path
 
 import numpy as np
-
 from conftest import REPO
+
 from twin import campaign as cp
 from twin.model import Q_X, SENS_NUT1_ACC
 from twin.scenario import Scenario
@@ -90,7 +90,7 @@ def test_simulated_motion_matches_the_kinematic_truth():
     # takes out (angles are observable only up to their mean anyway).
     fwd = traj.cmd.v[steady] > 0
     for name, s_row, t_row, tol in zip(("E_YX", "E_ZX", "E_AX", "E_BX", "E_CX"), sim_e,
-                                       truth[1:], (0.05e-6, 0.05e-6, 0.1e-6, 0.1e-6, 0.1e-6)):
+                                       truth[1:], (0.05e-6, 0.05e-6, 0.1e-6, 0.1e-6, 0.1e-6), strict=True):
         err = s_row - t_row
         for part in (fwd, ~fwd):
             err[part] -= err[part].mean()

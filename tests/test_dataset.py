@@ -191,7 +191,7 @@ def test_resumed_campaign_equals_uninterrupted(tmp_path):
         a, b = full / fname, resumed / fname
         with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
             keys = []
-            fa.visititems(lambda k, o: keys.append(k) if isinstance(o, h5py.Dataset) else None)
+            fa.visititems(lambda k, o, keys=keys: keys.append(k) if isinstance(o, h5py.Dataset) else None)
             assert keys
             for k in keys:
                 assert fa[k].dtype == fb[k].dtype

@@ -104,7 +104,8 @@ def test_default_law_paper_shape():
     assert np.all(np.diff(b) >= 0.0)
     assert np.all((p >= 0.0) & (p <= 1.0)) and np.all(b >= 0.0)
     figures = {h: (float(preload_fraction(h, law)), float(backlash_um(h, law))) for h in (3000, 4000, 6000, 8000)}
-    print("\n[default law] hours: (preload fraction, backlash µm)", {k: (round(a, 3), round(c, 2)) for k, (a, c) in figures.items()})
+    print("\n[default law] hours: (preload fraction, backlash µm)",
+          {k: (round(a, 3), round(c, 2)) for k, (a, c) in figures.items()})
 
 
 def test_sharp_law_matches_single_ball_hertz():

@@ -55,4 +55,5 @@ def test_score_refuses_a_directory_without_truth_or_outputs(demo_run, tmp_path):
     shutil.copy(out / "truth.h5", real / "truth.h5")
     proc = run_twin("score", real, check=False)
     assert proc.returncode == 2
-    assert "found neither phase1/detection.json (twin detect) nor backlash/backlash.json" in " ".join(proc.stderr.split())
+    message = " ".join(proc.stderr.split())
+    assert "found neither phase1/detection.json (twin detect) nor backlash/backlash.json" in message

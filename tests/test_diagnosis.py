@@ -14,10 +14,10 @@ import shutil
 import h5py
 import numpy as np
 import pytest
+from conftest import REPO, run_twin
 
 from analysis.diagnosis import gap
 from analysis.diagnosis.signature import Region, Signature
-from conftest import REPO, run_twin
 
 BENCH_SCENARIO = REPO / "scenarios" / "diagnose-bench.toml"
 

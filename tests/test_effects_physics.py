@@ -13,9 +13,20 @@ import scipy.linalg
 from twin import geometry as geo
 from twin.campaign import KIND_PHASE1, KIND_WORLD, condition_at, make_world, rng_for
 from twin.drive import Move, command_profile
-from twin.model import (CTRL_NUT_AXIAL, CTRL_STRIBECK, NCTRL, NSENS, Q_BASE, SENS_IMU_ACC,
-                        SENS_NUT1_ACC, SENS_SERVO_FORCE, BaseMode, build_mjcf, build_model,
-                        stiffness_of)
+from twin.model import (
+    CTRL_NUT_AXIAL,
+    CTRL_STRIBECK,
+    NCTRL,
+    NSENS,
+    Q_BASE,
+    SENS_IMU_ACC,
+    SENS_NUT1_ACC,
+    SENS_SERVO_FORCE,
+    BaseMode,
+    build_mjcf,
+    build_model,
+    stiffness_of,
+)
 from twin.scenario import Scenario, ScenarioError, from_dict, to_axis
 from twin.simulate import Simulator, phase1_capture, phase1_profile
 

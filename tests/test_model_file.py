@@ -3,8 +3,8 @@ and it is complete: loaded on its own it holds still."""
 
 import mujoco
 import numpy as np
-
 from conftest import REPO
+
 from twin.model import NCTRL, Q_SCREW, Q_X, Q_Z, build_mjcf
 from twin.scenario import Scenario, to_axis
 

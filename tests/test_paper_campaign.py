@@ -5,9 +5,9 @@ Run with: make test-slow   (or .venv/bin/python -m pytest -m slow -s)
 
 import numpy as np
 import pytest
+from conftest import REPO, run_twin
 
 from analysis.dataset import open_measurements, open_truth
-from conftest import REPO, run_twin
 
 pytestmark = pytest.mark.slow
 

@@ -27,7 +27,7 @@ TOL = 0.01  # 1 %
 def _tones(amps, freqs, n, noise, rng, phases=None):
     t = np.arange(n) / FS
     x = sum(a * np.sin(2 * np.pi * f * t + (0 if phases is None else p))
-            for a, f, p in zip(amps, freqs, phases or [0] * len(amps)))
+            for a, f, p in zip(amps, freqs, phases or [0] * len(amps), strict=True))
     return x + noise * rng.standard_normal(n)
 
 
@@ -108,7 +108,7 @@ def test_capture_features_end_to_end_on_a_synthetic_capture():
                           acc1=acc, acc2=acc.copy())
     s = summarise_capture(cap)
     x = sample_features([s], transient_templates([s]))
-    feat = dict(zip(FEATURE_NAMES, x))
+    feat = dict(zip(FEATURE_NAMES, x, strict=True))
     got = [feat[f"amp{k}x_acc1_x"] for k in (1, 2, 3)]
     print(f"synthetic capture: amp 1x/2x/3x acc1_x {np.round(got, 5)}; corr fwd/rev "
           f"{feat['corr_tr_torque_fwd']:.4f} {feat['corr_tr_torque_rev']:.4f}; steady torque kurt "

@@ -88,7 +88,8 @@ def synthetic():
     profiles = [rail_profile(rng) for _ in range(5)]
     period = 0.010 / 8  # an 8-per-revolution screw-fixed feature
     screw_rng = rail_profile(rng, amp=0.05e-6)
-    screw = lambda u: 0.1e-6 * np.sin(2 * math.pi * u / period) + screw_rng(u)
+    def screw(u):
+        return 0.1e-6 * np.sin(2 * math.pi * u / period) + screw_rng(u)
     x = np.arange(0.002, 0.252, 10e-6)  # 250 mm of the stroke keeps the test fast
     return profiles, screw, x
 
@@ -148,7 +149,8 @@ def test_comb_spacing_and_peak_numbers():
     period = 1.25e-3
     rng = np.random.default_rng(5)
     f = rail_profile(rng, amp=0.02e-6)
-    sig = lambda u: np.sin(2 * math.pi * u / period) * 1e-7 + f(u)
+    def sig(u):
+        return np.sin(2 * math.pi * u / period) * 1e-7 + f(u)
     r = shift_between(winfilt(sig(x - 0.3e-3), dx), winfilt(sig(x), dx), dx)
     print(f"\ncomb: {r.n_peaks} peaks, spacing {r.spacing_m * 1e6:.4f} µm (true 1250), "
           f"shift {r.shift_m * 1e6:.3f} µm (true 300)")

@@ -187,7 +187,7 @@ def test_slow_traces_keep_the_backlash_lag(backlash_step_campaign):
     change = np.array(lags["s0001"]) - np.array(lags["s0000"])
     print("\nforward-reverse lag of slow traces (0.5-20 mm band), 0 -> 20 µm backlash, µm: "
           + ", ".join(f"{d} {a * 1e6:.2f} -> {b * 1e6:.2f}"
-                      for d, a, b in zip(DOFS, lags["s0000"], lags["s0001"])))
+                      for d, a, b in zip(DOFS, lags["s0000"], lags["s0001"], strict=True)))
     for i in (1, 5):
         assert abs(change[i] - 20e-6) < 1.5e-6, f"{DOFS[i]} lag change {change[i] * 1e6:.2f} µm"
     assert np.all(change > 2e-6), f"lag changes {change * 1e6} µm"

@@ -107,7 +107,7 @@ def parse(path: Path) -> ReportParser:
 
 def rows_by_first(table: list[list[str]]) -> dict[str, dict[str, str]]:
     head, *rows = table
-    return {r[0]: dict(zip(head, r)) for r in rows}
+    return {r[0]: dict(zip(head, r, strict=True)) for r in rows}
 
 
 @pytest.fixture(scope="module")

@@ -2,8 +2,8 @@
 allowed, without a traceback (check 12 of the twin issue)."""
 
 import pytest
-
 from conftest import REPO, run_twin
+
 from twin.scenario import ScenarioError, load
 
 QUICK = REPO / "scenarios/quick.toml"
@@ -22,7 +22,8 @@ CASES = [
     (["--set", "degradation.law=\"table\"", "--set", "degradation.table_hours=[10.0, 0.0]",
       "--set", "degradation.table_preload_fraction=[1.0, 1.0]", "--set", "degradation.table_backlash_um=[0.0, 1.0]"],
      ["`degradation.table_hours` = [10.0, 0.0]", "strictly increasing"]),
-    (["--set", "campaign.warmup_hours=700"], ["`campaign.warmup_hours` = 700", "total_hours = 600", "warmup_hours <= total_hours"]),
+    (["--set", "campaign.warmup_hours=700"],
+     ["`campaign.warmup_hours` = 700", "total_hours = 600", "warmup_hours <= total_hours"]),
     (["--set", "seed=4294967296"], ["seed", "4294967296", "<= 4294967295"]),
     (["--set", "sensors.imu_acc_fs_hz=0"], ["sensors.imu_acc_fs_hz", "0", "> 0"]),
 ]

@@ -37,7 +37,8 @@ def test_phase2_errors_against_the_injected_change(scored_dir):
     _write(scored_dir / "backlash" / "backlash.json", {
         "parameters": {"baseline_sessions": 2},
         "sessions": [{"session": n, "hours": h, "delta_backlash_um_shift": float(v + o),
-                      "delta_backlash_um_pitch": None} for n, h, v, o in zip(names, hours, injected, offsets)],
+                      "delta_backlash_um_pitch": None}
+                     for n, h, v, o in zip(names, hours, injected, offsets, strict=True)],
         "prognosis": {"crossing_hours": 300.0}})
     doc = score(scored_dir)
     p2 = doc["phase2"]

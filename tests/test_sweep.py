@@ -117,7 +117,7 @@ def test_default_table_recovers_the_injected_backlash(default_run):
     assert len(df) == 8
     assert list(df.columns[:4]) == ["point", "seed", "degradation.table_backlash_um[1]",
                                     "sensors.imu_acc_noise_ug_per_rthz"]
-    assert list(zip(df["point"], df["seed"])) == [(p, s) for p in range(4) for s in (1, 2)]
+    assert list(zip(df["point"], df["seed"], strict=True)) == [(p, s) for p in range(4) for s in (1, 2)]
     assert sorted(set(df["degradation.table_backlash_um[1]"])) == [5.0, 15.0]
     assert sorted(set(df["sensors.imu_acc_noise_ug_per_rthz"])) == [5.0, 20.0]
     assert {"phase2.rms_error_um", "phase2.bias_um", "phase2.error_motion.E_ZX.rms_um"} <= set(df.columns)

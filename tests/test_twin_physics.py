@@ -32,11 +32,29 @@ from scipy import signal
 from twin import campaign as cp
 from twin import geometry as geo
 from twin.drive import Move, Profile, command_profile
-from twin.model import (CTRL_POS, Q_FLANK, Q_PITCH, Q_SCREW, Q_X, Q_Z, SENS_SERVO_FORCE,
-                        MechanicalState, apply_state, stiffness_of)
+from twin.model import (
+    CTRL_POS,
+    Q_FLANK,
+    Q_PITCH,
+    Q_SCREW,
+    Q_X,
+    Q_Z,
+    SENS_SERVO_FORCE,
+    MechanicalState,
+    apply_state,
+    stiffness_of,
+)
 from twin.scenario import DialConfig, Scenario
-from twin.simulate import (PHASE2_LEAD_IN, Condition, Simulator, dial_indicator,
-                           phase1_capture, phase1_profile, phase2_moves, phase2_trajectory)
+from twin.simulate import (
+    PHASE2_LEAD_IN,
+    Condition,
+    Simulator,
+    dial_indicator,
+    phase1_capture,
+    phase1_profile,
+    phase2_moves,
+    phase2_trajectory,
+)
 
 SCEN = Scenario()
 WORLD = cp.make_world(SCEN)
@@ -87,7 +105,7 @@ def _steady(cmd: Profile, speed: float, fs: float, trim_s: float, direction: int
         m &= np.sign(v) == direction
     edges = np.flatnonzero(np.diff(np.concatenate([[0], m.astype(int), [0]])))
     n = int(round(trim_s * fs))
-    out = [np.arange(a + n, b - n) for a, b in zip(edges[::2], edges[1::2]) if b - a > 2 * n]
+    out = [np.arange(a + n, b - n) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > 2 * n]
     return np.concatenate(out) if out else np.zeros(0, int)
 
 
@@ -157,7 +175,7 @@ def _lead_run(world, cond):
     rest)."""
     sim = Simulator(world, DT_SLOW)
     pts = (0.02,) + LEAD_POSITIONS
-    moves = [Move(a, b, LEAD_SPEED, 0.5, 1.0) for a, b in zip(pts[:-1], pts[1:])]
+    moves = [Move(a, b, LEAD_SPEED, 0.5, 1.0) for a, b in zip(pts[:-1], pts[1:], strict=True)]
     lead_in = 0.5
     cmd = command_profile(moves, sim.fs, lead_in=lead_in)
     traj = sim.run(cond, cmd, passes=1)  # b = 0: pass 1 looks the rails up at x within 0.14 µm
@@ -698,7 +716,7 @@ def _cruise_psd(x: np.ndarray, speed: np.ndarray, fs: float, omega: float, nseg:
     m = np.abs(np.abs(speed) - omega) < 0.01 * omega
     edges = np.flatnonzero(np.diff(np.concatenate([[0], m.astype(int), [0]])))
     psds = []
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
         if b - a >= nseg:
             c = (a + b) // 2
             f, p = signal.periodogram(x[c - nseg // 2:c + nseg // 2], fs, window="hann",
@@ -725,7 +743,7 @@ def _dwell_ring_frequency(acc: np.ndarray, speed: np.ndarray, fs: float, nseg: i
     still = np.abs(speed) < 0.5
     edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
     psds = []
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
         if b - a > nseg:
             f, p = signal.periodogram(acc[a:a + nseg], fs, window="boxcar", detrend="constant",
                                       nfft=8 * nseg)
@@ -794,9 +812,9 @@ def test_phase1_spectral_lines(phase1_runs):
             f, p, n = _cruise_psd(x.astype(float), sig["speed"], sig["fs_hz"], omega)
             ratios = [_line_ratio(f, p, f0) for f0 in lines]
             print(f"\n[phase1 lines] {frac:.0%} {name}: " + ", ".join(
-                f"{f0:.0f} Hz ×{r:.0f}" for f0, r in zip(lines, ratios)) + f" ({n} runs)", end="")
+                f"{f0:.0f} Hz ×{r:.0f}" for f0, r in zip(lines, ratios, strict=True)) + f" ({n} runs)", end="")
             assert n >= 4
-            assert min(ratios) >= 10.0, (name, frac, dict(zip(lines, ratios)))
+            assert min(ratios) >= 10.0, (name, frac, dict(zip(lines, ratios, strict=True)))
     print()
 
 

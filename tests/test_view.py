@@ -23,6 +23,7 @@ from tests.conftest import REPO, TWIN, run_twin
 from twin.scenario import Scenario, from_dict, to_axis
 from twin.view import EXAGGERATION, POSE_RATE_HZ, carriage_poses, hours_to_ns
 
+
 @pytest.fixture(scope="module")
 def campaign(demo_run):
     """A simulated and analysed campaign (``twin demo`` at small scale, tests/conftest.py):

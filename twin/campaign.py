@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -27,9 +27,20 @@ from twin.model import MechanicalState, stiffness_of
 from twin.scenario import Scenario, from_dict, nominal_axis_description, to_axis
 from twin.sensors import instruments as ins
 from twin.sensors.instruments import MICRO_G
-from twin.simulate import (Condition, Simulator, World, dial_indicator, phase1_capture,
-                           phase1_measure, phase1_profile, phase2_command, phase2_measure,
-                           phase2_trajectory, run_many, true_error_motions)
+from twin.simulate import (
+    Condition,
+    Simulator,
+    World,
+    dial_indicator,
+    phase1_capture,
+    phase1_measure,
+    phase1_profile,
+    phase2_command,
+    phase2_measure,
+    phase2_trajectory,
+    run_many,
+    true_error_motions,
+)
 
 KIND_WORLD, KIND_PHASE1, KIND_PHASE2, KIND_DIAL, KIND_ORIGIN = range(5)
 RAIL_MARGIN = 0.15  # m of rail modelled beyond each end of the travel
@@ -314,12 +325,12 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
     import json
 
     if unit.kind not in ("phase1", "phase2"):
-        for j, d in zip(scenario_jsons, out_dirs):
+        for j, d in zip(scenario_jsons, out_dirs, strict=True):
             run_unit(j, unit, d)
         return unit.name
     ss = [from_dict(json.loads(j)) for j in scenario_jsons]
     items = []  # (scenario, simulator, condition, command, rng or None, store)
-    for s, j, d in zip(ss, scenario_jsons, out_dirs):
+    for s, j, d in zip(ss, scenario_jsons, out_dirs, strict=True):
         store = ds.PartStore(d)
         if unit.kind == "phase1":
             sim = _simulator(s, j, s.phase1.timestep_s)
@@ -343,7 +354,7 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
     passes = 1 if unit.kind == "phase1" else 2
     for g in groups:
         trajs = run_many([(items[i][1], items[i][2]) for i in g], items[g[0]][3], passes)
-        for i, traj in zip(g, trajs):
+        for i, traj in zip(g, trajs, strict=True):
             s, sim, cond, _, rng, store = items[i]
             if unit.kind == "phase1":
                 _store_phase1(store, unit, phase1_measure(sim, s.phase1, traj, rng))
@@ -495,7 +506,7 @@ def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | P
     the first one's raises ValueError."""
     units = plan(scenarios[0])
     outs = [Path(d) for d in out_dirs]
-    for s, out in zip(scenarios, outs):
+    for s, out in zip(scenarios, outs, strict=True):
         if plan(s) != units:
             raise ValueError(f"simulate_campaigns_batched: scenario {s.name!r} (seed {s.seed}) has "
                              f"another plan than {scenarios[0].name!r}; batch only campaigns of "
@@ -510,5 +521,5 @@ def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | P
         todo = [i for i, st in enumerate(stores) if not st.has(u.kind, u.name)]
         if todo:
             run_unit_batch([payloads[i] for i in todo], u, [str(outs[i]) for i in todo])
-    for s, out in zip(scenarios, outs):
+    for s, out in zip(scenarios, outs, strict=True):
         assemble(s, out, units)

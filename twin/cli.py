@@ -5,7 +5,6 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.console import Console
@@ -26,7 +25,7 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
-def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: Optional[int]) -> dict:
+def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None) -> dict:
     from twin.campaign import CampaignDirectoryError, plan, simulate_campaign
 
     try:
@@ -61,7 +60,7 @@ def simulate(
     scenario: Path = typer.Argument(..., help="scenario TOML file"),
     out: Path = typer.Option(..., "-o", "--out", help="campaign directory to write"),
     set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE (TOML value), repeatable"),
-    workers: Optional[int] = typer.Option(None, "--workers", help="processes (default: all cores)"),
+    workers: int | None = typer.Option(None, "--workers", help="processes (default: all cores)"),
 ) -> None:
     """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed)."""
     summary = _run_simulation(scenario, out, set_, workers)
@@ -133,7 +132,8 @@ def score(
     Reads DIRECTORY/phase1/detection.json (twin detect) and DIRECTORY/backlash/backlash.json
     (twin backlash); either may be missing, not both."""
     from analysis.dataset import DatasetError
-    from analysis.scoring import ScoreError, score as score_dir, write_score
+    from analysis.scoring import ScoreError, write_score
+    from analysis.scoring import score as score_dir
 
     try:
         doc = score_dir(directory)
@@ -147,7 +147,7 @@ def score(
 def demo(
     out: Path = typer.Option(Path("runs/demo"), "-o", "--out", help="where to write the demo"),
     set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE on scenarios/demo.toml"),
-    workers: Optional[int] = typer.Option(None, "--workers", help="processes (default: all cores)"),
+    workers: int | None = typer.Option(None, "--workers", help="processes (default: all cores)"),
 ) -> None:
     """The whole chain on a small campaign (scenarios/demo.toml): simulate the Phase I reference
     data set and the campaign, run Phase I (Fisher selection, six detectors) and Phase II
@@ -186,9 +186,9 @@ def demo(
 
 @app.command("export-model")
 def export_model(
-    scenario: Optional[Path] = typer.Argument(None, help="scenario TOML (default: the paper's axis)"),
+    scenario: Path | None = typer.Argument(None, help="scenario TOML (default: the paper's axis)"),
     out: Path = typer.Option(Path("models/linear_axis.xml"), "-o", "--out"),
-    timestep: Optional[float] = typer.Option(None, help="time step, s (default: the Phase I step)"),
+    timestep: float | None = typer.Option(None, help="time step, s (default: the Phase I step)"),
 ) -> None:
     """Write the MJCF of the axis in its new, healthy state: a complete model that holds still,
     e.g. to open in MuJoCo's viewer (`python -m mujoco.viewer --mjcf models/linear_axis.xml`)."""
@@ -214,7 +214,7 @@ def export_model(
 def detect(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
     reference: Path = typer.Option(..., "--reference", help="reference data set directory (Fisher selection)"),
-    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
+    out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
     method: list[str] = typer.Option([], "--method", help="method(s) to run (default: all six)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
 ) -> None:
@@ -249,7 +249,7 @@ def detect(
 @app.command()
 def backlash(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 only for the plot)"),
-    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/backlash)"),
+    out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/backlash)"),
     strict: bool = typer.Option(False, "--strict", help="exit 2 on a bad run instead of skipping it"),
     plots: bool = typer.Option(True, "--plots/--no-plots", help="write the PNG figures"),
     process_noise: str = typer.Option("1e-23", "--process-noise",
@@ -325,11 +325,11 @@ def backlash(
 @app.command()
 def sweep(
     sweep_file: Path = typer.Argument(..., help="sweep TOML file (see twin/sweep.py and scenarios/sweeps/)"),
-    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default: runs/sweeps/<file stem>)"),
-    scheduler: Optional[str] = typer.Option(None, "--scheduler",
+    out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: runs/sweeps/<file stem>)"),
+    scheduler: str | None = typer.Option(None, "--scheduler",
                                             help="address of a running dask.distributed scheduler; "
                                                  "OUT must be on a file system its workers share"),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1,
+    workers: int | None = typer.Option(None, "--workers", min=1,
                                           help="run on a dask LocalCluster of N worker processes"),
 ) -> None:
     """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
@@ -453,12 +453,12 @@ def _print_diagnosis(res: dict) -> None:
 def diagnose(
     real_dir: Path = typer.Argument(..., help="directory with the recording's measurements.h5 (no truth needed)"),
     scenario: Path = typer.Option(..., "--scenario", help="the scenario meant to describe the recorded axis"),
-    out: Optional[Path] = typer.Option(None, "-o", "--out", help="output directory (default REAL_DIR/diagnosis)"),
+    out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default REAL_DIR/diagnosis)"),
     overrides: list[str] = typer.Option([], "--set", help="scenario override KEY=VALUE (repeatable)"),
     seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the seed-to-seed spread"),
     alpha: float = typer.Option(0.01, "--alpha", min=1e-9, max=0.5, help="family-wise error rate"),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
-    cache: Optional[Path] = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
+    cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
 ) -> None:
     """Where the twin and the recording differ, which effect of the library explains it, and how
     far the gap shrinks once it is added (held-out data). Writes OUT/diagnosis.json and
@@ -502,7 +502,7 @@ def diagnose_benchmark(
     pairs: int = typer.Option(5, "--pairs", min=0),
     rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
     seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the spread"),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1),
+    workers: int | None = typer.Option(None, "--workers", min=1),
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
@@ -542,12 +542,12 @@ def diagnose_benchmark(
 def view(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5, phase1/, "
                                                "backlash/ when present)"),
-    save: Optional[Path] = typer.Option(None, "--save", help="write the recording here "
+    save: Path | None = typer.Option(None, "--save", help="write the recording here "
                                                             "(default: DIRECTORY/view.rrd)"),
     serve: bool = typer.Option(False, "--serve", help="serve a web viewer instead and block until Ctrl-C"),
-    session: Optional[str] = typer.Option(None, "--session", help="Phase II session shown in 3D "
+    session: str | None = typer.Option(None, "--session", help="Phase II session shown in 3D "
                                                                   "(default: the last)"),
-    run_: Optional[str] = typer.Option(None, "--run", help="run of that session (default: its first)"),
+    run_: str | None = typer.Option(None, "--run", help="run of that session (default: its first)"),
     capture: list[str] = typer.Option([], "--capture", help="Phase I capture(s) to show, repeatable "
                                                            "(default: the first and the last)"),
     exaggeration: float = typer.Option(2000.0, "--exaggeration",
@@ -601,8 +601,9 @@ def view(
 # --- twin report (helper: report) --------------------------------------------------------------
 @app.command()
 def report(
-    directory: Path = typer.Argument(..., help="analysed campaign directory (truth.h5, phase1/, backlash/, score.json)"),
-    out: Optional[Path] = typer.Option(None, "-o", "--out", help="report folder (default: DIRECTORY/report)"),
+    directory: Path = typer.Argument(
+        ..., help="analysed campaign directory (truth.h5, phase1/, backlash/, score.json)"),
+    out: Path | None = typer.Option(None, "-o", "--out", help="report folder (default: DIRECTORY/report)"),
 ) -> None:
     """HTML report: the scenario, the scores of both phases, and the paper's Table III and Figs. 6,
     10-13 side by side with ours. Writes OUT/index.html and the PNGs it shows into OUT/figures;

@@ -32,11 +32,11 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -133,7 +133,7 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
     payloads = [s.to_json() for s in scenarios]
     paths: list[str | None] = [None] * len(payloads)
     todo = []
-    for i, p in enumerate(payloads):
+    for i in range(len(payloads)):
         f = Path(cache_dir) / _key(scenarios[i]) / "signature.npz"
         if f.exists():
             paths[i] = str(f)
@@ -153,7 +153,7 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
 
     def record(batch: list[str], result: list[str]) -> int:
         n = 0
-        for payload, path in zip(batch, result):
+        for payload, path in zip(batch, result, strict=True):
             for i in unique[payload]:
                 paths[i] = path
                 n += 1
@@ -191,7 +191,7 @@ def grid_points(effect: Effect) -> list[GridPoint]:
     out = []
     for index in np.ndindex(*[len(a) for a in axes]):
         out.append(GridPoint(effect.name, tuple(int(i) for i in index),
-                             {p.name: float(p.grid[i]) for p, i in zip(effect.params, index)}))
+                             {p.name: float(p.grid[i]) for p, i in zip(effect.params, index, strict=True)}))
     return out
 
 

@@ -34,16 +34,23 @@ import csv
 import json
 import os
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
-from twin.diagnose import (DEFAULT_SEEDS, build_ensemble, diagnose_signatures, evaluate_all,
-                           json_safe, with_effects, with_seed)
+from twin.diagnose import (
+    DEFAULT_SEEDS,
+    build_ensemble,
+    diagnose_signatures,
+    evaluate_all,
+    json_safe,
+    with_effects,
+    with_seed,
+)
 from twin.effects import LIBRARY
 from twin.scenario import Scenario
 
@@ -158,7 +165,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     sigs = evaluate_all(reals, cache, workers, prog("recordings"))
     t_real = time.perf_counter() - t0 - t_ens
     rows = []
-    for case, sig in zip(cases, sigs):
+    for case, sig in zip(cases, sigs, strict=True):
         res, _ = diagnose_signatures({p: sig[p] for p in PARTS}, ens, case.library, alpha)
         rows.append(_score_case(case, res))
     t_all = time.perf_counter() - t0

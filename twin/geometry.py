@@ -585,7 +585,7 @@ def lead_error(theta, spec: ScrewSpec) -> np.ndarray:
     """
     th = _as_1d(theta)
     e = spec.cumulative_lead_error_m_per_m * spec.radius_per_rad_m * th
-    for h, (amp, phase) in enumerate(zip(spec.cyclic_lead_error_m, spec.cyclic_lead_phase_rad),
+    for h, (amp, phase) in enumerate(zip(spec.cyclic_lead_error_m, spec.cyclic_lead_phase_rad, strict=True),
                                      start=1):
         e = e + amp * np.sin(h * th + phase)
     return e

@@ -11,9 +11,9 @@ Used by ``twin demo`` and by every point of ``twin sweep``, so both write the sa
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from analysis.dataset import open_measurements
 from analysis.scoring import score, write_score

@@ -136,7 +136,7 @@ class TruckLayout:
     height_below_com: float
 
     @classmethod
-    def of(cls, axis: Axis) -> "TruckLayout":
+    def of(cls, axis: Axis) -> TruckLayout:
         a = axis.carriage.truck_spacing / 2.0
         w = axis.carriage.rail_spacing / 2.0
         # FL, FR, RL, RR: front = +X, left = −Y (rail 0), right = +Y (rail 1).
@@ -198,7 +198,7 @@ def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str
     flank_kv = 2.0 * math.sqrt(flank_kp * FLANK_MASS)
 
     truck_tendons = []
-    for i, name in enumerate(TRUCKS):
+    for i in range(len(TRUCKS)):
         xi, yi, h = layout.x[i], layout.y[i], layout.height_below_com
         truck_tendons.append(
             f'    <fixed name="truck_v{i}" {spring(1 + 2 * i)}>\n'

@@ -60,7 +60,7 @@ class AxisConfig(_Section):
     torque_ripple_per_rev: int = Field(8, ge=1)
 
     @model_validator(mode="after")
-    def _preload_rated(self) -> "AxisConfig":
+    def _preload_rated(self) -> AxisConfig:
         limit = 0.1 * self.rated_dynamic_load_N
         if self.preload_N > limit:
             raise ValueError(
@@ -108,7 +108,8 @@ class DegradationConfig(_Section):
     wear_rate_um_per_kh: float = Field(1.4, ge=0, le=1000)
     scatter_um: float = Field(2.0, ge=0, le=100)
     backlash_gain: float = Field(2.83, gt=0, le=20)
-    truck_wear_coupling: float = Field(0.0, ge=0, le=1, description="fraction of the nut's preload loss that the trucks share")
+    truck_wear_coupling: float = Field(
+        0.0, ge=0, le=1, description="fraction of the nut's preload loss that the trucks share")
     table_hours: list[float] = Field(default_factory=list)
     table_preload_fraction: list[float] = Field(default_factory=list)
     table_backlash_um: list[float] = Field(default_factory=list)
@@ -120,7 +121,7 @@ class DegradationConfig(_Section):
         "(0 = drag independent of temperature; about 0.03 /K for mineral greases)"))
 
     @model_validator(mode="after")
-    def _table(self) -> "DegradationConfig":
+    def _table(self) -> DegradationConfig:
         if self.law == "table":
             n = len(self.table_hours)
             if n == 0 or len(self.table_preload_fraction) != n or len(self.table_backlash_um) != n:
@@ -131,7 +132,7 @@ class DegradationConfig(_Section):
             if any(b < 0 for b in self.table_backlash_um):
                 raise ValueError(f"table_backlash_um = {self.table_backlash_um} has a negative "
                                  "backlash: allowed values are >= 0 µm")
-            if any(b <= a for a, b in zip(self.table_hours, self.table_hours[1:])):
+            if any(b <= a for a, b in zip(self.table_hours, self.table_hours[1:], strict=True)):
                 raise ValueError(f"table_hours = {self.table_hours}: allowed strictly increasing hours")
             if self.table_hours[0] < 0:
                 raise ValueError(f"table_hours = {self.table_hours}: allowed hours >= 0")
@@ -148,11 +149,14 @@ class Phase1Config(_Section):
     end_mm: float = Field(330.0, ge=0)
     dwell_s: float = Field(1.0, ge=0)
     capture_s: float = Field(10.0, gt=0, le=120)
-    fs_hz: float = Field(10000.0, ge=2000, le=100000, description="DAQ and controller rate of all eight Phase I signals")
+    fs_hz: float = Field(
+        10000.0, ge=2000, le=100000, description="DAQ and controller rate of all eight Phase I signals")
     captures_per_sample: int = Field(10, ge=1)
     capture_interval_minutes: float = Field(30.0, gt=0)
     sample_interval_hours: float = Field(84.0, gt=0)
-    timestep_s: float = Field(2e-4, gt=0, le=1e-3, description="simulation step; the nut accelerometers are upsampled to their DAQ rate when it is coarser")
+    timestep_s: float = Field(
+        2e-4, gt=0, le=1e-3,
+        description="simulation step; the nut accelerometers are upsampled to their DAQ rate when it is coarser")
 
 
 class Phase2Config(_Section):
@@ -165,10 +169,11 @@ class Phase2Config(_Section):
     session_interval_hours: float = Field(84.0, gt=0)
     timestep_s: float = Field(2e-4, gt=0, le=1e-3)
     origin_offset_max_mm: float = Field(2.0, ge=0, le=20)
-    session_hours: list[float] = Field(default_factory=list, description="explicit session hours; overrides the interval")
+    session_hours: list[float] = Field(
+        default_factory=list, description="explicit session hours; overrides the interval")
 
     @model_validator(mode="after")
-    def _speeds(self) -> "Phase2Config":
+    def _speeds(self) -> Phase2Config:
         if any(h < 0 for h in self.session_hours):
             raise ValueError(f"session_hours = {self.session_hours}: allowed hours >= 0")
         if not self.speeds_mm_s or any(not 0 < s <= 2000 for s in self.speeds_mm_s):
@@ -191,7 +196,8 @@ class PauseConfig(_Section):
 
 
 class CampaignConfig(_Section):
-    scale: float = Field(1.0, gt=0, le=1, description="reduced scale: multiplies captures per sample and runs per session")
+    scale: float = Field(
+        1.0, gt=0, le=1, description="reduced scale: multiplies captures per sample and runs per session")
     total_hours: float = Field(8693.0, gt=0)
     warmup_hours: float = Field(2.0, ge=0)
     pauses: list[PauseConfig] = Field(default_factory=lambda: [
@@ -241,7 +247,7 @@ class Scenario(_Section):
     effects: EffectsConfig = Field(default_factory=EffectsConfig)
 
     @model_validator(mode="after")
-    def _strokes(self) -> "Scenario":
+    def _strokes(self) -> Scenario:
         if self.campaign.warmup_hours > self.campaign.total_hours:
             raise ValueError(f"campaign.warmup_hours = {self.campaign.warmup_hours:g} exceeds "
                              f"campaign.total_hours = {self.campaign.total_hours:g}: allowed "
@@ -260,7 +266,7 @@ class Scenario(_Section):
         return self
 
     @model_validator(mode="after")
-    def _base_mode(self) -> "Scenario":
+    def _base_mode(self) -> Scenario:
         fx = self.effects
         if fx.base_modal_mass_kg > 0:
             from twin.model import BaseMode, check_base_mode

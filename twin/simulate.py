@@ -36,13 +36,36 @@ from scipy import signal
 from twin import geometry as geo
 from twin.axis import Axis
 from twin.drive import Move, Profile, command_profile, reciprocating
-from twin.model import (CTRL_FF, CTRL_FLANK_FF, CTRL_FLANK_POS, CTRL_FLANK_VEL, CTRL_NUT_AXIAL,
-                        CTRL_POS, CTRL_RIPPLE, CTRL_RUNOUT, CTRL_STRIBECK, CTRL_TRUCK_L,
-                        CTRL_TRUCK_V, CTRL_VEL, FLANK_MASS, NCTRL, Q_SCREW, Q_X, SENS_IMU_ACC,
-                        SENS_IMU_GYRO, SENS_NUT1_ACC, SENS_NUT2_ACC, SENS_SERVO_FORCE, BaseMode,
-                        MechanicalState, apply_state, build_model, initial_state, stiffness_of)
+from twin.model import (
+    CTRL_FF,
+    CTRL_FLANK_FF,
+    CTRL_FLANK_POS,
+    CTRL_FLANK_VEL,
+    CTRL_NUT_AXIAL,
+    CTRL_POS,
+    CTRL_RIPPLE,
+    CTRL_RUNOUT,
+    CTRL_STRIBECK,
+    CTRL_TRUCK_L,
+    CTRL_TRUCK_V,
+    CTRL_VEL,
+    FLANK_MASS,
+    NCTRL,
+    Q_SCREW,
+    Q_X,
+    SENS_IMU_ACC,
+    SENS_IMU_GYRO,
+    SENS_NUT1_ACC,
+    SENS_NUT2_ACC,
+    SENS_SERVO_FORCE,
+    BaseMode,
+    MechanicalState,
+    apply_state,
+    build_model,
+    initial_state,
+    stiffness_of,
+)
 from twin.sensors import instruments as ins
-
 
 SETTLE_TIME = 0.1  # s of standstill simulated before t = 0 of every rollout
 
@@ -188,7 +211,8 @@ class Condition:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """A rollout, row k at t_k = k·dt (state and sensors). t (n,) s; qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m]
+    """A rollout, row k at t_k = k·dt (state and sensors). t (n,) s;
+    qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m] or
     (n, 9) with a compliant base (``base_x`` m last); qvel likewise;
     sens (n, 14) MuJoCo sensors (see :mod:`twin.model`); cmd: the commanded profile (controller
     frame); theta_cmd (n,) rad."""
@@ -317,7 +341,7 @@ class Simulator:
         return (m.nq, m.nv, m.nu, m.na, m.nsensordata, self.timestep)
 
 
-def run_many(items: list[tuple["Simulator", Condition]], cmd: Profile, passes: int = 2,
+def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int = 2,
              nthread: int | None = None) -> list[Trajectory]:
     """Roll out several (simulator, condition) pairs under one command in one
     ``mujoco.rollout`` call.
@@ -346,7 +370,7 @@ def run_many(items: list[tuple["Simulator", Condition]], cmd: Profile, passes: i
     else:
         direction = np.ones_like(cmd.v)
     models, s0s, x_rails, used = [], [], [], set()
-    for (sim, cond), xc in zip(items, x_cmd):
+    for (sim, cond), xc in zip(items, x_cmd, strict=True):
         model = sim.model if id(sim) not in used else copy.deepcopy(sim.model)
         used.add(id(sim))
         ax = sim.world.axis
@@ -375,13 +399,13 @@ def run_many(items: list[tuple["Simulator", Condition]], cmd: Profile, passes: i
     hold = Profile(t=np.arange(n_settle) * first.timestep, x=np.full(n_settle, cmd.x[0]),
                    v=np.zeros(n_settle), a=np.zeros(n_settle))
     ctrl = np.stack([sim.controls(c, hold, np.full(n_settle, xr[0]))
-                     for (sim, c), xr in zip(items, x_rails)])
+                     for (sim, c), xr in zip(items, x_rails, strict=True)])
     settled, _ = rollout.rollout(models, datas, np.stack(s0s), ctrl)
     s0s = list(settled[:, -1, :])
     for s0 in s0s:
         s0[0] = 0.0  # time
     for _ in range(max(passes, 1)):
-        ctrl = np.stack([sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails)])
+        ctrl = np.stack([sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)])
         state, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
         # Rollout row k is the state after step k; prepend the initial state so that row k
         # is the state at t_k, the one step k (its rails, its sensors) sees.
@@ -390,7 +414,7 @@ def run_many(items: list[tuple["Simulator", Condition]], cmd: Profile, passes: i
     t = np.arange(cmd.t.size) * first.timestep
     return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
                        cmd=cmd, theta_cmd=xc / sim.world.axis.screw.radius_per_rad)
-            for st, se, xc, (sim, _) in zip(state, sens, x_cmd, items)]
+            for st, se, xc, (sim, _) in zip(state, sens, x_cmd, items, strict=True)]
 
 
 # ---------------------------------------------------------------------------------------------

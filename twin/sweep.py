@@ -220,7 +220,7 @@ class RandomSampling(_Model):
         out = []
         for row in u:
             vals = []
-            for a, x in zip(self.axis, row):
+            for a, x in zip(self.axis, row, strict=True):
                 lo, hi = float(a.low), float(a.high)
                 if a.scale == "log":
                     vals.append(_tidy(math.exp(math.log(lo) + x * (math.log(hi) - math.log(lo)))))
@@ -550,7 +550,7 @@ def plan_sweep(path: str | Path) -> Plan:
             values: dict[str, Any] = {}
             data = copy.deepcopy(base)
             desc = []
-            for keys, v in zip(all_keys, vals):
+            for keys, v in zip(all_keys, vals, strict=True):
                 for k in keys:
                     values[k] = v
                     set_key(data, k, v, f"{src}: point {point}")
@@ -692,7 +692,7 @@ def _diff(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
     if isinstance(a, list) and isinstance(b, list) and len(a) == len(b) and a != b and \
             any(isinstance(x, (dict, list)) for x in a):
         out = []
-        for i, (x, y) in enumerate(zip(a, b)):
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
             out += _diff(x, y, f"{prefix}[{i}]")
         return out
     return [] if a == b else [(prefix, a, b)]
@@ -947,7 +947,7 @@ def summary(plan: Plan, df, methods: tuple[str, ...] = ("pca_t2",)) -> tuple[lis
             return "-"
         return f"{x.mean():.3g}" + (f"±{x.std(ddof=1):.2g}" if len(x) > 1 else "")
 
-    for point, g in df.groupby("point", sort=True):
+    for _point, g in df.groupby("point", sort=True):
         row = [f"{g[c].iloc[0]:.4g}" for c in plan.primary] + [str(len(g))]
         row += [ms(g[c]) for c in score_cols]
         for m in p1:

@@ -109,7 +109,7 @@ def _phase2_figure(plan, df, x: str, path: Path) -> Path | None:
     plt = _plt()
     group = _group_column(plan, df, x, panels[0][0])
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False)
-    for ax, (col, title) in zip(axes[0], panels):
+    for ax, (col, title) in zip(axes[0], panels, strict=True):
         ax.plot(df[x], df[col], ".", color="0.75", zorder=0)
         if group is None:
             _line(ax, df, x, df[col], None)
@@ -140,7 +140,7 @@ def _phase1_figure(plan, df, x: str, methods: list[str], path: Path) -> Path | N
         _line(axes[0][2], df, x, det, m)
     for ax, title in zip(axes[0], ("detection delay after the onset (h)",
                                    "false-alarm rate (healthy post-baseline samples)",
-                                   "detection rate (detected after the onset)")):
+                                   "detection rate (detected after the onset)"), strict=True):
         _xaxis(ax, df, x, log_x, len(plan.tied[x]) - 1)
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3)
@@ -164,7 +164,7 @@ def roc_table(recs):
             roc = r.get("roc")
             if not roc:
                 continue
-            for f, fa, d in zip(roc["threshold_factor"], roc["false_alarm_rate"], roc["detected"]):
+            for f, fa, d in zip(roc["threshold_factor"], roc["false_alarm_rate"], roc["detected"], strict=True):
                 a = acc.setdefault((m, float(f)), {"fa": [], "det": []})
                 a["det"].append(bool(d))
                 if fa is not None:

@@ -194,7 +194,7 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
     after = float(np.sum((z_ho[sel] - dt) ** 2))
     noise = 2.0 * float(np.sqrt(np.sum(dt ** 2)))
     threshold = float(stats.chi2.ppf(1.0 - alpha, max(len(cand.params), 1))) + 3.0 * noise
-    return Fit(name=cand.name, params={a.name: float(v) for a, v in zip(cand.params, p_best)},
+    return Fit(name=cand.name, params={a.name: float(v) for a, v in zip(cand.params, p_best, strict=True)},
                interval=interval, cal_chi2=float(chi2[best]), heldout_before=before,
                heldout_after=after, gain_noise_sd=noise, gain_threshold=threshold,
                delta_cal=d_cal, delta_heldout=d_ho)
@@ -230,7 +230,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
         "heldout_gap_before": g_before, "heldout_gap_critical": crit,
     }
     gaps_cal = g.region_gaps(z0["cal"], regions)
-    sig_keys = {r.key for r, s in zip(regions, select) if s}
+    sig_keys = {r.key for r, s in zip(regions, select, strict=True) if s}
     if n_sel == 0 or g_before <= crit:
         out.update(verdict=NO_GAP, ranking=[], added=[], heldout_gap_after=g_before,
                    heldout_shrink=0.0, regions=_regions(regions, z0, z0, select, sig_keys, gaps_cal),
@@ -281,7 +281,7 @@ def _regions(regions, z_before, z_after, select, sig_keys, gaps_cal) -> list[dic
     before = g.region_gaps(z_before["heldout"], regions)
     after = g.region_gaps(z_after["heldout"], regions)
     n_sig: dict[tuple, int] = {}
-    for r, s in zip(regions, select):
+    for r, s in zip(regions, select, strict=True):
         if s:
             n_sig[r.key] = n_sig.get(r.key, 0) + 1
     rows = []

@@ -46,7 +46,7 @@ class Spread:
 def check_same(a: Signature, b: Signature, what_a: str, what_b: str) -> None:
     """Raise :class:`GapError` unless the two signatures hold the same statistics."""
     if len(a.regions) != len(b.regions) or any(
-            ra.key != rb.key for ra, rb in zip(a.regions, b.regions)):
+            ra.key != rb.key for ra, rb in zip(a.regions, b.regions, strict=True)):
         ka = {r.key for r in a.regions}
         kb = {r.key for r in b.regions}
         only_a = sorted(" ".join(k) for k in ka - kb)[:5]

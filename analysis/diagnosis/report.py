@@ -17,8 +17,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from analysis.diagnosis.signature import (OPERATING_PHASES, PHASE1_BANDS_HZ, PHASE1_CHANNELS,  # noqa: E402
-                                          PHASE2_CHANNELS, Region, _band_labels)
+from analysis.diagnosis.signature import (  # noqa: E402
+    OPERATING_PHASES,
+    PHASE1_BANDS_HZ,
+    PHASE1_CHANNELS,
+    PHASE2_CHANNELS,
+    Region,
+    _band_labels,
+)
 from analysis.phase2.traces import DOFS  # noqa: E402
 
 
@@ -26,7 +32,7 @@ def _cells(z: np.ndarray, regions, rows, cols, pick) -> np.ndarray:
     """(len(rows), len(cols)) mean z² of the statistics for which pick(region) = (row, col)."""
     acc = np.zeros((len(rows), len(cols)))
     cnt = np.zeros_like(acc)
-    for v, r in zip(z, regions):
+    for v, r in zip(z, regions, strict=True):
         rc = pick(r)
         if rc is None or not np.isfinite(v) or rc[0] not in rows or rc[1] not in cols:
             continue

@@ -116,7 +116,7 @@ def _part_of(names: list[str], part: str) -> list[str]:
 
 
 def _band_labels(edges) -> list[str]:
-    return [f"{a:g}-{b:g} Hz" for a, b in zip(edges[:-1], edges[1:])]
+    return [f"{a:g}-{b:g} Hz" for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
 def _band_powers(x: np.ndarray, fs: float, edges, nperseg: int) -> np.ndarray:
@@ -125,7 +125,7 @@ def _band_powers(x: np.ndarray, fs: float, edges, nperseg: int) -> np.ndarray:
     f, p = signal.welch(x, fs=fs, nperseg=nper, axis=0, detrend="constant")
     df = f[1] - f[0]
     out = np.empty((x.shape[1], len(edges) - 1))
-    for i, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+    for i, (a, b) in enumerate(zip(edges[:-1], edges[1:], strict=True)):
         sel = (f >= a) & (f < b)
         out[:, i] = np.log10(p[sel].sum(axis=0) * df + _TINY) if sel.any() else np.nan
     return out
@@ -201,13 +201,13 @@ def _phase1(m: Measurements, part: str, b: _Builder) -> None:
                 "diagnosis needs at least 2 per sample (even ones to fit, odd ones held out)")
         hours = float(np.mean([c.hours for c in caps]))
         stats = np.nanmean([_phase1_capture_stats(c) for c in caps], axis=0)
-        for v, r in zip(stats, _phase1_regions(hours)):
+        for v, r in zip(stats, _phase1_regions(hours), strict=True):
             b.add(v, r)
         summaries = [summarise_capture(c, m.label) for c in caps]
         if templates is None:
             templates = transient_templates(summaries)
         feats = sample_features(summaries, templates)
-        for name, v in zip(FEATURE_NAMES, feats):
+        for name, v in zip(FEATURE_NAMES, feats, strict=True):
             # Line amplitudes and band energies are positive and skewed: log10 makes them
             # closer to Gaussian from seed to seed.
             if name.startswith(("amp", "band")):
@@ -259,7 +259,7 @@ def _phase2_run_stats(run) -> tuple[dict, np.ndarray]:
 def _segments(x: np.ndarray, margin: float) -> list[tuple[float, float]]:
     lo, hi = x[0] + margin, x[-1] - margin
     edges = np.linspace(lo, hi, POSITION_SEGMENTS + 1)
-    return list(zip(edges[:-1], edges[1:]))
+    return list(zip(edges[:-1], edges[1:], strict=True))
 
 
 def _profile(em) -> tuple[np.ndarray, np.ndarray]:

@@ -83,7 +83,7 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
     total = float(np.sum(np.nan_to_num(fisher, posinf=0.0)))
     selection = {
         "selected": [ref.names[i] for i in selected],
-        "fisher_scores": {n: (float(s) if np.isfinite(s) else None) for n, s in zip(ref.names, fisher)},
+        "fisher_scores": {n: (float(s) if np.isfinite(s) else None) for n, s in zip(ref.names, fisher, strict=True)},
         "cumulative_fraction": (float(np.sum(fisher[selected]) / total) if total > 0 else None),
         "threshold_fraction": fraction,
         "reference_samples": {"healthy": n_h, "backlash": n_f, "unused": int(np.sum(labels < 0))},

@@ -49,7 +49,7 @@ def plot_fig6(path: Path, hours: np.ndarray, results: dict[str, dict], titles: d
     names = list(results)
     rows = max(1, (len(names) + 1) // 2)
     fig, axes = plt.subplots(rows, 2 if len(names) > 1 else 1, figsize=(11, 3.0 * rows), squeeze=False)
-    for ax, name in zip(axes.ravel(), names):
+    for ax, name in zip(axes.ravel(), names, strict=True):
         s = np.asarray(results[name]["scores"], dtype=float)
         thr = results[name]["threshold"]
         ax.plot(hours[:n_baseline], s[:n_baseline], "o-", ms=3, color="tab:green", label="baseline")

@@ -51,7 +51,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """``[start, stop)`` of every run of True in a boolean (n,) array."""
     d = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
     starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-    return list(zip(starts.tolist(), stops.tolist()))
+    return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 
 def segment_capture(

@@ -28,9 +28,8 @@ the stationary parts, group-delay compensation, trimming of the ringing after ea
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -353,14 +352,14 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                           _new_layer(p, speeds[:1], slow_dx_m, trim_s, trim_end_s,
                                      "the slowest speed")]
             gridded = [_grid_run(p, layer, sm, label=label, **lkw)
-                       for layer, lkw in zip(layers, layer_kw)]
+                       for layer, lkw in zip(layers, layer_kw, strict=True)]
         except BadRunError as e:
             if on_bad_run == "raise":
                 raise
             skipped.append((name, str(e)))
             continue
         expected = exp
-        for layer, (accs, gyros) in zip(layers, gridded):
+        for layer, (accs, gyros) in zip(layers, gridded, strict=True):
             for k in layer.acc:
                 layer.acc[k] += accs[k]
                 layer.gyro[k] += gyros[k]

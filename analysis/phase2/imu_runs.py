@@ -91,7 +91,7 @@ class RunSegments:
 def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
     """(start, stop) index pairs of the True stretches of a boolean array."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
 def segment_run(position_cmd: np.ndarray, fs_hz: float, *, settle_s: float = 0.2,

@@ -83,7 +83,7 @@ def write_figures(result, out_dir, trend=None, dial=None, injected=None) -> list
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.5))
     j = DOFS.index("E_YX")
-    for ax, zoom in zip(axes, (None, 3e-3)):
+    for ax, zoom in zip(axes, (None, 3e-3), strict=True):
         for tr, label in ((first, f"{ems[0].hours:g} h"), (last, f"{ems[-1].hours:g} h")):
             w = winfilt(tr.forward[j], tr.dx_m, est.cutoff_wavelength_m, est.window_definition)
             x = tr.x_m
@@ -175,7 +175,7 @@ def write_figures(result, out_dir, trend=None, dial=None, injected=None) -> list
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     series = (("shift", [s.delta_backlash_shift_m for s in ses], "signal position shifts (Eq. 6)"),
               ("pitch", [s.delta_backlash_pitch_m for s in ses], "perceived pitch (Eq. 9)"))
-    for ax, (key, vals, title) in zip(axes, series):
+    for ax, (key, vals, title) in zip(axes, series, strict=True):
         ax.plot(hours, np.asarray(vals) * 1e6, "o", ms=3, label="estimate")
         if key == "shift" and trend is not None:
             ax.plot(trend.hours, trend.smoothed * 1e6, "-", label="Kalman-smoothed")

@@ -17,8 +17,8 @@ import numpy as np
 
 from analysis.dataset import DatasetError, open_measurements, open_truth
 from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash
-from analysis.phase2.traces import DOFS
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis
+from analysis.phase2.traces import DOFS
 
 __all__ = ["BacklashRun", "run"]
 

@@ -2,8 +2,16 @@
 each with its physical parameters, prior ranges and physical source; see
 :mod:`twin.effects.base`)."""
 
-from twin.effects import (ball_recirculation, base_resonance, cogging, imu_misalignment,
-                          origin_variability, servo_dynamics, stribeck_friction, thermal_growth)
+from twin.effects import (
+                          ball_recirculation,
+                          base_resonance,
+                          cogging,
+                          imu_misalignment,
+                          origin_variability,
+                          servo_dynamics,
+                          stribeck_friction,
+                          thermal_growth,
+)
 from twin.effects.base import Effect, Param
 
 LIBRARY: dict[str, Effect] = {m.EFFECT.name: m.EFFECT for m in (

@@ -85,7 +85,7 @@ class Effect:
             for key in p.keys:
                 cur = _get(data, key)
                 u = v * p.factor
-                new = {"add": lambda: cur + u, "scale": lambda: cur * u, "set": lambda: u}[p.mode]()
+                new = cur + u if p.mode == "add" else cur * u if p.mode == "scale" else u
                 _set(data, key, int(new) if isinstance(cur, int) and not isinstance(cur, bool)
                      and float(new).is_integer() else new)
         return from_dict(data, source=f"scenario with effect {self.name}")
