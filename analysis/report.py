@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.dataset import DatasetError, open_measurements, open_truth
+from analysis.files import read_json, write_text
 from analysis.scoring import ScoreError, score, write_score
 
 __all__ = [
@@ -144,13 +145,8 @@ class Inputs:
     notes: list[str] = field(default_factory=list)
 
 
-def _read_json(path: Path) -> dict | None:
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ReportError(f"{path}: not valid JSON ({exc}); rerun the command that writes it") from None
+def _read_optional_json(path: Path, what: str) -> dict | None:
+    return read_json(path, what, error=ReportError, missing_ok=True)
 
 
 def _needs_score(d: Path) -> bool:
@@ -159,7 +155,7 @@ def _needs_score(d: Path) -> bool:
     if not path.is_file():
         return True
     try:
-        _read_json(path)
+        read_json(path, "the scores of `twin score`", error=ReportError)
     except ReportError:
         return True
     t = path.stat().st_mtime
@@ -197,9 +193,12 @@ def read_inputs(directory: str | Path) -> Inputs:
     if (d / "measurements.h5").is_file():
         with open_measurements(d / "measurements.h5") as m:
             inp.axis = m.axis()
-    inp.detection = _read_json(d / "phase1" / "detection.json")
-    inp.details = _read_json(d / "phase1" / "detection_details.json")
-    inp.backlash = _read_json(d / "backlash" / "backlash.json")
+    inp.detection = _read_optional_json(d / "phase1" / "detection.json",
+                                        "the Phase I detection results of `twin detect`")
+    inp.details = _read_optional_json(d / "phase1" / "detection_details.json",
+                                      "the Phase I details of `twin detect`")
+    inp.backlash = _read_optional_json(d / "backlash" / "backlash.json",
+                                       "the Phase II backlash results of `twin backlash`")
     has_outputs = inp.detection is not None or inp.backlash is not None
     if inp.scenario is not None and has_outputs and _needs_score(d):
         inp.score = score(d)
@@ -210,7 +209,7 @@ def read_inputs(directory: str | Path) -> Inputs:
         except OSError as exc:
             inp.notes.append(f"score.json computed for this report but not written ({exc}).")
     else:
-        inp.score = _read_json(d / "score.json")
+        inp.score = _read_optional_json(d / "score.json", "the scores of `twin score`")
     if inp.onset_hours is None and inp.score and inp.score.get("phase1"):
         inp.onset_hours = inp.score["phase1"].get("onset_hours")
     if inp.onset_hours is None and inp.details:
@@ -950,10 +949,7 @@ def render(directory: str | Path, out: str | Path | None = None) -> Report:
     doc = ("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
            f"<title>{_e(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
            + "\n".join(body) + "\n</body>\n</html>\n")
-    index = out / "index.html"
-    tmp = out / "index.html.tmp"
-    tmp.write_text(doc, encoding="utf-8")
-    tmp.replace(index)
+    index = write_text(out / "index.html", doc)
     return Report(index=index, figures=figs.written, missing=missing, notes=notes)
 
 

@@ -25,7 +25,6 @@ Units: the JSON carries µm, µrad and h in its key names; :func:`flat` gives on
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict
 from pathlib import Path
@@ -33,12 +32,14 @@ from pathlib import Path
 import numpy as np
 
 from analysis.dataset import DatasetError, open_truth
+from analysis.files import read_json, write_json
+from analysis.injected import injected_backlash_um
 from analysis.phase1.scoring import score_method
+from analysis.phase2.error_motion_file import read_error_motions
 from analysis.phase2.fusion import remove_unobservable
 from analysis.phase2.traces import DOFS
-from analysis.phase2.workflow import read_error_motions
 
-__all__ = ["ScoreError", "THRESHOLD_FACTORS", "flat", "injected_change_um", "score", "write_score"]
+__all__ = ["ScoreError", "THRESHOLD_FACTORS", "flat", "score", "write_score"]
 
 THRESHOLD_FACTORS = tuple(float(f) for f in np.round(np.logspace(-2, 2, 17, base=2), 6))
 LIMIT_UM = 10.0
@@ -49,14 +50,6 @@ class ScoreError(ValueError):
     """A campaign directory that cannot be scored (names the file and what is missing)."""
 
 
-def _read_json(path: Path) -> dict | None:
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ScoreError(f"{path}: not valid JSON ({exc}); rerun the analysis that writes it") from None
-
 
 def _none(x) -> float | None:
     return None if x is None or not math.isfinite(float(x)) else float(x)
@@ -64,10 +57,12 @@ def _none(x) -> float | None:
 
 def score_phase1(directory: Path, onset_hours: float | None) -> dict | None:
     """Phase I scores from ``DIR/phase1``; None if ``detection.json`` is absent."""
-    det = _read_json(directory / "phase1" / "detection.json")
+    det = read_json(directory / "phase1" / "detection.json", "the Phase I detection results of `twin detect`",
+                    error=ScoreError, missing_ok=True)
     if det is None:
         return None
-    details = _read_json(directory / "phase1" / "detection_details.json") or {}
+    details = read_json(directory / "phase1" / "detection_details.json", "the Phase I details of `twin detect`",
+                        error=ScoreError, missing_ok=True) or {}
     n_base = int(details.get("n_baseline", 15))
     consecutive = int(details.get("consecutive", 1))
     methods = {}
@@ -132,19 +127,6 @@ def _error_motion_errors(path: Path, truth) -> dict | None:
             "sessions": len(per[EM_DOFS[0]])}
 
 
-def injected_backlash_um(truth, sessions: list[str]) -> np.ndarray:
-    """The injected backlash (clearance, µm) of each Phase II session of truth.h5; raises
-    DatasetError naming a session truth.h5 does not hold."""
-    return np.array([float(truth.session(n)[2]["backlash_um"]) for n in sessions])
-
-
-def injected_change_um(truth, sessions: list[str], baseline_sessions: int = 1) -> np.ndarray:
-    """The injected change of backlash (µm) of each session against the mean of the first
-    ``baseline_sessions``: what the Phase II estimates, re-zeroed the same way, are compared with."""
-    b = injected_backlash_um(truth, sessions)
-    return b - b[:baseline_sessions].mean()
-
-
 def _elastic_um(scenario: dict, tl: dict, hours: list[float]) -> np.ndarray | None:
     """Elastic lost motion 2·F/K in µm at ``hours``: F the rail friction of the scenario (N), K the
     axial stiffness of the drive from truth.h5's timeline ``tl`` (N/m). None if either is not there."""
@@ -157,7 +139,8 @@ def _elastic_um(scenario: dict, tl: dict, hours: list[float]) -> np.ndarray | No
 
 def score_phase2(directory: Path, truth) -> dict | None:
     """Phase II scores from ``DIR/backlash``; None if ``backlash.json`` is absent."""
-    doc = _read_json(directory / "backlash" / "backlash.json")
+    doc = read_json(directory / "backlash" / "backlash.json", "the Phase II backlash results of `twin backlash`",
+                    error=ScoreError, missing_ok=True)
     if doc is None or not doc.get("sessions"):
         return None
     k = int(doc.get("parameters", {}).get("baseline_sessions", 1))
@@ -235,11 +218,7 @@ def score(directory: str | Path) -> dict:
 
 def write_score(directory: str | Path, doc: dict) -> Path:
     """Write ``doc`` to ``directory/score.json`` (through a temporary file) and return the path."""
-    path = Path(directory) / "score.json"
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(doc, indent=1, allow_nan=False))
-    tmp.replace(path)
-    return path
+    return write_json(Path(directory) / "score.json", doc)
 
 
 def flat(doc: dict) -> dict[str, float | int | None]:

@@ -3,7 +3,7 @@ and the speed-up (issue 5, check 8).
 
 The sweep is Phase II only (``scenarios/backlash-steps.toml`` reduced to 2 sessions of 2 runs at
 100 mm/s over 450 mm): 4 backlash steps x 2 IMU noise levels x 2 seeds = 16 campaigns, each
-simulated, analysed and scored by :func:`twin.harness.run_point` in a worker. Both runs go
+simulated, analysed and scored by :func:`twin.harness.chain.run_point` in a worker. Both runs go
 through ``twin sweep --workers N`` (a fresh output directory each, so nothing is reused); the
 times include starting the cluster and the workers' imports. The two result tables are compared
 (they must be identical).
@@ -53,7 +53,7 @@ def run(sweep: Path, out: Path, workers: int) -> float:
 
 
 def task_seconds(out: Path) -> list[float]:
-    from twin.sweep import read_log
+    from twin.harness.sweep import read_log
 
     return [r["seconds"] for r in read_log(out) if r["event"] == "point"]
 

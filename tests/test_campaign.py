@@ -12,7 +12,8 @@ import h5py
 import numpy as np
 from conftest import REPO, SMALL, run_twin
 
-from analysis.dataset import PartStore, measurement_keys, open_measurements, open_truth, truth_mentions
+from analysis.dataset import measurement_keys, open_measurements, open_truth, truth_mentions
+from twin.parts import PartStore
 
 
 def _arrays(path):
@@ -168,7 +169,7 @@ def test_batched_campaigns_equal_campaigns_simulated_alone(tmp_path):
     import pytest
 
     from twin.campaign import simulate_campaign, simulate_campaigns_batched
-    from twin.diagnose import with_effects, with_seed
+    from twin.harness.gap_runner import with_effects, with_seed
     from twin.scenario import load
 
     nom = load(REPO / "scenarios" / "diagnose-bench.toml",

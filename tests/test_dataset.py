@@ -14,7 +14,6 @@ from analysis.dataset import (
     DOFS,
     TRUTH_KEYS,
     DatasetError,
-    PartStore,
     assemble_measurements,
     assemble_truth,
     measurement_keys,
@@ -22,6 +21,7 @@ from analysis.dataset import (
     open_truth,
     truth_mentions,
 )
+from twin.parts import PartStore
 
 AXIS = {"lead_m": 0.01, "travel_m": 0.45, "load_kg": 100.0, "sensors": ["acc1", "acc2", "imu"]}
 N1 = 200  # samples per Phase I capture
@@ -421,7 +421,7 @@ def test_assemble_rejects_bad_input_and_leaves_nothing(tmp_path):
     data["torque"][3] = np.nan
     with pytest.raises(DatasetError, match=r"/phase1/c000000/torque has 1 non-finite value"):
         assemble_measurements(out, AXIS, [("c000000", attrs, data)])
-    assert not out.exists() and not (tmp_path / "measurements.h5.tmp").exists()
+    assert not out.exists() and not list(tmp_path.glob("*.tmp"))
 
 
 def test_measurement_keys_and_no_truth_leak(campaign):
@@ -470,7 +470,7 @@ def test_assemble_refuses_truth_in_measurements(tmp_path):
         f"{out}: refusing to write measurements that reveal the injected truth: "
         f"/@axis (value mentions 'preload'); /phase1/c000000@wear_index (name mentions 'wear')"
     )
-    assert not out.exists() and not (tmp_path / "measurements.h5.tmp").exists()
+    assert not out.exists() and not list(tmp_path.glob("*.tmp"))
     # whole words only: 'effective' and 'default' are not 'effect' and 'fault'
     assemble_measurements(out, {"effective_mass_kg": 100.0, "mode": "default"}, [])
     assert truth_mentions(out) == []

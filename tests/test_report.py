@@ -272,9 +272,9 @@ def test_developer_guide_code_runs(analysed, tmp_path):
     blocks = re.findall(r"```python\n(.*?)```", guide, flags=re.DOTALL)
     assert len(blocks) >= 3
     d = workdir(analysed, tmp_path / "demo")
-    # A sweep's output as twin.sweep writes it, with the demo's scores for its first two tasks.
-    from twin.sweep import plan_sweep, point_dir, records, results_table, write_table
-    from twin.sweep_plots import roc_table
+    # A sweep's output as twin.harness.sweep writes it, with the demo's scores for its first two tasks.
+    from twin.harness.sweep import plan_sweep, point_dir, records, results_table, write_table
+    from twin.harness.sweep.plots import roc_table
 
     sweep = tmp_path / "sweep"
     plan = plan_sweep(REPO / "scenarios/sweeps/detection.toml")

@@ -79,7 +79,7 @@ def same_table(a, b) -> None:
 
 
 def log(out) -> list[dict]:
-    from twin.sweep import read_log
+    from twin.harness.sweep import read_log
 
     return read_log(out)
 
@@ -236,7 +236,7 @@ def test_plan_expands_grid_random_and_seeds(root):
     and seeds expand to the expected points, the same on every reading."""
     import math
 
-    from twin.sweep import plan_sweep
+    from twin.harness.sweep import plan_sweep
 
     extra = """[random]
 n = 3

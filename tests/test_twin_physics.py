@@ -105,7 +105,7 @@ def _steady(cmd: Profile, speed: float, fs: float, trim_s: float, direction: int
         m &= np.sign(v) == direction
     edges = np.flatnonzero(np.diff(np.concatenate([[0], m.astype(int), [0]])))
     n = int(round(trim_s * fs))
-    out = [np.arange(a + n, b - n) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a > 2 * n]
+    out = [np.arange(a + n, b - n) for a, b in zip(edges[::2], edges[1::2], strict=False) if b - a > 2 * n]
     return np.concatenate(out) if out else np.zeros(0, int)
 
 
@@ -716,7 +716,7 @@ def _cruise_psd(x: np.ndarray, speed: np.ndarray, fs: float, omega: float, nseg:
     m = np.abs(np.abs(speed) - omega) < 0.01 * omega
     edges = np.flatnonzero(np.diff(np.concatenate([[0], m.astype(int), [0]])))
     psds = []
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
+    for a, b in zip(edges[::2], edges[1::2], strict=False):
         if b - a >= nseg:
             c = (a + b) // 2
             f, p = signal.periodogram(x[c - nseg // 2:c + nseg // 2], fs, window="hann",
@@ -743,7 +743,7 @@ def _dwell_ring_frequency(acc: np.ndarray, speed: np.ndarray, fs: float, nseg: i
     still = np.abs(speed) < 0.5
     edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
     psds = []
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
+    for a, b in zip(edges[::2], edges[1::2], strict=False):
         if b - a > nseg:
             f, p = signal.periodogram(acc[a:a + nseg], fs, window="boxcar", detrend="constant",
                                       nfft=8 * nseg)

@@ -5,7 +5,7 @@ Determinism: every random draw comes from ``numpy.random.SeedSequence([seed, kin
 so a unit of work gives the same arrays whichever process, executor or order runs it.
 
 Resuming: each finished unit is stored as its own part file (atomic rename, see
-:class:`analysis.dataset.PartStore`); a rerun skips the parts that exist and assembles
+:class:`twin.parts.PartStore`); a rerun skips the parts that exist and assembles
 ``measurements.h5`` and ``truth.h5`` from all parts at the end.
 """
 
@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from analysis import dataset as ds
+from analysis.files import write_json
 from twin import degradation as deg
 from twin import geometry as geo
 from twin.model import MechanicalState, stiffness_of
+from twin.parts import PartStore
 from twin.scenario import Scenario, from_dict, nominal_axis_description, to_axis
 from twin.sensors import instruments as ins
 from twin.sensors.instruments import MICRO_G
@@ -265,13 +267,13 @@ def _simulator(s: Scenario, key: str, timestep: float) -> Simulator:
     return sim
 
 
-def _store_phase1(store: ds.PartStore, unit: Unit, sig: dict) -> None:
+def _store_phase1(store: PartStore, unit: Unit, sig: dict) -> None:
     store.write("phase1", unit.name,
                 attrs={"hours": unit.hours, "sample": unit.sample, "fs_hz": sig["fs_hz"]},
                 datasets={k: sig[k] for k in ("speed", "torque", "acc1", "acc2")})
 
 
-def _store_phase2(s: Scenario, sim: Simulator, store: ds.PartStore, unit: Unit, cond: Condition,
+def _store_phase2(s: Scenario, sim: Simulator, store: PartStore, unit: Unit, cond: Condition,
                   traj) -> None:
     datasets, dattrs = {}, {}
     for r in range(s.runs_per_session):
@@ -293,7 +295,7 @@ def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
     import json
 
     s = from_dict(json.loads(scenario_json))
-    store = ds.PartStore(out_dir)
+    store = PartStore(out_dir)
     if unit.kind == "phase1":
         sim = _simulator(s, scenario_json, s.phase1.timestep_s)
         cond = condition_at(s, unit.hours)
@@ -331,7 +333,7 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
     ss = [from_dict(json.loads(j)) for j in scenario_jsons]
     items = []  # (scenario, simulator, condition, command, rng or None, store)
     for s, j, d in zip(ss, scenario_jsons, out_dirs, strict=True):
-        store = ds.PartStore(d)
+        store = PartStore(d)
         if unit.kind == "phase1":
             sim = _simulator(s, j, s.phase1.timestep_s)
             rng = rng_for(s.seed, KIND_PHASE1, unit.index)
@@ -383,7 +385,7 @@ def _timeline(s: Scenario, units: list[Unit]) -> dict[str, np.ndarray]:
 
 def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
     """Write measurements.h5 and truth.h5 from the stored parts."""
-    store = ds.PartStore(out_dir)
+    store = PartStore(out_dir)
     by_kind = {k: [u for u in units if u.kind == k] for k in ("phase1", "phase2", "dial")}
 
     def phase1_items():
@@ -441,10 +443,7 @@ def _claim(out: Path, s: Scenario) -> None:
                 f"{', '.join(diff[:8])}{' ...' if len(diff) > 8 else ''}); its finished parts "
                 "cannot be reused. Choose a new output directory, or delete this one.")
         return
-    manifest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = manifest.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(mine, sort_keys=True, indent=1))
-    os.replace(tmp, manifest)
+    write_json(manifest, mine, sort_keys=True)
 
 
 def _diff_keys(a, b, prefix: str = "") -> list[str]:
@@ -470,7 +469,7 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     _claim(out, s)
-    store = ds.PartStore(out)
+    store = PartStore(out)
     store.remove_temporaries()
     units = plan(s)
     todo = [u for u in units if not store.has(u.kind, u.name)]
@@ -514,7 +513,7 @@ def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | P
         out.mkdir(parents=True, exist_ok=True)
         _claim(out, s)
     payloads = [s.to_json() for s in scenarios]
-    stores = [ds.PartStore(out) for out in outs]
+    stores = [PartStore(out) for out in outs]
     for st in stores:
         st.remove_temporaries()
     for u in units:

@@ -154,8 +154,8 @@ def demo(
     (backlash, trend), score both against the truth, write the report and a Rerun recording,
     and print the summary."""
     from analysis.report import write_report
-    from twin.harness import analyse
-    from twin.view import write_recording
+    from twin.harness.chain import analyse
+    from twin.harness.view import write_recording
 
     t0 = time.perf_counter()
     _run_simulation(SCENARIOS / "paper-reference.toml", out / "reference", REFERENCE_SMALL, workers)
@@ -334,7 +334,7 @@ def sweep(
 ) -> None:
     """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
     OUT/results.csv and plots. Default executor: all local cores (processes). Resumes if interrupted."""
-    from twin.sweep import Callbacks, SweepError, method_summary, plan_sweep, run_sweep, summary
+    from twin.harness.sweep import Callbacks, SweepError, method_summary, plan_sweep, run_sweep, summary
 
     if scheduler is not None and workers is not None:
         _fail("--scheduler and --workers exclude each other: --scheduler runs on an existing "
@@ -464,7 +464,7 @@ def diagnose(
     far the gap shrinks once it is added (held-out data). Writes OUT/diagnosis.json and
     OUT/report/ (gap maps before and after)."""
     from analysis.dataset import DatasetError
-    from twin.diagnose import run_diagnosis
+    from twin.harness.gap_runner import run_diagnosis
 
     try:
         s = load(scenario, overrides)
@@ -506,7 +506,7 @@ def diagnose_benchmark(
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
-    from twin.gap_benchmark import plan_cases, run_benchmark
+    from twin.harness.gap_benchmark import plan_cases, run_benchmark
 
     try:
         s = load(scenario)
@@ -561,7 +561,7 @@ def view(
     operating hours, the scenario as properties. Parts whose inputs are missing are left out
     with a note (e.g. no truth.h5 on a real machine)."""
     from analysis.dataset import DatasetError
-    from twin.view import ViewError, serve_recording, write_recording
+    from twin.harness.view import ViewError, serve_recording, write_recording
 
     if save is not None and serve:
         _fail("--save and --serve: give one of them (--save FILE.rrd writes a file, --serve serves a "

@@ -13,12 +13,14 @@ from __future__ import annotations
 import copy
 import json
 import tomllib
+from itertools import pairwise
 from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from twin.axis import Axis, Carriage, ScrewDrive, Servo
+from twin.config import explain_errors, set_dotted
 
 
 class ScenarioError(ValueError):
@@ -132,7 +134,7 @@ class DegradationConfig(_Section):
             if any(b < 0 for b in self.table_backlash_um):
                 raise ValueError(f"table_backlash_um = {self.table_backlash_um} has a negative "
                                  "backlash: allowed values are >= 0 µm")
-            if any(b <= a for a, b in zip(self.table_hours, self.table_hours[1:], strict=True)):
+            if any(b <= a for a, b in pairwise(self.table_hours)):
                 raise ValueError(f"table_hours = {self.table_hours}: allowed strictly increasing hours")
             if self.table_hours[0] < 0:
                 raise ValueError(f"table_hours = {self.table_hours}: allowed hours >= 0")
@@ -293,66 +295,6 @@ class Scenario(_Section):
 # Loading with readable errors
 
 
-def _format_loc(loc: tuple[Any, ...]) -> str:
-    return ".".join(str(p) for p in loc if not str(p).startswith("function-")) or "(top level)"
-
-
-def _allowed_keys(loc: tuple[Any, ...]) -> list[str]:
-    model: type[BaseModel] = Scenario
-    for part in loc[:-1]:
-        field = model.model_fields.get(str(part))
-        ann = getattr(field, "annotation", None) if field else None
-        if isinstance(ann, type) and issubclass(ann, BaseModel):
-            model = ann
-        else:
-            return []
-    return sorted(model.model_fields)
-
-
-def _explain(err: dict[str, Any], source: str) -> str:
-    loc = tuple(err.get("loc", ()))
-    key = _format_loc(loc)
-    value = err.get("input")
-    kind = err.get("type", "")
-    ctx = err.get("ctx") or {}
-    if kind == "extra_forbidden":
-        allowed = ", ".join(_allowed_keys(loc))
-        section = _format_loc(loc[:-1])
-        where = f"in [{section}]" if len(loc) > 1 else "at the top level"
-        return (f"{source}: unknown key `{key}` (value {value!r}); allowed keys {where}: {allowed}.")
-    bounds = []
-    for name, sym in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
-        if name in ctx:
-            bounds.append(f"{sym} {ctx[name]}")
-    if bounds:
-        return (f"{source}: key `{key}` = {value!r} is out of range; allowed: value "
-                f"{' and '.join(bounds)}.")
-    if kind == "value_error":
-        msg = str(ctx.get("error", err.get("msg", "")))
-        first, _, rest = msg.partition(" ")
-        # "field = value ..." from a section's validator, "section.field = value ..." from the
-        # scenario's own: name the full dotted key.
-        if first in _allowed_keys((*loc, "")):
-            return f"{source}: key `{key + '.' if loc else ''}{first}` {rest}."
-        if not loc and "." in first and rest.startswith("="):
-            return f"{source}: key `{first}` {rest}."
-        return f"{source}: key `{key}`: {msg}."
-    if kind == "missing":
-        return f"{source}: key `{key}` is required but missing."
-    return f"{source}: key `{key}` = {value!r} is not valid: {err.get('msg')}."
-
-
-def _set_dotted(data: dict[str, Any], key: str, value: Any) -> None:
-    parts = key.split(".")
-    node = data
-    for p in parts[:-1]:
-        nxt = node.setdefault(p, {})
-        if not isinstance(nxt, dict):
-            raise ScenarioError(f"--set {key}: `{p}` is a value, not a section")
-        node = nxt
-    node[parts[-1]] = value
-
-
 def parse_override(text: str) -> tuple[str, Any]:
     """Parse ``KEY=VALUE`` (VALUE as TOML, else a plain string)."""
     if "=" not in text:
@@ -371,8 +313,7 @@ def from_dict(data: dict[str, Any], source: str = "scenario") -> Scenario:
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
-        lines = [_explain(e, source) for e in exc.errors()]
-        raise ScenarioError(" ".join(lines)) from None
+        raise ScenarioError(explain_errors(exc, data, source, Scenario)) from None
 
 
 def read_toml(path: str | Path, what: str, error: type[Exception] = ValueError) -> dict[str, Any]:
@@ -395,7 +336,7 @@ def load(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Scena
     data = copy.deepcopy(read_toml(path, "scenario file", ScenarioError))
     for item in overrides:
         key, value = parse_override(item)
-        _set_dotted(data, key, value)
+        set_dotted(data, key, value, source=f"{path}: --set", error=ScenarioError)
     return from_dict(data, source=str(path))
 
 

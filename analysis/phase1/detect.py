@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.dataset import open_measurements, open_truth
+from analysis.files import write_json
 from analysis.phase1 import pipeline, report
 from analysis.phase1.scoring import score_method
 
@@ -88,7 +89,7 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
         "threshold_fraction": fraction,
         "reference_samples": {"healthy": n_h, "backlash": n_f, "unused": int(np.sum(labels < 0))},
     }
-    report.write_json(out / "selection.json", selection)
+    write_json(out / "selection.json", selection)
 
     # 2. Campaign features.
     table = _extract_to_csv(campaign / "measurements.h5", out / "features")
@@ -106,7 +107,7 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
     scores = {m: score_method(table.hours, r["scores"], r["threshold"], n_baseline, onset, consecutive)
               for m, r in results.items()}
     detections = {m: s.detection_hours for m, s in scores.items()}
-    report.write_json(out / "detection.json", report.detection_json(table.hours, results, detections))
+    write_json(out / "detection.json", report.detection_json(table.hours, results, detections))
     details = {
         "campaign": str(campaign), "reference": str(reference), "onset_hours": onset,
         "n_samples": len(table.hours), "n_baseline": n_baseline, "consecutive": consecutive,
@@ -115,7 +116,7 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
                         "n_components": getattr(results[m]["detector"], "n_components_", None)}
                     for m in results},
     }
-    report.write_json(out / "detection_details.json", details)
+    write_json(out / "detection_details.json", details)
     report.plot_fig6(out / "detection.png", table.hours, results, pipeline.PAPER_NAMES, n_baseline,
                      onset, detections)
     return details

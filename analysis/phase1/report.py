@@ -8,7 +8,6 @@ goes to ``detection_details.json``.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import matplotlib
@@ -17,7 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-__all__ = ["detection_json", "plot_fig6", "write_json"]
+__all__ = ["detection_json", "plot_fig6"]
 
 
 def _num(x: float | None) -> float | None:
@@ -31,12 +30,6 @@ def detection_json(hours: np.ndarray, results: dict[str, dict], detections: dict
                "scores": [float(v) for v in r["scores"]], "hours": [float(h) for h in hours]}
         for name, r in results.items()}}
 
-
-def write_json(path: Path, obj: dict) -> None:
-    """Write JSON (no NaN allowed) through a temporary file."""
-    tmp = Path(str(path) + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1, allow_nan=False))
-    tmp.replace(path)
 
 
 def plot_fig6(path: Path, hours: np.ndarray, results: dict[str, dict], titles: dict[str, str],

@@ -8,17 +8,18 @@ injected values in Fig. 13. The CLI and the harness (``twin demo``, ``twin sweep
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from analysis.dataset import DatasetError, open_measurements, open_truth
+from analysis.dataset import open_measurements, open_truth
+from analysis.files import write_json
+from analysis.injected import injected_change_um
 from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash
+from analysis.phase2.error_motion_file import write_error_motions
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis
-from analysis.phase2.traces import DOFS
 
 __all__ = ["BacklashRun", "run"]
 
@@ -43,60 +44,6 @@ class BacklashRun:
     trend: BacklashTrend | None
     prognosis: Prognosis | None
     figures: list[Path]
-
-
-def write_error_motions(path: Path, ems) -> None:
-    """Write the combined error motions of every session: group ``/<session>`` with ``x_m`` (n,)
-    commanded position in m and ``forward``, ``reverse`` (6, n) in m and rad (rows ``dofs``
-    attribute), attributes ``hours``, ``runs``. Read by :mod:`analysis.scoring`."""
-    import h5py
-
-    tmp = Path(str(path) + ".tmp")
-    with h5py.File(tmp, "w") as f:
-        f.attrs["dofs"] = list(DOFS)
-        f.attrs["position_reference"] = "position_cmd, m"
-        for em in ems:
-            g = f.create_group(em.session)
-            g.attrs["hours"] = em.hours
-            g.attrs["runs"] = list(em.runs)
-            g.create_dataset("x_m", data=em.combined.x_m)
-            g.create_dataset("forward", data=em.combined.forward)
-            g.create_dataset("reverse", data=em.combined.reverse)
-    tmp.replace(path)
-
-
-def read_error_motions(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """The sessions of an ``error_motions.h5`` written by :func:`write_error_motions`:
-    ``{session: (x_m (n,) m, forward (6, n), reverse (6, n))}``, rows in :data:`DOFS` order
-    (m and rad) whatever order the file's ``dofs`` attribute gives.
-
-    Raises:
-        DatasetError: unreadable file, missing DOFs or inconsistent shapes (names file and key).
-    """
-    import h5py
-
-    out = {}
-    try:
-        with h5py.File(path, "r") as f:
-            dofs = [d.decode() if isinstance(d, bytes) else str(d) for d in f.attrs["dofs"]]
-            missing = [d for d in DOFS if d not in dofs]
-            if missing:
-                raise DatasetError(f"{path}: /@dofs is {dofs}; expected all of {', '.join(DOFS)}")
-            order = [dofs.index(d) for d in DOFS]
-            for name, g in f.items():
-                x = np.asarray(g["x_m"][...], dtype=np.float64)
-                fwd = np.asarray(g["forward"][...], dtype=np.float64)
-                rev = np.asarray(g["reverse"][...], dtype=np.float64)
-                for key, arr in (("forward", fwd), ("reverse", rev)):
-                    if x.ndim != 1 or len(x) < 2 or arr.shape != (len(dofs), len(x)):
-                        raise DatasetError(
-                            f"{path}: /{name}/{key} has shape {arr.shape} with x_m {x.shape}; "
-                            f"expected ({len(dofs)}, n) with n = len(x_m) >= 2")
-                out[name] = (x, fwd[order], rev[order])
-    except (OSError, KeyError) as exc:
-        raise DatasetError(f"{path}: cannot read the error motions ({exc}); rerun `twin backlash` "
-                           "to rewrite it") from None
-    return out
 
 
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
@@ -169,12 +116,11 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
                        else est.reference_pitch_m_ * 1e3},
     }
     out.mkdir(parents=True, exist_ok=True)
-    (out / "backlash.json").write_text(json.dumps(doc, indent=1, allow_nan=False))
+    write_json(out / "backlash.json", doc)
     write_error_motions(out / "error_motions.h5", result.error_motions)
     figures: list[Path] = []
     if plots and ses:
         from analysis.phase2.report import write_figures
-        from analysis.scoring import injected_change_um
 
         injected = None
         if (directory / "truth.h5").exists():

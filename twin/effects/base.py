@@ -15,7 +15,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from twin.scenario import Scenario, _set_dotted, from_dict
+from twin.config import get_dotted, set_dotted
+from twin.scenario import Scenario, from_dict
 
 
 @dataclass(frozen=True)
@@ -79,15 +80,15 @@ class Effect:
         if self.is_off({p.name: values.get(p.name, p.off) for p in self.params}):
             return s
         for key, v in self.fixed.items():
-            _set(data, key, v)
+            set_dotted(data, key, v, source=f"effect {self.name}")
         for p in self.params:
             v = values.get(p.name, p.off)
             for key in p.keys:
-                cur = _get(data, key)
+                cur = get_dotted(data, key, source=f"effect {self.name}")
                 u = v * p.factor
                 new = cur + u if p.mode == "add" else cur * u if p.mode == "scale" else u
-                _set(data, key, int(new) if isinstance(cur, int) and not isinstance(cur, bool)
-                     and float(new).is_integer() else new)
+                keep_int = isinstance(cur, int) and not isinstance(cur, bool) and float(new).is_integer()
+                set_dotted(data, key, int(new) if keep_int else new, source=f"effect {self.name}")
         return from_dict(data, source=f"scenario with effect {self.name}")
 
     def draw(self, rng: np.random.Generator, magnitude: str) -> dict[str, float]:
@@ -108,28 +109,3 @@ class Effect:
                 v *= float(rng.choice([-1.0, 1.0]))
             out[p.name] = float(v)
         return out
-
-
-def _split(key: str) -> tuple[list[str], int | None]:
-    idx = None
-    if key.endswith("]"):
-        key, _, i = key[:-1].partition("[")
-        idx = int(i)
-    return key.split("."), idx
-
-
-def _get(data: dict, key: str) -> Any:
-    parts, idx = _split(key)
-    node: Any = data
-    for p in parts:
-        node = node[p]
-    return node[idx] if idx is not None else node
-
-
-def _set(data: dict, key: str, value: Any) -> None:
-    """Set a dotted key (as ``--set`` does), or one element of a list key ``a.b[i]``."""
-    if key.endswith("]"):
-        base, _, i = key[:-1].partition("[")
-        _get(data, base)[int(i)] = value
-    else:
-        _set_dotted(data, key, value)

@@ -1,39 +1,4 @@
-"""The Rerun recording of a campaign directory (``twin view``); the only module that imports Rerun.
-
-What the recording holds (entity paths; the blueprint arranges them in four tabs):
-
-- ``/world/...``: the axis in 3D (z up, x along the travel, m): base, the two rails, the screw
-  and, under ``/world/carriage``, the trucks, the carriage plate, the nut, the load and the IMU.
-  ``/world/carriage`` carries one :class:`rerun.Transform3D` per pose on the ``sim_time``
-  timeline (s from the start of the run) of one Phase II run: the carriage at the commanded
-  position plus the six error motions multiplied by a stated factor (``exaggeration``, e.g.
-  2000), placed so that the IMU point moves by the exaggerated translations and the carriage
-  turns by the exaggerated angles. The error motions are the true ones of the session
-  (``truth.h5``) when it exists, else the estimated ones (``backlash/error_motions.h5``, the
-  forward or reverse profile by the direction of travel); the property ``view`` and the notes
-  say which. With ``truth.h5`` the carriage is placed at its rail coordinate (commanded position
-  plus the session's origin offset); without it, at the commanded position.
-- ``/phase2/<session>/<run>/...``: that run's IMU channels and commanded position, and the error
-  motions along the run (unexaggerated, µm and µrad), on ``sim_time``.
-- ``/phase1/<capture>/...``: motor speed and torque and the two nut accelerometers of one or
-  more Phase I captures, on ``sim_time`` (s from the start of the capture). Channels longer than
-  ``max_points`` samples keep every k-th sample (stated in the series name).
-- ``/hours/...`` on the ``hours`` timeline (operating hours, stored as a duration of
-  hours·3600 s): the Phase I scores of every method of ``phase1/detection.json`` with their
-  limits (values exactly those of the file), the injected onset (``truth.h5``) and the true
-  preload; the backlash estimates of ``backlash/backlash.json`` (shift estimate, perceived-pitch
-  estimate, Kalman smoothed value with ±2σ, dial-indicator change) against the injected change
-  of backlash (``truth.h5``, relative to the mean of the baseline sessions as the estimates);
-  ``/hours/events`` marks the onset and each method's first detection.
-- Properties: ``scenario`` (the scenario of ``truth.h5``, flattened to dotted keys, plus the whole
-  JSON as ``json``) or, without ``truth.h5``, ``measurements`` (the axis description of
-  ``measurements.h5``); ``view`` (what was drawn and from what).
-- ``/notes``: a Markdown document of the above, including what was left out and why.
-
-A directory without ``truth.h5`` (a real machine) gives a recording without the truth parts;
-missing ``phase1/`` or ``backlash/`` outputs are left out with a note naming the file and the
-command that writes it.
-"""
+"""Logging a campaign directory into a Rerun recording, saving it or serving it."""
 
 from __future__ import annotations
 
@@ -41,306 +6,37 @@ import json
 import math
 import os
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
 import numpy as np
 
-from analysis.dataset import DOFS, DatasetError, open_measurements, open_truth
-from analysis.phase2.workflow import read_error_motions
-from analysis.scoring import injected_change_um
-from twin.axis import Axis
+from analysis.dataset import DOFS, open_measurements, open_truth
+from analysis.injected import injected_change_um
+from twin.harness.view.base import (
+    APP_ID,
+    BLUE,
+    DOF_LABELS,
+    ENTITY_CARRIAGE,
+    EXAGGERATION,
+    GREEN,
+    GREY,
+    MAX_POINTS,
+    ORANGE,
+    PHASE1_CHANNELS,
+    PHASE2_CHANNELS,
+    POSE_RATE_HZ,
+    PURPLE,
+    RED,
+    ViewError,
+    ViewSummary,
+    hours_to_ns,
+)
+from twin.harness.view.blueprint import _blueprint
+from twin.harness.view.inputs import _axis_from_measurements, _backlash, _detection, _flatten
+from twin.harness.view.poses import _direction, _estimated_error_motions, _geometry, _Shape, _stride, carriage_poses
 from twin.scenario import Scenario, ScenarioError, from_dict, to_axis
-
-__all__ = ["ENTITY_CARRIAGE", "EXAGGERATION", "MAX_POINTS", "POSE_RATE_HZ", "ViewError", "ViewSummary",
-           "build", "carriage_poses", "hours_to_ns", "serve_recording", "write_recording"]
-
-APP_ID = "ballscrew_twin"
-#: Carriage poses logged per second of the run.
-POSE_RATE_HZ = 100.0
-#: Samples per sensor channel above which only every k-th sample is logged.
-MAX_POINTS = 50_000
-#: Default factor on the error motions in the 3D view.
-EXAGGERATION = 2000.0
-ENTITY_CARRIAGE = "/world/carriage"
-DOF_LABELS = {"E_XX": ("positioning", "um"), "E_YX": ("horizontal straightness", "um"),
-              "E_ZX": ("vertical straightness", "um"), "E_AX": ("roll", "urad"),
-              "E_BX": ("pitch", "urad"), "E_CX": ("yaw", "urad")}
-PHASE1_CHANNELS = (("speed", "rad/s", None), ("torque", "N*m", None),
-                   ("acc1", "m/s^2", "xyz"), ("acc2", "m/s^2", "xyz"))
-PHASE2_CHANNELS = (("imu_acc", "m/s^2", "xyz"), ("imu_gyro", "rad/s", "xyz"), ("position_cmd", "m", None))
-RED, ORANGE, GREEN, BLUE, GREY, PURPLE = ((220, 40, 40), (240, 150, 20), (40, 160, 60),
-                                          (40, 90, 220), (120, 120, 120), (150, 60, 200))
-
-
-class ViewError(ValueError):
-    """Bad input to ``twin view``: the message names the file, key or option and what was expected."""
-
-
-@dataclass
-class ViewSummary:
-    """What :func:`build` put into the recording.
-
-    Attributes:
-        directory: the campaign directory.
-        path: the ``.rrd`` written (None when served).
-        session, run, hours: the Phase II run shown in 3D (None without Phase II data).
-        error_motion_source: ``"truth.h5"``, ``"backlash/error_motions.h5"`` or ``"none"``.
-        source_detail: one sentence saying where the error motions come from.
-        exaggeration: factor on the error motions in the 3D view.
-        n_poses: carriage poses logged on ``sim_time``.
-        captures: Phase I captures logged.
-        methods: Phase I methods logged from ``detection.json``.
-        backlash_sessions: sessions of ``backlash.json`` logged.
-        has_truth: whether ``truth.h5`` was used.
-        notes: what was left out and why (printed by the CLI).
-        seconds: wall time of :func:`build`.
-        size_bytes: size of the written file (0 when served).
-    """
-
-    directory: Path
-    path: Path | None = None
-    session: str | None = None
-    run: str | None = None
-    hours: float | None = None
-    error_motion_source: str = "none"
-    source_detail: str = ""
-    exaggeration: float = EXAGGERATION
-    n_poses: int = 0
-    captures: list[str] = field(default_factory=list)
-    methods: list[str] = field(default_factory=list)
-    backlash_sessions: int = 0
-    has_truth: bool = False
-    notes: list[str] = field(default_factory=list)
-    seconds: float = 0.0
-    size_bytes: int = 0
-
-
-def hours_to_ns(hours) -> np.ndarray:
-    """Operating hours as the ``hours`` timeline stores them: int64 ns of a duration of hours·3600 s."""
-    return np.round(np.asarray(hours, dtype=np.float64) * 3600e9).astype(np.int64)
-
-
-# ---------------------------------------------------------------------------------------------
-# Inputs
-
-
-def _read_json(path: Path, what: str) -> dict:
-    try:
-        doc = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ViewError(f"{path}: not valid JSON ({exc}); expected {what}; rerun the command that "
-                        "writes it") from None
-    except OSError as exc:
-        raise ViewError(f"{path}: cannot read it ({exc.strerror})") from None
-    if not isinstance(doc, dict):
-        raise ViewError(f"{path}: JSON of type {type(doc).__name__}; expected {what}")
-    return doc
-
-
-def _number_list(path: Path, key: str, value: Any, n: int | None = None,
-                 allow_none: bool = False) -> list:
-    ok = isinstance(value, list) and all(
-        (v is None and allow_none) or (isinstance(v, (int, float)) and not isinstance(v, bool)
-                                       and math.isfinite(v)) for v in value)
-    if not ok or (n is not None and len(value) != n):
-        length = "" if n is None else f" of length {n}"
-        raise ViewError(f"{path}: {key} is {str(value)[:80]}; expected a list{length} of finite numbers")
-    return value
-
-
-def _detection(path: Path) -> dict[str, dict]:
-    """``detection.json``: method -> {hours, scores, threshold, detection_hours}, checked."""
-    doc = _read_json(path, "the Phase I detection results of `twin detect`")
-    methods = doc.get("methods")
-    if not isinstance(methods, dict) or not methods:
-        raise ViewError(f"{path}: 'methods' is {str(methods)[:80]}; expected an object of methods")
-    out = {}
-    for name, m in methods.items():
-        key = f"methods.{name}"
-        if not isinstance(m, dict):
-            raise ViewError(f"{path}: {key} is {str(m)[:80]}; expected an object")
-        hours = _number_list(path, f"{key}.hours", m.get("hours"))
-        scores = _number_list(path, f"{key}.scores", m.get("scores"), len(hours))
-        thr = m.get("threshold")
-        if not isinstance(thr, (int, float)) or not math.isfinite(thr):
-            raise ViewError(f"{path}: {key}.threshold is {thr!r}; expected a finite number")
-        det = m.get("detection_hours")
-        out[name] = {"hours": hours, "scores": scores, "threshold": float(thr),
-                     "detection_hours": det if isinstance(det, (int, float)) else None}
-    return out
-
-
-def _backlash(path: Path) -> dict:
-    doc = _read_json(path, "the Phase II backlash results of `twin backlash`")
-    sessions = doc.get("sessions")
-    if not isinstance(sessions, list):
-        raise ViewError(f"{path}: 'sessions' is {str(sessions)[:80]}; expected a list of sessions")
-    for i, rec in enumerate(sessions):
-        if not isinstance(rec, dict) or not isinstance(rec.get("session"), str):
-            raise ViewError(f"{path}: sessions[{i}] is {str(rec)[:80]}; expected an object with 'session'")
-        _number_list(path, f"sessions[{i}].hours", [rec.get("hours")])
-        for key in ("delta_backlash_um_shift", "delta_backlash_um_pitch", "smoothed_um",
-                    "smoothed_std_um", "dial_delta_um"):
-            if key in rec:
-                _number_list(path, f"sessions[{i}].{key}", [rec[key]], allow_none=True)
-    return doc
-
-
-def _flatten(obj: Any, prefix: str = "") -> dict[str, Any]:
-    """A JSON object as ``{"a.b.c": value}``: numbers, strings, booleans and non-empty lists of
-    numbers or of strings as they are; anything else (null, empty or mixed lists, lists of
-    objects) as its JSON text."""
-    out: dict[str, Any] = {}
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            out.update(_flatten(v, f"{prefix}{k}."))
-        return out
-    key = prefix[:-1]
-    if isinstance(obj, (bool, int, float, str)):
-        out[key] = obj
-    elif (isinstance(obj, list) and obj and
-          (all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in obj)
-           or all(isinstance(v, str) for v in obj))):
-        out[key] = [float(v) for v in obj] if not isinstance(obj[0], str) else list(obj)
-    else:
-        out[key] = json.dumps(obj)
-    return out
-
-
-_AXIS_KEYS = ("travel_mm", "lead_mm", "rail_spacing_mm", "truck_spacing_mm", "carriage_mass_kg")
-
-
-def _axis_from_measurements(desc: dict, notes: list[str], label: str) -> Axis:
-    """The axis to draw from the nominal description of ``measurements.h5``: the few dimensions it
-    names (``travel_mm`` or ``travel_m``, ...), the defaults of :class:`Scenario` for the rest."""
-    given: dict[str, float] = {}
-    for key in _AXIS_KEYS:
-        unit = key.rsplit("_", 1)[1]
-        if isinstance(desc.get(key), (int, float)):
-            given[key] = float(desc[key])
-        elif unit == "mm" and isinstance(desc.get(key[:-3] + "_m"), (int, float)):
-            given[key] = float(desc[key[:-3] + "_m"]) * 1e3
-    try:
-        s = from_dict({"axis": given})
-    except ScenarioError as exc:
-        notes.append(f"{label}: /@axis gives dimensions the twin cannot draw ({exc}); the 3D view "
-                     "uses the default axis")
-        s = Scenario()
-    missing = [k for k in _AXIS_KEYS if k not in given]
-    if missing:
-        notes.append(f"{label}: /@axis has no {', '.join(missing)}; the 3D view uses the twin's "
-                     "defaults for them")
-    return to_axis(s)
-
-
-# ---------------------------------------------------------------------------------------------
-# Geometry and poses (numpy only)
-
-
-@dataclass(frozen=True)
-class _Shape:
-    path: str
-    kind: str  # "box" or "cylinder_x"
-    center: tuple[float, float, float]
-    size: tuple[float, float, float]  # box: half sizes; cylinder along x: (half length, radius, 0)
-    color: tuple[int, int, int]
-    label: str
-
-
-def _geometry(axis: Axis) -> tuple[list[_Shape], list[_Shape], dict[str, float]]:
-    """Static shapes in the world frame and shapes in the carriage frame (origin at the carriage's
-    centre of mass, ``com_height`` above the rail plane z = 0), m. Dimensions from the axis where
-    it has them (travel, rail and truck spacing, screw diameters, heights of the nut, centre of
-    mass and IMU); the rest is schematic."""
-    c, s, L = axis.carriage, axis.screw, axis.travel
-    w, a = c.rail_spacing / 2.0, c.truck_spacing / 2.0
-    zc = c.com_height
-    world = [
-        _Shape("base", "box", (L / 2, 0.0, -0.06), (L / 2 + 0.1, max(0.2, w + 0.06), 0.02), GREY,
-               "base"),
-        _Shape("rails/left", "box", (L / 2, -w, -0.02), (L / 2 + 0.1, 0.01, 0.02), (90, 90, 100),
-               f"rail (spacing {c.rail_spacing * 1e3:g} mm)"),
-        _Shape("rails/right", "box", (L / 2, w, -0.02), (L / 2 + 0.1, 0.01, 0.02), (90, 90, 100),
-               "rail"),
-        _Shape("screw", "cylinder_x", (L / 2, 0.0, c.nut_height), (L / 2 + 0.05, s.root_diameter / 2, 0.0),
-               (180, 180, 190), f"screw {s.pitch_diameter * 1e3:g}x{s.lead * 1e3:g}"),
-    ]
-    top = 0.035  # rail plane to the underside of the plate: the trucks
-    plate_t = 0.02
-    load_h = max(c.imu_height - top - plate_t, 0.02)
-    carriage = [
-        *[_Shape(f"trucks/{n}", "box", (x, y, top / 2 - zc), (0.03, 0.02, top / 2), (70, 70, 80),
-                 f"truck {n}") for n, x, y in (("FL", a, -w), ("FR", a, w), ("RL", -a, -w), ("RR", -a, w))],
-        _Shape("plate", "box", (0.0, 0.0, top + plate_t / 2 - zc), (a + 0.04, w + 0.03, plate_t / 2),
-               (80, 100, 200), "carriage"),
-        _Shape("nut", "cylinder_x", (0.0, 0.0, c.nut_height - zc), (0.04, s.pitch_diameter / 2 + 0.012, 0.0),
-               (200, 160, 60), "ball nut"),
-        _Shape("load", "box", (0.0, 0.0, top + plate_t + load_h / 2 - zc), (0.09, 0.09, load_h / 2),
-               (60, 60, 60), f"steel load (carriage with load {c.mass:g} kg)"),
-        _Shape("imu", "box", (0.0, 0.0, c.imu_height - zc + 0.005), (0.015, 0.015, 0.005), (220, 40, 40),
-               "IMU"),
-    ]
-    frame = {"com_height": zc, "imu_offset": c.imu_height - zc, "travel": L}
-    return world, carriage, frame
-
-
-def _quat_xyzw(roll, pitch, yaw) -> np.ndarray:
-    """Quaternions (n, 4) x, y, z, w of R = Rz(yaw)·Ry(pitch)·Rx(roll) (angles (n,) rad)."""
-    cr, sr = np.cos(np.asarray(roll) / 2), np.sin(np.asarray(roll) / 2)
-    cp, sp = np.cos(np.asarray(pitch) / 2), np.sin(np.asarray(pitch) / 2)
-    cy, sy = np.cos(np.asarray(yaw) / 2), np.sin(np.asarray(yaw) / 2)
-    return np.stack([sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-                     cr * cp * sy - sr * sp * cy, cr * cp * cy + sr * sp * sy], axis=1)
-
-
-def _rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate the vector v (3,) by each quaternion of q (n, 4) x, y, z, w; returns (n, 3)."""
-    u, w = q[:, :3], q[:, 3:4]
-    t = 2.0 * np.cross(u, np.broadcast_to(v, u.shape))
-    return v + w * t + np.cross(u, t)
-
-
-def carriage_poses(x_m: np.ndarray, errors: np.ndarray, exaggeration: float, com_height: float,
-                   imu_offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """Carriage frame poses: ``x_m`` (n,) carriage position along the rails in m; ``errors``
-    (6, n) error motions at the IMU in DOFS order (m, m, m, rad, rad, rad). Returns translations
-    (n, 3) in m and quaternions (n, 4) x, y, z, w of the carriage frame (origin at the centre of
-    mass), such that the IMU point (``imu_offset`` above the origin) is at
-    (x + k·E_XX, k·E_YX, com_height + imu_offset + k·E_ZX) and the carriage is turned by
-    k·(E_AX, E_BX, E_CX) about x, y, z, with k = ``exaggeration``."""
-    k = float(exaggeration)
-    q = _quat_xyzw(k * errors[3], k * errors[4], k * errors[5])
-    imu = np.stack([x_m + k * errors[0], k * errors[1],
-                    np.full_like(x_m, com_height + imu_offset) + k * errors[2]], axis=1)
-    return imu - _rotate(q, np.array([0.0, 0.0, imu_offset])), q
-
-
-def _direction(x: np.ndarray) -> np.ndarray:
-    """+1 moving forward (x increasing), −1 in reverse; a standstill keeps the last direction
-    (forward before the first move)."""
-    s = np.sign(np.diff(x, prepend=x[0]))
-    idx = np.where(s != 0, np.arange(len(s)), 0)
-    np.maximum.accumulate(idx, out=idx)
-    d = s[idx]
-    d[d == 0] = 1.0
-    return d
-
-
-def _estimated_error_motions(path: Path, session: str):
-    """``(x_m (n,) m, forward (6, n), reverse (6, n))`` in DOFS order (m and rad) of ``session``
-    in ``error_motions.h5`` (written by ``twin backlash``), or None if the session is absent."""
-    try:
-        return read_error_motions(path).get(session)
-    except DatasetError as exc:
-        raise ViewError(str(exc)) from None
-
-
-def _stride(n: int, max_points: int) -> int:
-    return max(1, -(-n // max_points))
-
 
 # ---------------------------------------------------------------------------------------------
 # The recording
@@ -557,44 +253,6 @@ def _log_backlash(r: _Recorder, doc: dict, truth, notes: list[str], truth_label:
     change = injected_change_um(truth, [s["session"] for s in shown], k)
     r.series("/hours/backlash/injected_delta_um", [float(s["hours"]) for s in shown], list(change),
              timeline="hours", name="injected change (truth.h5, µm)", color=ORANGE, points=True)
-
-
-def _blueprint(rrb, summary: ViewSummary, phase2_roots: list[str], phase1_roots: list[str],
-               ranges: dict[str, tuple | None], travel: float, has_backlash: bool, has_truth: bool):
-    tabs = []
-    k = f"{summary.exaggeration:g}"
-    eye = rrb.EyeControls3D(position=[travel / 2 + 0.35, -0.95, 0.55], look_target=[travel / 2, 0.0, 0.05],
-                            eye_up=[0, 0, 1])
-    view3d = rrb.Spatial3DView(origin="/world", eye_controls=eye,
-                               name=f"axis, error motions ×{k} ({summary.error_motion_source})")
-    if phase2_roots:
-        plots = [rrb.TimeSeriesView(origin=p, name=p.rsplit("/", 1)[1] + f" ({summary.session}/{summary.run})")
-                 for p in phase2_roots]
-        tabs.append(rrb.Horizontal(view3d, rrb.Vertical(*plots), column_shares=[3, 2],
-                                   name="Phase II run (sim_time)"))
-    else:
-        tabs.append(rrb.Horizontal(view3d, name="axis"))
-    if phase1_roots:
-        tabs.append(rrb.Grid(*[rrb.TimeSeriesView(origin=p, name=p.removeprefix("/phase1/"))
-                               for p in phase1_roots], grid_columns=4, name="Phase I captures (sim_time)"))
-    hours_views = []
-    for name, rng in ranges.items():
-        hours_views.append(rrb.TimeSeriesView(
-            origin=f"/hours/phase1/{name}", name=f"{name} against operating hours",
-            axis_y=rrb.ScalarAxis(range=rng) if rng is not None else None))
-    if has_truth:
-        hours_views.append(rrb.TimeSeriesView(origin="/hours/truth", name="injected preload (truth.h5)"))
-    if has_backlash:
-        hours_views.append(rrb.TimeSeriesView(origin="/hours/backlash", name="backlash change (µm)"))
-    if hours_views:
-        first = hours_views[:1] if ranges else []
-        rest = hours_views[1:] if ranges else hours_views
-        tabs.append(rrb.Vertical(*first, rrb.Grid(*rest, grid_columns=3), row_shares=[1, 1] if first else None,
-                                 name="operating hours (timeline: hours)"))
-    tabs.append(rrb.Vertical(rrb.TextDocumentView(origin="/notes", name="notes"),
-                             rrb.TextLogView(origin="/hours/events", name="events (hours)"),
-                             row_shares=[3, 1], name="notes"))
-    return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), rrb.TimePanel(timeline="sim_time"))
 
 
 def _notes_markdown(summary: ViewSummary, directory: Path) -> str:

@@ -31,7 +31,6 @@ import hashlib
 import json
 import os
 import shutil
-import tempfile
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -44,6 +43,7 @@ from analysis.diagnosis import attribution, layout
 from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
 from analysis.diagnosis.report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, signature
+from analysis.files import atomic_write, write_json, write_text
 from twin.campaign import simulate_campaigns_batched
 from twin.effects import LIBRARY, Effect
 from twin.scenario import Scenario, from_dict
@@ -82,6 +82,11 @@ def _key(s: Scenario) -> str:
     return hashlib.sha256(f"{SIGNATURE_VERSION}:{s.to_json()}".encode()).hexdigest()[:20]
 
 
+def _save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    with path.open("wb") as f:  # a file object: np.savez would append ".npz" to a path
+        np.savez(f, **arrays)
+
+
 def _regions_json(regions: list[Region]) -> str:
     return json.dumps([[r.domain, r.channel, r.family, r.bin, r.hours] for r in regions])
 
@@ -107,14 +112,12 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool = False) -> l
             simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
         for i in todo:
             d = dirs[i]
-            (d / "layout.json").write_text(json.dumps(layout.describe(d / "campaign" / "measurements.h5")))
+            write_json(d / "layout.json", layout.describe(d / "campaign" / "measurements.h5"), indent=None)
             sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
-            fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz")
-            os.close(fd)
-            np.savez(tmp, cal=sigs["cal"].values, heldout=sigs["heldout"].values,
-                     regions=np.array(_regions_json(sigs["cal"].regions)))
-            os.replace(tmp, d / "signature.npz")
-            (d / "scenario.json").write_text(scenario_jsons[i])
+            arrays = {"cal": sigs["cal"].values, "heldout": sigs["heldout"].values,
+                      "regions": np.array(_regions_json(sigs["cal"].regions))}
+            atomic_write(d / "signature.npz", lambda tmp, arrays=arrays: _save_npz(tmp, arrays))
+            write_text(d / "scenario.json", scenario_jsons[i])
             if not keep:
                 shutil.rmtree(d / "campaign", ignore_errors=True)
     return [str(d / "signature.npz") for d in dirs]
@@ -312,22 +315,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                                               for p in LIBRARY[c.name].params}}
                           for c in ens.candidates},
               **result}
-    (out / "diagnosis.json").write_text(json.dumps(json_safe(result), indent=1, allow_nan=False))
+    write_json(out / "diagnosis.json", result, nan_as_null=True)
     if plots:
         write_diagnosis_report(out / "report", result, real["heldout"].regions, t_heldout)
     return result
 
-
-def json_safe(o):
-    """``o`` with numpy scalars as Python numbers and NaN/inf as None (strict JSON)."""
-    if isinstance(o, dict):
-        return {str(k): json_safe(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [json_safe(v) for v in o]
-    if isinstance(o, (np.bool_, bool)):
-        return bool(o)
-    if isinstance(o, (np.integer, int)):
-        return int(o)
-    if isinstance(o, (np.floating, float)):
-        return float(o) if np.isfinite(o) else None
-    return o

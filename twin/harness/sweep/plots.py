@@ -19,11 +19,13 @@ Sweeps over many distinct values (random sampling) are drawn as scatter plots wi
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
 import numpy as np
+
+from analysis.files import write_json
+from twin.harness.sweep.results import phase1_methods, records
 
 __all__ = ["roc_table", "write_plots"]
 
@@ -202,7 +204,6 @@ def _roc_figure(plan, roc, path: Path) -> Path | None:
 
 def write_plots(plan, out: str | Path, df) -> list[Path]:
     """Write the figures (and ``roc.csv``) of a sweep into ``out``; returns the files written."""
-    from twin.sweep import phase1_methods, records
 
     out = Path(out)
     pdir = out / "plots"
@@ -224,5 +225,5 @@ def write_plots(plan, out: str | Path, df) -> list[Path]:
         fig = _roc_figure(plan, roc, pdir / "detection_roc.png")
         if fig is not None:
             written.append(fig)
-    (pdir / "index.json").write_text(json.dumps([str(p.relative_to(out)) for p in written], indent=1))
+    write_json(pdir / "index.json", [str(p.relative_to(out)) for p in written])
     return written

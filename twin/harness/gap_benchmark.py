@@ -31,7 +31,6 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 from __future__ import annotations
 
 import csv
-import json
 import os
 import time
 from collections.abc import Callable
@@ -42,16 +41,16 @@ import numpy as np
 
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
-from twin.diagnose import (
+from analysis.files import write_json
+from twin.effects import LIBRARY
+from twin.harness.gap_runner import (
     DEFAULT_SEEDS,
     build_ensemble,
     diagnose_signatures,
     evaluate_all,
-    json_safe,
     with_effects,
     with_seed,
 )
-from twin.effects import LIBRARY
 from twin.scenario import Scenario
 
 HIGH_SCORE = 0.5  # the stricter open-set score: no wrong effect removing this much of the gap
@@ -189,7 +188,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
         "cases": rows,
         "plan": [asdict(c) for c in cases],
     }
-    (out / "benchmark.json").write_text(json.dumps(json_safe(summary), indent=1, allow_nan=False))
+    write_json(out / "benchmark.json", summary, nan_as_null=True)
     with open(out / "benchmark_cases.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["id", "kind", "injected", "magnitude", "verdict", "ranking", "added",

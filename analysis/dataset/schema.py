@@ -1,0 +1,64 @@
+"""The dataset format: file kinds, version, channels and their units, the truth-leak words.
+
+The layout is described for users in ``docs/dataset-format.md``.
+"""
+
+from __future__ import annotations
+
+MEASUREMENTS_FORMAT = "ballscrew-twin/measurements"
+TRUTH_FORMAT = "ballscrew-twin/truth"
+FORMAT_VERSION = 1
+SUPPORTED_VERSIONS = (1,)
+
+#: Phase I channels: name -> (unit, description, columns); columns 1 means shape (n,).
+PHASE1_CHANNELS: dict[str, tuple[str, str, int]] = {
+    "speed": ("rad/s", "motor speed", 1),
+    "torque": ("N*m", "motor torque", 1),
+    "acc1": ("m/s^2", "nut accelerometer 1 (x, y, z)", 3),
+    "acc2": ("m/s^2", "nut accelerometer 2 (x, y, z)", 3),
+}
+#: Phase II run channels: name -> (unit, description, columns). Each has its own ``fs_hz``.
+PHASE2_CHANNELS: dict[str, tuple[str, str, int]] = {
+    "imu_acc": ("m/s^2", "IMU accelerometer (x, y, z)", 3),
+    "imu_gyro": ("rad/s", "IMU rate gyroscope (x, y, z)", 3),
+    "position_cmd": ("m", "commanded carriage position", 1),
+}
+DIAL_UNITS = {"hours": "h", "backlash_um": "um"}
+#: Order of the six error motions in ``truth.h5`` ``/phase2/<session>/E``.
+DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
+DOF_UNITS = ("m", "m", "m", "rad", "rad", "rad")
+TIMELINE_REQUIRED = ("hours", "preload_N", "backlash_um")
+SESSION_TRUTH_REQUIRED = ("hours", "backlash_um", "origin_offset_m")
+
+#: Words that only the simulator may know. No group, dataset or attribute name of
+#: ``measurements.h5``, nor any string attribute value (the ``axis`` JSON included), may mention
+#: one of them (whole word, case-insensitive, camelCase split, plural/-ed/-ing forms included),
+#: except the paths in :data:`ALLOWED_TRUTH_MENTIONS`.
+TRUTH_KEYS = (
+    "preload",
+    "backlash",
+    "stiffness",
+    "onset",
+    "wear",
+    "origin_offset",
+    "effect",
+    "truth",
+    "scenario",
+    "degradation",
+    "fault",
+    "inject",
+    "seed",
+    "drag_torque",
+    "temperature_rise",
+    "error_motion",
+)
+#: A dial-indicator reading is what a real lab records, so its backlash dataset is allowed.
+ALLOWED_TRUTH_MENTIONS = ("/dial_indicator/backlash_um",)
+
+
+class DatasetError(ValueError):
+    """A dataset file is unreadable or does not follow the format.
+
+    The message names the file, the HDF5 key (``/group/dataset`` or ``/group@attribute``), the
+    offending value and what was expected.
+    """
