@@ -31,13 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.dataset import DatasetError, open_truth
+from analysis.dataset import DOFS, DatasetError, open_truth
 from analysis.files import read_json, write_json
 from analysis.injected import injected_backlash_um
 from analysis.phase1.scoring import score_method
 from analysis.phase2.error_motion_file import read_error_motions
 from analysis.phase2.fusion import remove_unobservable
-from analysis.phase2.traces import DOFS
 
 __all__ = ["ScoreError", "THRESHOLD_FACTORS", "flat", "score", "write_score"]
 

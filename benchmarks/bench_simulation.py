@@ -63,7 +63,7 @@ def main() -> None:
         theta = 0.11 / world.axis.screw.radius_per_rad
         s0 = initial_state(model, 0.11, theta)
         ctrl = np.zeros((nstep, model.nu))
-        ctrl[:, 0] = theta
+        ctrl[:, sim.index.servo_pos] = theta
         wall_bare, _ = timed(lambda model=model, data=data, s0=s0, ctrl=ctrl: rollout.rollout(model, data, s0, ctrl))
         rtf_bare = nstep / wall_bare * dt
         print(f"Phase I capture, step {dt * 1e3:g} ms: pipeline {wall:.3f} s wall -> "

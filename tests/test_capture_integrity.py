@@ -8,9 +8,13 @@ import numpy as np
 from conftest import REPO
 
 from twin import campaign as cp
-from twin.model import Q_X, SENS_NUT1_ACC
-from twin.scenario import Scenario
+from twin.model import ModelIndex, build_model
+from twin.scenario import Scenario, to_axis
 from twin.simulate import Simulator, phase1_capture, phase1_profile
+
+#: Columns of qpos, sens and ctrl of the axis model, looked up by name.
+IX = ModelIndex.of(build_model(to_axis(Scenario()), 2e-4))
+
 
 SCEN = Scenario()
 WORLD = cp.make_world(SCEN)
@@ -36,9 +40,9 @@ def test_states_and_sensors_share_one_clock():
     sim = Simulator(WORLD, SCEN.phase1.timestep_s)
     cmd = phase1_profile(SCEN.phase1, sim.fs, cp.rng_for(0, 1, 0))
     traj = sim.run(cp.condition_at(SCEN, 100.0), cmd, passes=1)
-    x = traj.qpos[:, Q_X]
+    x = traj.qpos[:, IX.x]
     acc_x = (x[2:] - 2 * x[1:-1] + x[:-2]) / sim.timestep**2  # acceleration at row k = 1..n-2
-    sensor = traj.sens[1:-1, SENS_NUT1_ACC][:, 0]
+    sensor = traj.sens[1:-1, IX.nut1_acc][:, 0]
     # Judge at the edges of the acceleration phases, where a one-step misalignment is 4 m/s².
     edges = np.flatnonzero(np.abs(np.gradient(acc_x)) > 0.5)
     edges = edges[(edges > 5) & (edges < acc_x.size - 5)]
@@ -67,7 +71,6 @@ def test_simulated_motion_matches_the_kinematic_truth():
     motions stored in truth.h5 (twin.geometry.true_error_motions), once the pitch ringing of the
     acceleration (27 µrad at 19.6 m/s², decaying in ~15 ms) has settled."""
     from twin import geometry as geo
-    from twin.model import Q_PITCH, Q_ROLL, Q_Y, Q_YAW, Q_Z
     from twin.simulate import phase2_trajectory
 
     sim = Simulator(WORLD, SCEN.phase2.timestep_s)
@@ -81,10 +84,10 @@ def test_simulated_motion_matches_the_kinematic_truth():
     for k in starts:
         steady[k:k + settle] = False
     q = traj.qpos[steady]
-    truth = geo.true_error_motions(WORLD.rails, WORLD.carriage, WORLD.screw, q[:, Q_X], q[:, 0])
+    truth = geo.true_error_motions(WORLD.rails, WORLD.carriage, WORLD.screw, q[:, IX.x], q[:, 0])
     z_imu = WORLD.axis.carriage.imu_height - WORLD.axis.carriage.com_height
-    sim_e = np.stack([q[:, Q_Y] - q[:, Q_ROLL] * z_imu, q[:, Q_Z], q[:, Q_ROLL], q[:, Q_PITCH],
-                      q[:, Q_YAW]])
+    sim_e = np.stack([q[:, IX.y] - q[:, IX.roll] * z_imu, q[:, IX.z], q[:, IX.roll], q[:, IX.pitch],
+                      q[:, IX.yaw]])
     # The nut pushes 50 mm below the centre of mass: the friction force (12 N) pitches the
     # carriage by a constant ±0.14 µrad per direction, which the mean removal per direction
     # takes out (angles are observable only up to their mean anyway).
@@ -103,15 +106,14 @@ def test_gyro_is_centred_on_the_state_clock():
     """The IMU gyro stream is at t_k like the states: it equals the central difference of the
     carriage attitude to second order; MuJoCo's raw velocity sensor is half a step late (a
     4 µm constant lag at 20 mm/s once it had reached the Phase II gyro)."""
-    from twin.model import Q_PITCH, Q_ROLL, Q_YAW, SENS_IMU_GYRO
 
     sim = Simulator(WORLD, SCEN.phase1.timestep_s)
     cmd = phase1_profile(SCEN.phase1, sim.fs, cp.rng_for(0, 1, 0))
     traj = sim.run(cp.condition_at(SCEN, 100.0), cmd, passes=1)
-    ang = traj.qpos[:, [Q_ROLL, Q_PITCH, Q_YAW]]
+    ang = traj.qpos[:, [IX.roll, IX.pitch, IX.yaw]]
     rate = (ang[2:] - ang[:-2]) / (2 * sim.timestep)          # rows 1..n-2, at t_k
     centred = traj.angular_velocity_imu[1:-1]
-    raw = traj.sens[1:-1, SENS_IMU_GYRO]
+    raw = traj.sens[1:-1, IX.imu_gyro]
     err_c = np.sqrt(np.mean((centred - rate) ** 2))
     err_raw = np.sqrt(np.mean((raw - rate) ** 2))
     print(f"gyro vs central difference of attitude: centred {err_c:.3e}, raw {err_raw:.3e} rad/s rms"

@@ -13,22 +13,13 @@ import scipy.linalg
 from twin import geometry as geo
 from twin.campaign import KIND_PHASE1, KIND_WORLD, condition_at, make_world, rng_for
 from twin.drive import Move, command_profile
-from twin.model import (
-    CTRL_NUT_AXIAL,
-    CTRL_STRIBECK,
-    NCTRL,
-    NSENS,
-    Q_BASE,
-    SENS_IMU_ACC,
-    SENS_NUT1_ACC,
-    SENS_SERVO_FORCE,
-    BaseMode,
-    build_mjcf,
-    build_model,
-    stiffness_of,
-)
+from twin.model import BaseMode, ModelIndex, build_mjcf, build_model, stiffness_of
 from twin.scenario import Scenario, ScenarioError, from_dict, to_axis
 from twin.simulate import Simulator, phase1_capture, phase1_profile
+
+#: Columns of qpos, sens and ctrl of the axis model, looked up by name.
+IX = ModelIndex.of(build_model(to_axis(Scenario()), 2e-4))
+
 
 DT = 2e-4
 
@@ -81,7 +72,7 @@ def test_effects_off_leave_the_twin_unchanged():
         return sim, out
 
     sim, nominal = run(Scenario())
-    assert sim.model.nq == 8 and sim.model.nu == NCTRL == 19 and sim.model.nsensordata == NSENS
+    assert sim.model.nq == 8 and sim.model.nu == IX.nu == 19 and sim.model.nsensordata == 14
     for k, v in before.items():
         assert float(np.sum(nominal[k], dtype=np.float64)) == pytest.approx(v, rel=1e-9, abs=1e-9), k
     # Zero amplitudes with every shape parameter moved: the very same arrays.
@@ -135,7 +126,7 @@ def test_cogging_line_in_the_servo_torque():
         cr = _cruise(cmd, speed)
         w = sim.world
         phase = w.cogging_per_rev * traj.theta_cmd[cr] + w.cogging_phase
-        res[amp] = (_phasor(traj.sens[cr, SENS_SERVO_FORCE], phase), traj.sens[cr, SENS_SERVO_FORCE])
+        res[amp] = (_phasor(traj.sens[cr, IX.servo_torque], phase), traj.sens[cr, IX.servo_torque])
     ax = w.axis
     f = w.cogging_per_rev * speed / ax.screw.lead
     assert f == pytest.approx(48.0)
@@ -179,8 +170,8 @@ def test_recirculation_impulses_add_ball_pass_harmonics():
         cr = _cruise(cmd, speed)
         w = sim.world
         u = geo.ball_pass_per_rev(w.screw) * traj.theta_cmd[cr] + w.screw.ball_pass_phase_rad
-        f_ctrl = sim.controls(cond, cmd, cmd.x)[cr, CTRL_NUT_AXIAL]
-        acc[amp] = [_phasor(traj.sens[cr, SENS_NUT1_ACC][:, 0], n * u) for n in (1, 2, 3)]
+        f_ctrl = sim.controls(cond, cmd, cmd.x)[cr, IX.nut_axial]
+        acc[amp] = [_phasor(traj.sens[cr, IX.nut1_acc][:, 0], n * u) for n in (1, 2, 3)]
         ctrl[amp] = [_phasor(f_ctrl, n * u) for n in (1, 2, 3)]
         mean_force = f_ctrl.mean()
     ax = w.axis
@@ -229,7 +220,7 @@ def test_stribeck_force_at_reversals_and_in_the_servo_torque():
     sim, cond = _sim(stribeck_excess_N=d_f, stribeck_velocity_mm_s=2.0)
     s = Scenario()
     cmd = phase1_profile(s.phase1, sim.fs, np.random.default_rng(0))
-    force = sim.controls(cond, cmd, cmd.x)[:, CTRL_STRIBECK]
+    force = sim.controls(cond, cmd, cmd.x)[:, IX.stribeck]
     v = cmd.v
     starts = np.flatnonzero((v[1:] != 0) & (v[:-1] == 0)) + 1
     assert starts.size >= 2
@@ -244,7 +235,7 @@ def test_stribeck_force_at_reversals_and_in_the_servo_torque():
     for amp in (0.0, d_f):
         sim, cond = _sim(stribeck_excess_N=amp, stribeck_velocity_mm_s=20.0)
         cmd = _move(sim, 0.1, 0.1, 0.15)
-        torque[amp] = sim.run(cond, cmd, passes=1).sens[:, SENS_SERVO_FORCE]
+        torque[amp] = sim.run(cond, cmd, passes=1).sens[:, IX.servo_torque]
     r = sim.world.axis.screw.radius_per_rad
     diff = torque[d_f] - torque[0.0]
     pred = d_f * r * np.exp(-(cmd.v / 20e-3) ** 2) * np.sign(cmd.v)
@@ -272,7 +263,7 @@ def _ring_down_peak(sim, cond, band):
     cmd = _move(sim, 0.1, 19.6, 0.01, dwell=0.4)
     traj = sim.run(cond, cmd, passes=2)
     stop = np.flatnonzero(cmd.v)[-1] + 5
-    y = traj.sens[stop:, SENS_IMU_ACC][:, 0]
+    y = traj.sens[stop:, IX.imu_acc][:, 0]
     spec = np.abs(np.fft.rfft(y - y.mean(), 1 << 20))
     fr = np.fft.rfftfreq(1 << 20, DT)
     sel = (fr > band[0]) & (fr < band[1])
@@ -297,14 +288,14 @@ def test_base_mode_rings_in_the_carriage_acceleration(mass, hz):
     and rings 12 % below f_base: the two-mass value within 1 % in both cases."""
     sim, cond = _sim(base_modal_mass_kg=mass, base_frequency_hz=hz)
     m = sim.model
-    assert (m.nq, m.nv, m.nu, m.nsensordata) == (9, 9, NCTRL, NSENS)
-    assert m.joint("base_x").qposadr[0] == Q_BASE
+    assert (m.nq, m.nv, m.nu, m.nsensordata) == (9, 9, IX.nu, 14)
+    assert m.joint("base_x").qposadr[0] == ModelIndex.of(m).base == 8
     k = mass * (2 * math.pi * hz) ** 2
     assert m.jnt_stiffness[m.joint("base_x").id] == pytest.approx(k)
     assert m.dof_damping[m.joint("base_x").dofadr[0]] == pytest.approx(2 * 0.03 * math.sqrt(k * mass))
     expected = _two_mass(mass, hz, sim.world.axis, cond.mech)
     peak, level, traj = _ring_down_peak(sim, cond, (0.5 * hz, 1.5 * hz))
-    assert traj.qpos.shape[1] == 9 and np.abs(traj.qpos[:, Q_BASE]).max() > 1e-8
+    assert traj.qpos.shape[1] == 9 and np.abs(traj.qpos[:, sim.index.base]).max() > 1e-8
     rigid, cond0 = _sim()
     _, level_rigid, _ = _ring_down_peak(rigid, cond0, (peak - 0.5, peak + 0.5))
     print(f"base {mass:g} kg at {hz:g} Hz: IMU peak {peak:.2f} Hz, two-mass {expected:.2f} Hz, "
@@ -327,7 +318,7 @@ def test_base_mode_model_layout():
     assert with_base.wrap_prm[adr + num - 1] == -1.0
     # Same controls and sensors as the rigid model, names in the same order.
     rigid = build_model(axis, DT)
-    assert (with_base.nu, with_base.nsensordata) == (rigid.nu, rigid.nsensordata) == (NCTRL, NSENS)
+    assert (with_base.nu, with_base.nsensordata) == (rigid.nu, rigid.nsensordata) == (IX.nu, 14)
     for kind, count in ((mujoco.mjtObj.mjOBJ_ACTUATOR, "nactuator"), (mujoco.mjtObj.mjOBJ_SENSOR, "nsensor")):
         assert getattr(rigid, count) == getattr(with_base, count)
         assert ([mujoco.mj_id2name(rigid, kind, i) for i in range(getattr(rigid, count))]

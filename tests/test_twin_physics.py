@@ -11,7 +11,7 @@ Conventions used throughout:
   x_nut = x + ZN·pitch. The centre of mass additionally carries the Abbe term −ZN·pitch of the
   rail-driven pitch.
 - Ball-nut tendon: L = x + ZN·pitch − (1+s)·R·θ − ε, s the lead stretch (cumulative + thermal),
-  ε = qpos[Q_FLANK] the lead flank, driven along the cyclic lead error + ball pass
+  ε = qpos[IX.flank] the lead flank, driven along the cyclic lead error + ball pass
   ε_cmd = nut_axial_deviation(θ_cmd) − cumulative·R·θ_cmd (Simulator.flank_motion). The backlash
   gap is |L| < b/2; the carriage is on a flank when |L| ≥ b/2.
 - Worlds are varied with ``dataclasses.replace`` (flat rails, screws without cyclic lead error);
@@ -32,19 +32,8 @@ from scipy import signal
 from twin import campaign as cp
 from twin import geometry as geo
 from twin.drive import Move, Profile, command_profile
-from twin.model import (
-    CTRL_POS,
-    Q_FLANK,
-    Q_PITCH,
-    Q_SCREW,
-    Q_X,
-    Q_Z,
-    SENS_SERVO_FORCE,
-    MechanicalState,
-    apply_state,
-    stiffness_of,
-)
-from twin.scenario import DialConfig, Scenario
+from twin.model import MechanicalState, ModelIndex, apply_state, build_model, stiffness_of
+from twin.scenario import DialConfig, Scenario, to_axis
 from twin.simulate import (
     PHASE2_LEAD_IN,
     Condition,
@@ -55,6 +44,10 @@ from twin.simulate import (
     phase2_moves,
     phase2_trajectory,
 )
+
+#: Columns of qpos, sens and ctrl of the axis model, looked up by name.
+IX = ModelIndex.of(build_model(to_axis(Scenario()), 2e-4))
+
 
 SCEN = Scenario()
 WORLD = cp.make_world(SCEN)
@@ -136,8 +129,8 @@ def _cyclic(world, theta) -> np.ndarray:
 def _tendon(sim: Simulator, traj, cond: Condition, vel: bool = False) -> np.ndarray:
     """Ball-nut tendon length L (or its rate), m: x + ZN·pitch − (1+s)·R·θ − ε."""
     coef = np.zeros(sim.model.nv)
-    coef[Q_X], coef[Q_PITCH], coef[Q_FLANK] = 1.0, ZN, -1.0
-    coef[Q_SCREW] = -(1.0 + sim.lead_stretch(cond)) * R
+    coef[IX.x], coef[IX.pitch], coef[IX.flank] = 1.0, ZN, -1.0
+    coef[IX.screw] = -(1.0 + sim.lead_stretch(cond)) * R
     return (traj.qvel if vel else traj.qpos) @ coef
 
 
@@ -200,12 +193,12 @@ def test_lead_quasi_static_no_cyclic_error():
     assert stretch == pytest.approx(world.screw.cumulative_lead_error_m_per_m
                                     + world.thermal_expansion * 3.0, rel=1e-12)
     x = traj.x[ends]
-    th = traj.qpos[ends, Q_SCREW]
+    th = traj.qpos[ends, IX.screw]
     k = np.diff(th) / (2.0 * math.pi)
     k_cmd = np.diff(LEAD_POSITIONS) / LEAD
     err = np.diff(x) - k * LEAD * (1.0 + stretch)
     err_cmd = np.diff(x) - k_cmd * LEAD * (1.0 + stretch)
-    flank = float(np.abs(traj.qpos[:, Q_FLANK]).max())
+    flank = float(np.abs(traj.qpos[:, IX.flank]).max())
     print(f"\n[lead a] stretch c+αΔT = {stretch * 1e6:.2f} µm/m; revolutions {np.round(k, 6)}")
     print(f"[lead a] Δx − k·lead·(1+s) nm: {np.round(err * 1e9, 2)}; with the commanded k: "
           f"{np.round(err_cmd * 1e9, 2)}; lead-error part per 100 mm "
@@ -232,7 +225,7 @@ def test_lead_quasi_static_default_world():
     sim, cmd, traj, ends = _lead_run(world, cond)
     stretch = sim.lead_stretch(cond)
     rows = ends
-    x, th, pitch = traj.x[rows], traj.qpos[rows, Q_SCREW], traj.qpos[rows, Q_PITCH]
+    x, th, pitch = traj.x[rows], traj.qpos[rows, IX.screw], traj.qpos[rows, IX.pitch]
     th_cmd = _at_rows(traj.theta_cmd)[rows]
     k = np.diff(th) / (2.0 * math.pi)
     d_eps = np.diff(_cyclic(world, th_cmd))
@@ -252,8 +245,8 @@ def test_lead_quasi_static_default_world():
     assert np.abs(err_nut_no_cyclic).max() > 0.3e-6  # the cyclic error is there at rest
 
     # In motion: the cyclic lead error and ball pass are reproduced.
-    th_all = traj.qpos[:, Q_SCREW]
-    x_nut = traj.x + ZN * traj.qpos[:, Q_PITCH]
+    th_all = traj.qpos[:, IX.screw]
+    x_nut = traj.x + ZN * traj.qpos[:, IX.pitch]
     resid0 = x_nut - (1.0 + stretch) * R * th_all
     resid = resid0 - _cyclic(world, th_all)
     idx = _steady(cmd, LEAD_SPEED, sim.fs, trim_s=0.5, direction=1)
@@ -316,14 +309,14 @@ def _ring(sim: Simulator, preload: float, v0: float, duration: float = 0.5) -> n
     m.dof_armature[m.joint("screw").dofadr[0]] = 1e6
     d = mujoco.MjData(m)
     x0 = 0.2
-    d.qpos[Q_X], d.qpos[Q_SCREW] = x0, x0 / R
-    d.ctrl[CTRL_POS] = d.qpos[Q_SCREW]
-    d.qvel[Q_X] = v0
+    d.qpos[IX.x], d.qpos[IX.screw] = x0, x0 / R
+    d.ctrl[IX.servo_pos] = d.qpos[IX.screw]
+    d.qvel[IX.x] = v0
     n = int(round(duration / m.opt.timestep))
     x = np.empty(n)
     for i in range(n):
         mujoco.mj_step(m, d)
-        x[i] = d.qpos[Q_X] - x0
+        x[i] = d.qpos[IX.x] - x0
     return x
 
 
@@ -409,7 +402,7 @@ def test_drag_torque_follows_preload():
         traj = sim.run(Condition(mech=MechanicalState(preload=f_load)), cmd, passes=1)
         fl = sim.model.dof_frictionloss[sim.model.joint("screw").dofadr[0]]
         assert fl == pytest.approx(s.drag_torque(f_load), rel=1e-12)
-        tq = traj.sens[:, SENS_SERVO_FORCE]
+        tq = traj.sens[:, IX.servo_torque]
         fwd = tq[_steady(cmd, v, sim.fs, 0.05, +1)].mean()
         rev = tq[_steady(cmd, v, sim.fs, 0.05, -1)].mean()
         torque[frac] = (fwd, rev)
@@ -447,7 +440,7 @@ def test_rail_waviness_through_truck_spacing(wavelength):
     cmd = command_profile([Move(0.02, 0.43, v, 0.5, 0.2)], sim.fs, lead_in=0.2)
     traj = sim.run(_healthy(), cmd, passes=2)
     idx = _steady(cmd, v, sim.fs, 0.1)
-    x, z, pitch = traj.x[idx], traj.qpos[idx, Q_Z], traj.qpos[idx, Q_PITCH]
+    x, z, pitch = traj.x[idx], traj.qpos[idx, IX.z], traj.qpos[idx, IX.pitch]
     g_s, g_a = geo.truck_filter_gains(wavelength, a)
     arg = math.pi * a / wavelength
     z_s, z_c, _ = _fit_sin(x, z, wavelength)
@@ -474,7 +467,7 @@ def _pitch_registration(dt: float, v: float = 0.02, wavelength: float = 0.05):
     cmd = command_profile([Move(0.10, 0.20, v, 0.5, 0.05)], sim.fs, lead_in=0.05)
     traj = sim.run(_healthy(), cmd, passes=2)
     idx = _steady(cmd, v, sim.fs, 0.2)
-    s, c, _ = _fit_sin(traj.x[idx], traj.qpos[idx, Q_PITCH], wavelength)
+    s, c, _ = _fit_sin(traj.x[idx], traj.qpos[idx, IX.pitch], wavelength)
     # pitch = −G·cos(k(x + Δ)) = −G·cos(kΔ)·cos(kx) + G·sin(kΔ)·sin(kx)
     k = 2.0 * math.pi / wavelength
     return math.atan2(s, -c) / k, sim
@@ -545,9 +538,9 @@ def test_backlash_shift_forward_reverse(b_um):
     force = _nut_force(sim, traj, cond)[steady] * np.sign(_at_rows(cmd.v)[steady])
     # Registration of the pitch trace against the commanded position (information).
     grid = np.linspace(lo, hi, 40_000)
-    p_f = np.interp(grid, x_cmd[fwd], traj.qpos[fwd, Q_PITCH])
+    p_f = np.interp(grid, x_cmd[fwd], traj.qpos[fwd, IX.pitch])
     order = np.argsort(x_cmd[rev])
-    p_r = np.interp(grid, x_cmd[rev][order], traj.qpos[rev, Q_PITCH][order])
+    p_r = np.interp(grid, x_cmd[rev][order], traj.qpos[rev, IX.pitch][order])
     grad = np.gradient(p_f, grid)
     coef, *_ = np.linalg.lstsq(np.column_stack([grad, np.ones_like(grad)]), p_f - p_r, rcond=None)
     print(f"\n[backlash shift] b = {b_um:.0f} µm ({elapsed:.1f} s): shift {shift * 1e6:.3f} µm vs "
@@ -663,7 +656,7 @@ def _flank_lines(sim: Simulator, traj, idx: np.ndarray) -> list[tuple[float, com
     orders = (1.0, 2.0, 3.0, float(geo.ball_pass_per_rev(sim.world.screw)))
     cols = [np.ones_like(th), th] + [f(o * th) for o in orders for f in (np.sin, np.cos)]
     design = np.column_stack(cols)
-    c_flank, *_ = np.linalg.lstsq(design, traj.qpos[idx, Q_FLANK], rcond=None)
+    c_flank, *_ = np.linalg.lstsq(design, traj.qpos[idx, IX.flank], rcond=None)
     c_cmd, *_ = np.linalg.lstsq(design, eps, rcond=None)
     return [(o, complex(*c_flank[2 + 2 * i:4 + 2 * i]) / complex(*c_cmd[2 + 2 * i:4 + 2 * i]))
             for i, o in enumerate(orders)]
@@ -671,7 +664,7 @@ def _flank_lines(sim: Simulator, traj, idx: np.ndarray) -> list[tuple[float, com
 
 def test_lead_flank_follows_command(phase2_passes, phase1_contact):
     """The lead_flank coordinate follows its command ε_cmd(θ_cmd) (cyclic lead error + ball pass,
-    0.58 µm summed amplitude): max |qpos[Q_FLANK] − ε_cmd| over a whole Phase I capture
+    0.58 µm summed amplitude): max |qpos[IX.flank] − ε_cmd| over a whole Phase I capture
     (400 mm/s, dt 0.1 ms, b = 10 µm) and over the Phase II-like run with its 500 mm/s moves
     (dt 0.2 ms, b = 10 µm) below 10 nm (a third of the 30 nm ball pass, 1.7 % of the summed
     amplitude), and every line (1, 2, 3 per revolution, ball pass) reproduced within 1 % in
@@ -688,7 +681,7 @@ def test_lead_flank_follows_command(phase2_passes, phase1_contact):
     cases = (("Phase I capture, 400 mm/s", sim1, cond1, traj1, SCEN.phase1.speed_mm_s),
              ("Phase II-like run, 500 mm/s", sim2, cond2, trajs[1], 500.0))
     for name, sim, cond, traj, speed in cases:
-        err = traj.qpos[:, Q_FLANK] - _cyclic(sim.world, _at_rows(traj.theta_cmd))
+        err = traj.qpos[:, IX.flank] - _cyclic(sim.world, _at_rows(traj.theta_cmd))
         idx = _steady(traj.cmd, speed * 1e-3, sim.fs, 0.0)
         kp = -sim.model.actuator_biasprm[sim.model.actuator("lead_flank").id, 1]
         force = np.abs(_nut_force(sim, traj, cond)).max()
@@ -764,8 +757,8 @@ def _linear_axial_mode(sim: Simulator, preload: float) -> float:
     m.dof_frictionloss[:] = 0.0
     try:
         d = mujoco.MjData(m)
-        d.qpos[Q_X], d.qpos[Q_SCREW] = 0.2, 0.2 / R
-        d.ctrl[CTRL_POS] = d.qpos[Q_SCREW]
+        d.qpos[IX.x], d.qpos[IX.screw] = 0.2, 0.2 / R
+        d.ctrl[IX.servo_pos] = d.qpos[IX.screw]
         mujoco.mj_forward(m, d)
         nx = 2 * m.nv + m.na
         a_mat = np.zeros((nx, nx))
@@ -779,7 +772,7 @@ def _linear_axial_mode(sim: Simulator, preload: float) -> float:
     found = []
     for j in np.flatnonzero((s.imag > 2 * math.pi * 60) & (s.imag < 2 * math.pi * 250)):
         shape = np.abs(vec[:m.nv, j]) * scale
-        if max(shape[Q_X], shape[Q_SCREW]) >= shape.max() and shape[Q_PITCH] < 0.5 * shape[Q_X]:
+        if max(shape[IX.x], shape[IX.screw]) >= shape.max() and shape[IX.pitch] < 0.5 * shape[IX.x]:
             found.append(abs(s[j]) / (2 * math.pi))
     assert len(found) == 1, found
     return float(found[0])

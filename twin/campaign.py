@@ -16,6 +16,7 @@ import os
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -487,7 +488,7 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     else:
         # Phase II sessions first: they are the longest units.
         todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
             futures = [pool.submit(run_unit, payload, u, str(out)) for u in todo]
             for fut in as_completed(futures):
                 name = fut.result()

@@ -1,4 +1,8 @@
-"""The ``twin`` command line: simulate campaigns (and, as later issues land, analyse them)."""
+"""The ``twin`` command line, the face of the tool: ``simulate`` and ``export-model`` (the
+simulator), ``detect`` and ``backlash`` (the analysis), ``score``, ``report``, ``demo``, ``sweep``,
+``view``, ``diagnose`` and ``diagnose-benchmark`` (the harness). Each verb parses its options,
+calls one function of the package below it and prints a summary; errors of the user's input exit
+with code 2 and one message naming the file, key and value."""
 
 from __future__ import annotations
 

@@ -46,6 +46,8 @@ from functools import cached_property
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from analysis.dataset import DOFS
+
 __all__ = [
     "TRAVEL_M",
     "DEFAULT_RAIL_LENGTH_M",
@@ -85,13 +87,12 @@ trucks at x ± a/2 over the full travel plus overtravel)."""
 DEFAULT_RAIL_START_M = -(DEFAULT_RAIL_LENGTH_M - TRAVEL_M) / 2.0
 """Default rail coordinate of the first profile sample, m (travel centred on the rail)."""
 
-ERROR_MOTION_NAMES = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
-"""Row order of :func:`true_error_motions` (ISO 230-1 names)."""
+ERROR_MOTION_NAMES = DOFS
+"""Row order of :func:`true_error_motions` (ISO 230-1 names), the dataset's order."""
 
 TRUCK_NAMES = ("FL", "FR", "RL", "RR")
 """Row order of :func:`truck_displacements`; rail index of each truck is (0, 1, 0, 1)."""
 
-_TRUCK_RAIL = np.array([0, 1, 0, 1])
 _TRUCK_FRONT = np.array([+1.0, +1.0, -1.0, -1.0])  # sign of the x offset (front = +X)
 _TRUCK_SIDE = np.array([-1.0, +1.0, -1.0, +1.0])  # sign of the y offset (rail 0 = −Y)
 

@@ -76,29 +76,100 @@ from twin.sensors.instruments import STANDARD_GRAVITY as GRAVITY  # m/s²
 
 TRUCKS = ("FL", "FR", "RL", "RR")
 
-# Control layout (indices into data.ctrl): the pid actuators take three inputs each.
-CTRL_POS, CTRL_VEL, CTRL_FF = 0, 1, 2
-CTRL_RIPPLE = 3
-CTRL_FLANK_POS, CTRL_FLANK_VEL, CTRL_FLANK_FF = 4, 5, 6
-CTRL_TRUCK_V = slice(7, 11)
-CTRL_TRUCK_L = slice(11, 15)
-CTRL_RUNOUT = slice(15, 17)
-CTRL_NUT_AXIAL = 17  # N, axial force on the carriage at the nut (ball recirculation impulses)
-CTRL_STRIBECK = 18  # N, force on carriage_x (Stribeck excess friction)
-NCTRL = 19
 FLANK_MASS = 1e5  # kg, see the module docstring
+_RAILS = range(4)
 
-# Sensor layout (indices into data.sensordata).
-SENS_IMU_ACC = slice(0, 3)
-SENS_IMU_GYRO = slice(3, 6)
-SENS_NUT1_ACC = slice(6, 9)
-SENS_NUT2_ACC = slice(9, 12)
-SENS_SERVO_FORCE = 12
-SENS_RIPPLE_FORCE = 13
-NSENS = 14
 
-# qpos / qvel indices (Q_BASE exists only in a model with a :class:`BaseMode`).
-Q_SCREW, Q_X, Q_Y, Q_Z, Q_ROLL, Q_PITCH, Q_YAW, Q_FLANK, Q_BASE = range(9)
+class ModelLayoutError(RuntimeError):
+    """The compiled model lacks a named element the simulator drives or reads."""
+
+
+@dataclass(frozen=True)
+class ModelIndex:
+    """Where the simulator's controls, sensors and joints sit in a compiled axis model, looked up
+    once by name (``model.actuator("servo")``, ``model.sensor("imu_acc")``, ``model.joint(...)``).
+
+    Columns of ``data.ctrl`` (the ``<pid>`` actuators take three inputs: position, velocity,
+    feed-forward): ``servo_pos``, ``servo_vel``, ``servo_ff``, ``ripple`` (screw torque, N*m),
+    ``flank_pos``, ``flank_vel``, ``flank_ff`` (the lead flank), ``truck_v``, ``truck_l`` (4,)
+    rail force pairs of the trucks FL FR RL RR (N), ``runout`` (2,) y, z forces at the nut (N),
+    ``nut_axial``, ``stribeck`` (N). Columns of ``data.sensordata``: ``imu_acc``, ``imu_gyro``,
+    ``nut1_acc``, ``nut2_acc`` (3 each) and ``servo_torque``. Entries of ``data.qpos``:
+    ``screw`` (rad), ``x``, ``y``, ``z`` (m), ``roll``, ``pitch``, ``yaw`` (rad), ``flank`` (m),
+    ``base`` (m; None without a compliant base). ``pose`` (5,): y, z, roll, pitch, yaw.
+    """
+
+    nu: int
+    servo_pos: int
+    servo_vel: int
+    servo_ff: int
+    ripple: int
+    flank_pos: int
+    flank_vel: int
+    flank_ff: int
+    truck_v: np.ndarray
+    truck_l: np.ndarray
+    runout: np.ndarray
+    nut_axial: int
+    stribeck: int
+    imu_acc: slice
+    imu_gyro: slice
+    nut1_acc: slice
+    nut2_acc: slice
+    servo_torque: int
+    screw: int
+    x: int
+    y: int
+    z: int
+    roll: int
+    pitch: int
+    yaw: int
+    flank: int
+    base: int | None
+    pose: np.ndarray
+
+    @classmethod
+    def of(cls, model: mujoco.MjModel) -> ModelIndex:
+        """Look every element up by name; a missing one raises :class:`ModelLayoutError`."""
+        def element(kind: str, name: str):
+            try:
+                return getattr(model, kind)(name)
+            except KeyError:
+                raise ModelLayoutError(f"the axis model has no {kind} named {name!r}; the simulator "
+                                       f"drives or reads it (see twin.model.build_mjcf)") from None
+
+        def ctrl(name: str, inputs: int = 1) -> int:
+            i = element("actuator", name).id
+            if model.actuator_ctrlnum[i] != inputs:
+                raise ModelLayoutError(f"actuator {name!r} takes {model.actuator_ctrlnum[i]} control "
+                                       f"inputs; the simulator writes {inputs}")
+            return int(model.actuator_ctrladr[i])
+
+        def sensor(name: str, dim: int) -> slice:
+            i = element("sensor", name).id
+            if model.sensor_dim[i] != dim:
+                raise ModelLayoutError(f"sensor {name!r} has dimension {model.sensor_dim[i]}; expected {dim}")
+            return slice(int(model.sensor_adr[i]), int(model.sensor_adr[i]) + dim)
+
+        def qpos(name: str) -> int:
+            return int(element("joint", name).qposadr[0])
+
+        servo, flank = ctrl("servo", 3), ctrl("lead_flank", 3)
+        pose = np.array([qpos(n) for n in ("carriage_y", "carriage_z", "carriage_roll", "carriage_pitch",
+                                           "carriage_yaw")])
+        has_base = any(model.joint(i).name == "base_x" for i in range(model.njnt))
+        return cls(
+            nu=int(model.nu), servo_pos=servo, servo_vel=servo + 1, servo_ff=servo + 2, ripple=ctrl("ripple"),
+            flank_pos=flank, flank_vel=flank + 1, flank_ff=flank + 2,
+            truck_v=np.array([ctrl(f"rail_v{i}") for i in _RAILS]),
+            truck_l=np.array([ctrl(f"rail_l{i}") for i in _RAILS]),
+            runout=np.array([ctrl("runout_y"), ctrl("runout_z")]),
+            nut_axial=ctrl("nut_axial"), stribeck=ctrl("rail_stribeck"),
+            imu_acc=sensor("imu_acc", 3), imu_gyro=sensor("imu_gyro", 3), nut1_acc=sensor("nut1_acc", 3),
+            nut2_acc=sensor("nut2_acc", 3), servo_torque=sensor("servo_torque", 1).start,
+            screw=qpos("screw"), x=qpos("carriage_x"), y=int(pose[0]), z=int(pose[1]), roll=int(pose[2]),
+            pitch=int(pose[3]), yaw=int(pose[4]), flank=qpos("lead_flank"),
+            base=qpos("base_x") if has_base else None, pose=pose)
 BASE_MODE_MAX_OMEGA_DT = 1.0  # stability margin of the explicit base spring (limit 2)
 
 
@@ -292,15 +363,7 @@ def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str
 def build_model(axis: Axis, timestep: float, base: BaseMode | None = None) -> mujoco.MjModel:
     """Compile the axis model; see :func:`build_mjcf`."""
     model = mujoco.MjModel.from_xml_string(build_mjcf(axis, timestep, base))
-    assert model.nu == NCTRL and model.actuator_ctrlnum[2] == 3, "control layout changed"
-    assert model.actuator_ctrladr[model.actuator("nut_axial").id] == CTRL_NUT_AXIAL, \
-        "control layout changed"
-    assert model.actuator_ctrladr[model.actuator("rail_stribeck").id] == CTRL_STRIBECK, \
-        "control layout changed"
-    assert model.nsensordata == NSENS, "sensor layout changed"
-    assert model.nq == model.nv == (8 if base is None else 9), "joint layout changed"
-    if base is not None:
-        assert model.joint("base_x").qposadr[0] == Q_BASE, "joint layout changed"
+    ModelIndex.of(model)  # every element the simulator uses is there, with its width
     return model
 
 
@@ -385,7 +448,9 @@ def state_fields(axis: Axis, state: MechanicalState) -> StateFields:
 def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> None:
     """Write a degradation state into the model's float fields (in place)."""
     f = state_fields(axis, state)
-    assert model.tendon("ballnut").id == 0 and model.tendon("truck_l3").id == 8
+    if model.tendon("ballnut").id != 0 or model.tendon("truck_l3").id != model.ntendon - 1:
+        raise ModelLayoutError("the tendons are expected in the order ballnut, truck_v0, truck_l0, ..., "
+                               "truck_l3 (state_fields writes their parameters as one array)")
     model.tendon_stiffness[:] = f.tendon_stiffness
     model.tendon_damping[:] = f.tendon_damping
     model.tendon_lengthspring[:] = f.tendon_lengthspring
@@ -393,7 +458,9 @@ def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> No
     # The screw is the third joint of the ball-nut tendon (see build_mjcf).
     ballnut = model.tendon("ballnut").id
     wrap = model.tendon_adr[ballnut] + 2
-    assert model.wrap_objid[wrap] == model.joint("screw").id
+    if model.wrap_objid[wrap] != model.joint("screw").id:
+        raise ModelLayoutError("the third joint of the ball-nut tendon is not the screw hinge; "
+                               "its coefficient (the lead) cannot be set")
     model.wrap_prm[wrap] = f.screw_coef
 
 
@@ -402,11 +469,11 @@ def initial_state(model: mujoco.MjModel, x0: float, theta0: float, flank0: float
     """Full physics state at rest: carriage at ``x0`` m, screw at ``theta0`` rad, lead flank at
     ``flank0`` m, and the carriage's (y, z, roll, pitch, yaw) ``pose`` (5,) m/rad (default 0)."""
     data = mujoco.MjData(model)
-    data.qpos[Q_SCREW] = theta0
-    data.qpos[Q_X] = x0
-    data.qpos[Q_FLANK] = flank0
+    data.joint("screw").qpos[0] = theta0
+    data.joint("carriage_x").qpos[0] = x0
+    data.joint("lead_flank").qpos[0] = flank0
     if pose is not None:
-        data.qpos[Q_Y:Q_YAW + 1] = pose
+        data.qpos[ModelIndex.of(model).pose] = pose
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     mujoco.mj_forward(model, data)
     state = np.empty(mujoco.mj_stateSize(model, spec))

@@ -37,29 +37,10 @@ from twin import geometry as geo
 from twin.axis import Axis
 from twin.drive import Move, Profile, command_profile, reciprocating
 from twin.model import (
-    CTRL_FF,
-    CTRL_FLANK_FF,
-    CTRL_FLANK_POS,
-    CTRL_FLANK_VEL,
-    CTRL_NUT_AXIAL,
-    CTRL_POS,
-    CTRL_RIPPLE,
-    CTRL_RUNOUT,
-    CTRL_STRIBECK,
-    CTRL_TRUCK_L,
-    CTRL_TRUCK_V,
-    CTRL_VEL,
     FLANK_MASS,
-    NCTRL,
-    Q_SCREW,
-    Q_X,
-    SENS_IMU_ACC,
-    SENS_IMU_GYRO,
-    SENS_NUT1_ACC,
-    SENS_NUT2_ACC,
-    SENS_SERVO_FORCE,
     BaseMode,
     MechanicalState,
+    ModelIndex,
     apply_state,
     build_model,
     initial_state,
@@ -215,7 +196,7 @@ class Trajectory:
     qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m] or
     (n, 9) with a compliant base (``base_x`` m last); qvel likewise;
     sens (n, 14) MuJoCo sensors (see :mod:`twin.model`); cmd: the commanded profile (controller
-    frame); theta_cmd (n,) rad."""
+    frame); theta_cmd (n,) rad; index: the columns of qpos and sens by name."""
 
     t: np.ndarray
     qpos: np.ndarray
@@ -223,11 +204,12 @@ class Trajectory:
     sens: np.ndarray
     cmd: Profile
     theta_cmd: np.ndarray
+    index: ModelIndex
 
     @property
     def x(self) -> np.ndarray:
         """True carriage position (rail coordinate), m."""
-        return self.qpos[:, Q_X]
+        return self.qpos[:, self.index.x]
 
     @property
     def angular_velocity_imu(self) -> np.ndarray:
@@ -237,7 +219,7 @@ class Trajectory:
         of row k, v_k = (q_k − q_{k−1})/dt, is the mean rate over [t_{k−1}, t_k], centred half a
         step late; the accelerometer rows, (v_{k+1} − v_k)/dt, are centred at t_k. The mean of
         consecutive rows centres the gyro at t_k (last row repeated)."""
-        g = self.sens[:, SENS_IMU_GYRO]
+        g = self.sens[:, self.index.imu_gyro]
         out = g.copy()
         out[:-1] = 0.5 * (g[:-1] + g[1:])
         return out
@@ -250,6 +232,7 @@ class Simulator:
         self.world = world
         self.timestep = timestep
         self.model = build_model(world.axis, timestep, world.base_mode)
+        self.index = ModelIndex.of(self.model)
         self.data = mujoco.MjData(self.model)
         self._state_size = mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
 
@@ -279,7 +262,7 @@ class Simulator:
         return 1.0 / self.timestep
 
     def controls(self, cond: Condition, cmd: Profile, x_rail: np.ndarray) -> np.ndarray:
-        """(n, NCTRL) control array: servo set-points, torque ripple (+ cogging), the prescribed
+        """(n, nu) control array: servo set-points, torque ripple (+ cogging), the prescribed
         lead flank, the rail and runout errors as force pairs K·e (see :mod:`twin.model`), rails
         looked up at ``x_rail`` (n,) m, and the recirculation and Stribeck forces of the
         world's effects (zero when off)."""
@@ -287,28 +270,29 @@ class Simulator:
         r = ax.screw.radius_per_rad
         k = stiffness_of(ax, cond.mech)
         theta = (cmd.x + cond.origin_offset) / r
-        ctrl = np.zeros((cmd.t.size, NCTRL))
-        ctrl[:, CTRL_POS] = theta
-        ctrl[:, CTRL_VEL] = cmd.v / r
-        ctrl[:, CTRL_FF] = ax.servo.torque_feedforward * ax.total_inertia() * cmd.a / r
-        ctrl[:, CTRL_RIPPLE] = w.ripple_torque * np.sin(w.ripple_per_rev * theta + w.ripple_phase)
+        ix = self.index
+        ctrl = np.zeros((cmd.t.size, ix.nu))
+        ctrl[:, ix.servo_pos] = theta
+        ctrl[:, ix.servo_vel] = cmd.v / r
+        ctrl[:, ix.servo_ff] = ax.servo.torque_feedforward * ax.total_inertia() * cmd.a / r
+        ctrl[:, ix.ripple] = w.ripple_torque * np.sin(w.ripple_per_rev * theta + w.ripple_phase)
         if w.cogging_torque > 0.0:
-            ctrl[:, CTRL_RIPPLE] += w.cogging_torque * np.sin(w.cogging_per_rev * theta
+            ctrl[:, ix.ripple] += w.cogging_torque * np.sin(w.cogging_per_rev * theta
                                                               + w.cogging_phase)
         if w.recirculation_impulse > 0.0:
-            ctrl[:, CTRL_NUT_AXIAL] = recirculation_force(theta, cmd.v, w)
+            ctrl[:, ix.nut_axial] = recirculation_force(theta, cmd.v, w)
         if w.stribeck_excess > 0.0:
-            ctrl[:, CTRL_STRIBECK] = stribeck_force(cmd.v, w)
+            ctrl[:, ix.stribeck] = stribeck_force(cmd.v, w)
         # Cyclic lead error and ball pass move the nut's flanks (the lead_flank coordinate);
         # the cumulative and thermal parts are in the tendon's lead coefficient.
         flank, flank_v, flank_a = self.flank_motion(theta)
-        ctrl[:, CTRL_FLANK_POS] = flank
-        ctrl[:, CTRL_FLANK_VEL] = flank_v
-        ctrl[:, CTRL_FLANK_FF] = FLANK_MASS * flank_a
+        ctrl[:, ix.flank_pos] = flank
+        ctrl[:, ix.flank_vel] = flank_v
+        ctrl[:, ix.flank_ff] = FLANK_MASS * flank_a
         disp = geo.truck_displacements(w.rails, w.carriage, x_rail)
-        ctrl[:, CTRL_TRUCK_V] = k["truck_vertical"] * disp["vertical"].T
-        ctrl[:, CTRL_TRUCK_L] = k["truck_lateral"] * disp["lateral"].T
-        ctrl[:, CTRL_RUNOUT] = ax.screw.radial_stiffness * geo.runout(theta, w.screw)
+        ctrl[:, ix.truck_v] = k["truck_vertical"] * disp["vertical"].T
+        ctrl[:, ix.truck_l] = k["truck_lateral"] * disp["lateral"].T
+        ctrl[:, ix.runout] = ax.screw.radial_stiffness * geo.runout(theta, w.screw)
         return ctrl
 
     def run(self, cond: Condition, cmd: Profile, passes: int = 2) -> Trajectory:
@@ -410,10 +394,10 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
         # Rollout row k is the state after step k; prepend the initial state so that row k
         # is the state at t_k, the one step k (its rails, its sensors) sees.
         state = np.concatenate([np.stack(s0s)[:, None, :], state[:, :-1, :]], axis=1)
-        x_rails = [st[:, 1 + Q_X] for st in state]
+        x_rails = [st[:, 1 + sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
     t = np.arange(cmd.t.size) * first.timestep
     return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
-                       cmd=cmd, theta_cmd=xc / sim.world.axis.screw.radius_per_rad)
+                       cmd=cmd, theta_cmd=xc / sim.world.axis.screw.radius_per_rad, index=sim.index)
             for st, se, xc, (sim, _) in zip(state, sens, x_cmd, items, strict=True)]
 
 
@@ -454,7 +438,7 @@ def phase1_measure(sim: Simulator, cfg, traj: Trajectory, rng: np.random.Generat
     continues the capture's generator after :func:`phase1_profile`)."""
     w = sim.world
     fs = sim.fs
-    nut = traj.sens[:, np.r_[SENS_NUT1_ACC, SENS_NUT2_ACC]]
+    nut = traj.sens[:, np.r_[traj.index.nut1_acc, traj.index.nut2_acc]]
     fs_nut = fs
     if fs < w.nut_acc.fs_hz:
         # A coarser simulation step (phase1.timestep_s > 1/10 kHz) is band-limited upsampled to
@@ -464,9 +448,9 @@ def phase1_measure(sim: Simulator, cfg, traj: Trajectory, rng: np.random.Generat
         fs_nut = fs * up
     _, acc1 = ins.measure_nut_accelerometer(nut[:, :3], fs_nut, w.nut_acc, rng)
     _, acc2 = ins.measure_nut_accelerometer(nut[:, 3:], fs_nut, w.nut_acc, rng)
-    _, speed = ins.measure_speed(traj.qpos[:, Q_SCREW], fs, w.encoder_counts_per_rev,
+    _, speed = ins.measure_speed(traj.qpos[:, traj.index.screw], fs, w.encoder_counts_per_rev,
                                  w.controller_fs, rng)
-    _, torque = ins.measure_torque(traj.sens[:, SENS_SERVO_FORCE], fs, w.torque_noise,
+    _, torque = ins.measure_torque(traj.sens[:, traj.index.servo_torque], fs, w.torque_noise,
                                    w.torque_resolution, w.controller_fs, rng)
     skip = int(round(PHASE1_LEAD_IN * w.controller_fs))
     n = int(round(cfg.capture_s * w.controller_fs))
@@ -512,7 +496,7 @@ def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -
     independently per run from ``rng``), exactly as 90 simulations would."""
     w = sim.world
     fs = sim.fs
-    _, acc = ins.measure_imu_accelerometer(traj.sens[:, SENS_IMU_ACC], fs, w.imu_acc, rng)
+    _, acc = ins.measure_imu_accelerometer(traj.sens[:, traj.index.imu_acc], fs, w.imu_acc, rng)
     _, gyro = ins.measure_gyroscope(traj.angular_velocity_imu, fs, w.imu_gyro, rng)
     n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
     t_cmd = np.arange(n_cmd) / w.position_cmd_fs
@@ -604,7 +588,7 @@ def dial_indicator(sim: Simulator, cfg, cond: Condition, rng: np.random.Generato
         fwd, rev = touched[:nsteps], touched[nsteps:]
         # The technician notes the position display: the encoder's actual position (nominal
         # lead), not the command, which the stiction of the drive leaves a fraction of a µm away.
-        shown = traj.qpos[ends, Q_SCREW] * sim.world.axis.screw.radius_per_rad - cond.origin_offset
+        shown = traj.qpos[ends, traj.index.screw] * sim.world.axis.screw.radius_per_rad - cond.origin_offset
         cmd_steps_fwd, cmd_steps_rev = shown[:nsteps], shown[nsteps:]
         if not fwd.any() or not rev.any():
             raise RuntimeError("dial indicator: no contact within the stepped range")

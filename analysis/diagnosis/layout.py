@@ -57,11 +57,11 @@ def compare(real_path: str | Path, twin: dict) -> None:
     r1, t1 = real["phase1"], twin["phase1"]
     if len(r1) != len(t1):
         problems.append(f"{real_path}: {len(r1)} Phase I sample(s); the scenario has {len(t1)}")
-    for (sr, caps_r), (_, caps_t) in zip(r1, t1, strict=True):
+    for (sr, caps_r), (_, caps_t) in zip(r1, t1, strict=False):
         if len(caps_r) != len(caps_t):
             problems.append(f"{real_path}: Phase I sample {sr} has {len(caps_r)} capture(s); "
                             f"the scenario has {len(caps_t)}")
-        for (name, fs, n), (_, fs_t, n_t) in zip(caps_r, caps_t, strict=True):
+        for (name, fs, n), (_, fs_t, n_t) in zip(caps_r, caps_t, strict=False):
             if abs(fs - fs_t) > RATE_TOLERANCE * fs_t:
                 problems.append(f"{real_path}: /phase1/{name} is sampled at {fs:g} Hz; the "
                                 f"scenario's channels are at {fs_t:g} Hz (phase1.fs_hz)")
@@ -73,11 +73,11 @@ def compare(real_path: str | Path, twin: dict) -> None:
     if len(r2) != len(t2):
         problems.append(f"{real_path}: {len(r2)} Phase II session(s); the scenario has {len(t2)}")
     rate_issues: dict[tuple[str, float, float], list[str]] = {}
-    for (sr, runs_r), (_, runs_t) in zip(r2, t2, strict=True):
+    for (sr, runs_r), (_, runs_t) in zip(r2, t2, strict=False):
         if len(runs_r) != len(runs_t):
             problems.append(f"{real_path}: Phase II session {sr} has {len(runs_r)} run(s); "
                             f"the scenario has {len(runs_t)}")
-        for (rn, rates), (_, rates_t) in zip(runs_r, runs_t, strict=True):
+        for (rn, rates), (_, rates_t) in zip(runs_r, runs_t, strict=False):
             for ch, fs in rates.items():
                 if abs(fs - rates_t[ch]) > RATE_TOLERANCE * rates_t[ch]:
                     rate_issues.setdefault((ch, fs, rates_t[ch]), []).append(f"/phase2/{sr}/{rn}/{ch}")

@@ -17,6 +17,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from analysis.dataset import DOFS  # noqa: E402
 from analysis.diagnosis.signature import (  # noqa: E402
     OPERATING_PHASES,
     PHASE1_BANDS_HZ,
@@ -25,7 +26,6 @@ from analysis.diagnosis.signature import (  # noqa: E402
     Region,
     _band_labels,
 )
-from analysis.phase2.traces import DOFS  # noqa: E402
 
 
 def _cells(z: np.ndarray, regions, rows, cols, pick) -> np.ndarray:

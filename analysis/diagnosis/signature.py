@@ -35,11 +35,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
-from analysis.dataset import DatasetError, Measurements, open_measurements
+from analysis.dataset import DOFS, DatasetError, Measurements, open_measurements
 from analysis.phase1.features import FEATURE_NAMES, sample_features, summarise_capture, transient_templates
 from analysis.phase2.error_motions import session_error_motions
 from analysis.phase2.imu_runs import segment_run
-from analysis.phase2.traces import DOFS
 
 PARTS = ("cal", "heldout")
 PHASE1_CHANNELS = ("speed", "torque", "acc1_x", "acc1_y", "acc1_z", "acc2_x", "acc2_y", "acc2_z")

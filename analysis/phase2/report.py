@@ -24,8 +24,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from analysis.dataset import DOFS
 from analysis.phase2.shifts import correlate_traces
-from analysis.phase2.traces import DOFS
 from analysis.phase2.winfilt import winfilt
 
 _SCALE = {"E_XX": (1e6, "µm"), "E_YX": (1e6, "µm"), "E_ZX": (1e6, "µm"),

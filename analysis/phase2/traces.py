@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
-DOF_UNITS = ("m", "m", "m", "rad", "rad", "rad")
+from analysis.dataset.schema import DOF_UNITS, DOFS
+
+__all__ = ["DOFS", "DOF_UNITS", "DirectionalTraces", "SessionErrorMotions"]
 
 
 @dataclass(frozen=True)

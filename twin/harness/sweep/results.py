@@ -68,9 +68,8 @@ def write_table(df, out: str | Path) -> tuple[Path, Path]:
     return pq, csv
 
 
-# Scores shown in the summary table and plotted, in this order, if present.
+# Scores shown in the summary table, in this order, if present.
 KEY_SCORES = ("phase2.rms_error_um", "phase2.bias_um", "phase2.prognosis.error_hours")
-PHASE1_KEY = ("delay_hours", "false_alarm_rate")
 
 
 def phase1_methods(df) -> list[str]:
