@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
 from twin import geometry as geo
+from twin.scenario import Scenario, to_axis
+
+#: The default scenario's carriage layout.
+CARRIAGE = geo.CarriageGeometry.from_carriage(to_axis(Scenario()).carriage)
 
 LENGTH = geo.DEFAULT_RAIL_LENGTH_M
 X_TRAVEL = np.linspace(0.0, geo.TRAVEL_M, 9001)
@@ -30,7 +35,7 @@ def _profiles_from_functions(vertical, lateral) -> geo.RailProfiles:
 @pytest.mark.parametrize("wavelength", [0.05, 0.2, 0.6])
 @pytest.mark.parametrize("method", ["linear", "cubic"])
 def test_truck_filter_vertical(wavelength, method):
-    g = geo.CarriageGeometry()
+    g = CARRIAGE
     amp = 1e-6
     prof = geo.sinusoidal_rail_profiles(LENGTH, wavelength, amp, "vertical", phase=0.3)
     motions = geo.error_motions_from_trucks(
@@ -49,7 +54,7 @@ def test_truck_filter_vertical(wavelength, method):
 
 @pytest.mark.parametrize("wavelength", [0.05, 0.2, 0.6])
 def test_truck_filter_lateral(wavelength):
-    g = geo.CarriageGeometry()
+    g = CARRIAGE
     amp = 1e-6
     prof = geo.sinusoidal_rail_profiles(LENGTH, wavelength, amp, "lateral")
     motions = geo.error_motions_from_trucks(geo.truck_displacements(prof, g, X_TRAVEL), g)
@@ -168,7 +173,7 @@ def test_at_out_of_range_and_shapes():
 
 
 def test_sign_conventions():
-    g = geo.CarriageGeometry()
+    g = CARRIAGE
     x0 = 0.2
     step = lambda u: 1e-6 * (u > x0)  # noqa: E731  rail raised ahead of the carriage centre
 
@@ -198,7 +203,7 @@ def test_sign_conventions():
 def test_rigid_pose_round_trip_and_abbe():
     """Rails that are exactly the trace of a rigid pose give that pose back; the reference point
     moves by t + ε × r (checked against a rotation matrix)."""
-    g = geo.CarriageGeometry(reference_offset_x_m=0.03, reference_offset_y_m=-0.02)
+    g = dataclasses.replace(CARRIAGE, reference_offset_x_m=0.03, reference_offset_y_m=-0.02)
     t_y, t_z, e_a, e_b, e_c = 0.7e-6, -0.4e-6, 3e-6, -5e-6, 4e-6
     x0 = 0.25
     half_w = g.rail_spacing_m / 2
@@ -230,7 +235,7 @@ def test_true_error_motions_defaults():
     rng = np.random.default_rng(2024)
     prof = geo.make_rail_profiles(geo.RailSpec(), LENGTH, rng)
     screw = geo.draw_screw_phases(geo.ScrewSpec(), rng)
-    g = geo.CarriageGeometry()
+    g = CARRIAGE
     theta = 2 * math.pi * X_TRAVEL / screw.lead_m
     e = geo.true_error_motions(prof, g, screw, X_TRAVEL, theta)
     assert e.shape == (6, X_TRAVEL.size)

@@ -1,22 +1,27 @@
 """Physical description of the linear-axis testbed (the paper's section III) and its derived figures.
 
-Everything here is a plain parameter with an SI unit; the scenario file (µm, mm/s, hours at the
-edge) is converted into these dataclasses by :mod:`twin.scenario`. The MuJoCo model is built from
-them by :mod:`twin.model`.
+Everything here is a plain parameter with an SI unit. The numbers come from one place, the
+scenario (:class:`twin.scenario.AxisConfig`, in the units of the file), and are converted into
+these dataclasses by :func:`twin.scenario.to_axis`; the few defaults here are parameters a
+scenario does not expose. The MuJoCo model is built from them by :mod:`twin.model`.
 
-Sources of the default figures:
-- Pandhare et al., "Ball Screw Health Monitoring with Inertial Sensors", section III: 450 mm travel,
-  10 mm lead, four trucks on two rails, 100 kg of steel load.
-- reference/methods.md §4 (THK/HIWIN-style catalogue rules): nut stiffness
-  K_N = 0.8·K·(F_a0 / (0.1·C_a))^(1/3), shaft stiffness K_S = A·E/L, series total 1/K = Σ 1/K_i.
+Sources: Pandhare et al., "Ball Screw Health Monitoring with Inertial Sensors", section III
+(450 mm travel, 10 mm lead, four trucks on two rails, 100 kg of steel load); THK and HIWIN ball
+screw catalogues (nut stiffness K_N = 0.8·K·(F_a0 / (0.1·C_a))^(1/3), shaft stiffness
+K_S = A·E/L, series total 1/K = Σ 1/K_i).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from twin import degradation as deg
+
+# The reference carriage (plate, nut housing and the paper's 100 kg load) whose inertia scales
+# with the mass of a scenario's carriage.
+_REFERENCE_MASS = 120.0  # kg
+_REFERENCE_INERTIA = (2.4, 2.0, 3.6)  # kg·m²
 
 
 @dataclass(frozen=True)
@@ -42,21 +47,21 @@ class ScrewDrive:
         radial_stiffness: radial nut stiffness through which screw runout pushes the carriage, N/m.
     """
 
-    lead: float = 0.010
-    pitch_diameter: float = 0.0255
-    root_diameter: float = 0.0215
-    shaft_length: float = 0.50
+    lead: float
+    pitch_diameter: float
+    root_diameter: float
+    shaft_length: float
+    rated_dynamic_load: float
+    preload: float
+    nut_stiffness_catalogue: float
+    bearing_stiffness: float
+    screw_inertia: float
+    no_load_torque: float
+    drag_viscous: float
+    contact_damping_ratio: float
+    radial_stiffness: float
     young_modulus: float = 2.06e11
-    rated_dynamic_load: float = 21_000.0
-    preload: float = 1_500.0
-    nut_stiffness_catalogue: float = 400e6
-    bearing_stiffness: float = 750e6
-    screw_inertia: float = 1.8e-4
     screw_mass: float = 2.3
-    no_load_torque: float = 0.05
-    drag_viscous: float = 2.0e-4
-    contact_damping_ratio: float = 0.03
-    radial_stiffness: float = 100e6
 
     @property
     def radius_per_rad(self) -> float:
@@ -65,14 +70,14 @@ class ScrewDrive:
 
     @property
     def shaft_stiffness(self) -> float:
-        """Axial shaft stiffness K_S = A·E/L in N/m (fixed–free, methods.md §4)."""
+        """Axial shaft stiffness K_S = A·E/L in N/m (fixed–free; THK catalogue)."""
         area = math.pi * self.root_diameter**2 / 4.0
         return area * self.young_modulus / self.shaft_length
 
     @property
     def nut_stiffness_new(self) -> float:
         """Nut contact stiffness at the nominal preload, N/m: the catalogue rule
-        K_N = 0.8·K·(F_a0/(0.1·C_a))^(1/3) (methods.md §4)."""
+        K_N = 0.8·K·(F_a0/(0.1·C_a))^(1/3) (THK catalogue)."""
         ref = 0.1 * self.rated_dynamic_load
         return 0.8 * self.nut_stiffness_catalogue * (self.preload / ref) ** (1.0 / 3.0)
 
@@ -82,7 +87,7 @@ class ScrewDrive:
         return float(deg.contact_stiffness(self.nut_stiffness_new, preload_N, self.preload))
 
     def axial_stiffness(self, preload_N: float) -> float:
-        """Total axial stiffness 1/K = 1/K_S + 1/K_N + 1/K_B in N/m (methods.md §4)."""
+        """Total axial stiffness 1/K = 1/K_S + 1/K_N + 1/K_B in N/m (THK catalogue)."""
         return float(deg.series_stiffness(self.shaft_stiffness, self.nut_stiffness(preload_N),
                                           self.bearing_stiffness))
 
@@ -116,17 +121,23 @@ class Carriage:
             (negative: below the rail plane is not used here; the screw sits between the rails).
     """
 
-    mass: float = 120.0
-    inertia: tuple[float, float, float] = (2.4, 2.0, 3.6)
-    truck_spacing: float = 0.12
-    rail_spacing: float = 0.20
-    truck_stiffness_vertical: float = 300e6
-    truck_stiffness_lateral: float = 200e6
-    truck_damping_ratio: float = 0.05
-    rail_friction: float = 12.0
+    mass: float
+    inertia: tuple[float, float, float]
+    truck_spacing: float
+    rail_spacing: float
+    truck_stiffness_vertical: float
+    truck_stiffness_lateral: float
+    truck_damping_ratio: float
+    rail_friction: float
+    imu_height: float
     com_height: float = 0.08
-    imu_height: float = 0.20
     nut_height: float = 0.03
+
+    @staticmethod
+    def inertia_of(mass: float) -> tuple[float, float, float]:
+        """Principal inertia (Ixx, Iyy, Izz) in kg·m² of a carriage of ``mass`` kg: the reference
+        carriage's (2.4, 2.0, 3.6) kg·m² at 120 kg, scaled with the mass."""
+        return tuple(i * mass / _REFERENCE_MASS for i in _REFERENCE_INERTIA)
 
 
 @dataclass(frozen=True)
@@ -146,10 +157,10 @@ class Servo:
         torque_limit: peak motor torque, N·m.
     """
 
-    motor_inertia: float = 1.5e-4
-    position_bandwidth_hz: float = 20.0
-    velocity_bandwidth_hz: float = 60.0
-    velocity_integral_time: float = 0.01
+    motor_inertia: float
+    position_bandwidth_hz: float
+    velocity_bandwidth_hz: float
+    velocity_integral_time: float
     torque_feedforward: float = 1.0
     torque_limit: float = 20.0
 
@@ -158,10 +169,10 @@ class Servo:
 class Axis:
     """The whole testbed: travel, drive, carriage, servo and simulation settings."""
 
-    travel: float = 0.450
-    screw: ScrewDrive = field(default_factory=ScrewDrive)
-    carriage: Carriage = field(default_factory=Carriage)
-    servo: Servo = field(default_factory=Servo)
+    travel: float
+    screw: ScrewDrive
+    carriage: Carriage
+    servo: Servo
 
     def total_inertia(self) -> float:
         """Rotational inertia seen by the motor: J_m + J_s + m·R², kg·m²."""

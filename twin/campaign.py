@@ -79,9 +79,7 @@ def make_world(s: Scenario) -> World:
     margin = RAIL_MARGIN
     rails = geo.make_rail_profiles(rail_spec, length_m=axis.travel + 2 * margin, rng=rails_rng,
                                    u_start_m=-margin)
-    carriage = geo.CarriageGeometry(
-        truck_spacing_m=axis.carriage.truck_spacing, rail_spacing_m=axis.carriage.rail_spacing,
-        reference_height_m=axis.carriage.imu_height, screw_height_m=axis.carriage.nut_height)
+    carriage = geo.CarriageGeometry.from_carriage(axis.carriage)
     screw = geo.draw_screw_phases(geo.ScrewSpec(
         lead_m=axis.screw.lead, cumulative_lead_error_m_per_m=g.cumulative_lead_error_um_per_m * 1e-6,
         cyclic_lead_error_m=tuple(a * 1e-6 for a in g.cyclic_lead_error_um),

@@ -42,11 +42,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from analysis.dataset import DOFS
+
+if TYPE_CHECKING:
+    from twin.axis import Carriage
 
 __all__ = [
     "TRAVEL_M",
@@ -387,24 +391,23 @@ class CarriageGeometry:
     """Layout of the carriage (all m, relative to the carriage centre C; see the module docstring).
 
     Attributes:
-        truck_spacing_m: a, front-to-rear truck distance (default 0.12 m [M]: a 450 mm axis
-            carrying 100 kg; the value used by :class:`twin.axis.Carriage`). Note a = 2 × the
-            default bolt pitch, so bolt-pitch waviness reaches E_ZX at full gain and the pitch
-            not at all (see :func:`truck_filter_gains`).
-        rail_spacing_m: w, distance between the rails (default 0.20 m [M]).
+        truck_spacing_m: a, front-to-rear truck distance (the scenario's 120 mm: a 450 mm axis
+            carrying 100 kg). Note a = 2 × the default bolt pitch, so bolt-pitch waviness reaches
+            E_ZX at full gain and the pitch not at all (see :func:`truck_filter_gains`).
+        rail_spacing_m: w, distance between the rails.
         reference_height_m: height of the reference point (the IMU on top of the steel load)
-            above the rail plane (default 0.20 m [M], as :class:`twin.axis.Carriage`).
+            above the rail plane.
         screw_height_m: height of the screw axis (the nut's axial load line) above the rail
-            plane (default 0.03 m [M], as :class:`twin.axis.Carriage`).
+            plane.
         reference_offset_x_m, reference_offset_y_m: horizontal offsets of the reference point
             from C (default 0).
         screw_offset_y_m: lateral position of the screw axis (default 0: midway between rails).
     """
 
-    truck_spacing_m: float = 0.12
-    rail_spacing_m: float = 0.20
-    reference_height_m: float = 0.20
-    screw_height_m: float = 0.03
+    truck_spacing_m: float
+    rail_spacing_m: float
+    reference_height_m: float
+    screw_height_m: float
     reference_offset_x_m: float = 0.0
     reference_offset_y_m: float = 0.0
     screw_offset_y_m: float = 0.0
@@ -412,6 +415,12 @@ class CarriageGeometry:
     def __post_init__(self) -> None:
         if self.truck_spacing_m <= 0 or self.rail_spacing_m <= 0:
             raise ValueError("truck and rail spacing must be positive")
+
+    @classmethod
+    def from_carriage(cls, carriage: Carriage) -> CarriageGeometry:
+        """The layout of the axis's carriage: its trucks, rails, IMU (the reference point) and screw."""
+        return cls(truck_spacing_m=carriage.truck_spacing, rail_spacing_m=carriage.rail_spacing,
+                   reference_height_m=carriage.imu_height, screw_height_m=carriage.nut_height)
 
     @property
     def reference_point_m(self) -> np.ndarray:

@@ -355,10 +355,9 @@ def to_axis(s: Scenario) -> Axis:
         no_load_torque=a.no_load_torque_Nm, drag_viscous=a.drag_viscous_Nm_s_per_rad,
         contact_damping_ratio=a.contact_damping_ratio,
         radial_stiffness=a.radial_stiffness_N_per_um * 1e6)
-    ref = Carriage()
     carriage = Carriage(
-        mass=a.carriage_mass_kg,
-        inertia=tuple(i * a.carriage_mass_kg / ref.mass for i in ref.inertia), truck_spacing=a.truck_spacing_mm * 1e-3,
+        mass=a.carriage_mass_kg, inertia=Carriage.inertia_of(a.carriage_mass_kg),
+        truck_spacing=a.truck_spacing_mm * 1e-3,
         rail_spacing=a.rail_spacing_mm * 1e-3,
         truck_stiffness_vertical=a.truck_stiffness_vertical_N_per_um * 1e6,
         truck_stiffness_lateral=a.truck_stiffness_lateral_N_per_um * 1e6,

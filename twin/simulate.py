@@ -26,7 +26,7 @@ from __future__ import annotations
 import copy
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -85,29 +85,29 @@ class World:
     rails: geo.RailProfiles
     carriage: geo.CarriageGeometry
     screw: geo.ScrewSpec
-    ripple_torque: float = 0.01
-    ripple_per_rev: int = 8
-    ripple_phase: float = 0.0
-    thermal_expansion: float = 11.5e-6
-    drag_temperature_coefficient: float = 0.0
-    imu_acc: ins.AnalogAccelerometerSpec = field(default_factory=ins.AnalogAccelerometerSpec)
-    imu_gyro: ins.DigitalGyroSpec = field(default_factory=ins.DigitalGyroSpec)
-    nut_acc: ins.NutAccelerometerSpec = field(default_factory=ins.NutAccelerometerSpec)
-    controller_fs: float = 10_000.0
-    encoder_counts_per_rev: int = 2**20
-    torque_noise: float = 0.005
+    ripple_torque: float
+    ripple_per_rev: int
+    ripple_phase: float
+    thermal_expansion: float
+    drag_temperature_coefficient: float
+    imu_acc: ins.AnalogAccelerometerSpec
+    imu_gyro: ins.DigitalGyroSpec
+    nut_acc: ins.NutAccelerometerSpec
+    controller_fs: float
+    encoder_counts_per_rev: int
+    torque_noise: float
+    position_cmd_fs: float
+    cogging_torque: float
+    cogging_per_rev: int
+    cogging_phase: float
+    recirculation_impulse: float
+    recirculation_width: float
+    stribeck_excess: float
+    stribeck_velocity: float
+    base_modal_mass: float
+    base_frequency: float
+    base_damping_ratio: float
     torque_resolution: float = 0.001
-    position_cmd_fs: float = 1000.0
-    cogging_torque: float = 0.0
-    cogging_per_rev: int = 12
-    cogging_phase: float = 0.0
-    recirculation_impulse: float = 0.0
-    recirculation_width: float = 0.1
-    stribeck_excess: float = 0.0
-    stribeck_velocity: float = 2e-3
-    base_modal_mass: float = 0.0
-    base_frequency: float = 120.0
-    base_damping_ratio: float = 0.03
 
     @property
     def base_mode(self) -> BaseMode | None:

@@ -55,6 +55,13 @@ _UNIT_SUFFIXES = (
 )
 
 
+def _check_new(label: str, key: str, parent: h5py.Group, name: str, what: str) -> None:
+    """``name`` is a valid, not yet used name of a ``what`` (capture, session, run) in ``parent``."""
+    _check_name(label, key, name, what)
+    if name in parent:
+        raise DatasetError(f"{label}: {key} is given twice; expected unique {what} names")
+
+
 def _put(label: str, key: str, g: h5py.Group, name: str, arr: np.ndarray, attrs: Mapping[str, Any]) -> None:
     _check_finite(label, key, arr)
     ds = g.create_dataset(name, data=arr)
@@ -125,9 +132,7 @@ def assemble_measurements(
         g1 = f.create_group("phase1")
         for name, attrs, datasets in phase1:
             gkey = f"/phase1/{name}"
-            _check_name(label, gkey, name, "capture")
-            if name in g1:
-                raise DatasetError(f"{label}: {gkey} is given twice; expected unique capture names")
+            _check_new(label, gkey, g1, name, "capture")
             attrs = dict(attrs)
             attrs["hours"] = _attr_hours(label, attrs, gkey)
             attrs["sample"] = _attr_int(label, attrs, gkey, "sample", "an integer Phase I sample index")
@@ -143,18 +148,14 @@ def assemble_measurements(
         g2 = f.create_group("phase2")
         for sname, sattrs, runs in phase2:
             skey = f"/phase2/{sname}"
-            _check_name(label, skey, sname, "session")
-            if sname in g2:
-                raise DatasetError(f"{label}: {skey} is given twice; expected unique session names")
+            _check_new(label, skey, g2, sname, "session")
             sattrs = dict(sattrs)
             sattrs["hours"] = _attr_hours(label, sattrs, skey)
             gs = g2.create_group(sname)
             write_attrs(gs, sattrs)
             for rname, rattrs, datasets, dattrs in runs:
                 rkey = f"{skey}/{rname}"
-                _check_name(label, rkey, rname, "run")
-                if rname in gs:
-                    raise DatasetError(f"{label}: {rkey} is given twice; expected unique run names")
+                _check_new(label, rkey, gs, rname, "run")
                 arrays = _channels(label, rkey, datasets, PHASE2_CHANNELS)
                 dattrs = dattrs or {}
                 chattrs = {}
@@ -259,9 +260,7 @@ def assemble_truth(
         gp = f.create_group("phase2")
         for name, attrs, x_m, E in sessions:
             skey = f"/phase2/{name}"
-            _check_name(label, skey, name, "session")
-            if name in gp:
-                raise DatasetError(f"{label}: {skey} is given twice; expected unique session names")
+            _check_new(label, skey, gp, name, "session")
             attrs = dict(attrs)
             for a in SESSION_TRUTH_REQUIRED:
                 attrs[a] = _attr_number(label, attrs, skey, a, "a finite number")

@@ -23,7 +23,8 @@ import numpy as np
 
 from analysis.dataset import open_measurements, open_truth
 from analysis.files import write_json
-from analysis.phase1 import pipeline, report
+from analysis.phase1 import pipeline
+from analysis.phase1.figures import plot_fig6
 from analysis.phase1.scoring import score_method
 
 __all__ = ["DetectError", "run"]
@@ -107,7 +108,7 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
     scores = {m: score_method(table.hours, r["scores"], r["threshold"], n_baseline, onset, consecutive)
               for m, r in results.items()}
     detections = {m: s.detection_hours for m, s in scores.items()}
-    write_json(out / "detection.json", report.detection_json(table.hours, results, detections))
+    write_json(out / "detection.json", detection_json(table.hours, results, detections))
     details = {
         "campaign": str(campaign), "reference": str(reference), "onset_hours": onset,
         "n_samples": len(table.hours), "n_baseline": n_baseline, "consecutive": consecutive,
@@ -117,6 +118,21 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
                     for m in results},
     }
     write_json(out / "detection_details.json", details)
-    report.plot_fig6(out / "detection.png", table.hours, results, pipeline.PAPER_NAMES, n_baseline,
+    plot_fig6(out / "detection.png", table.hours, results, pipeline.PAPER_NAMES, n_baseline,
                      onset, detections)
     return details
+
+
+def _num(x: float | None) -> float | None:
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+def detection_json(hours: np.ndarray, results: dict[str, dict], detections: dict[str, float | None]) -> dict:
+    """The ``detection.json`` object: ``{"methods": {NAME: {"detection_hours": float or null,
+    "threshold": float, "scores": [...], "hours": [...]}}}``, scores oriented so that above the
+    threshold is an alarm (selected features, delays and false alarms go to
+    ``detection_details.json``). results: {name: {"scores" (n,), "threshold"}}."""
+    return {"methods": {
+        name: {"detection_hours": _num(detections[name]), "threshold": float(r["threshold"]),
+               "scores": [float(v) for v in r["scores"]], "hours": [float(h) for h in hours]}
+        for name, r in results.items()}}

@@ -19,6 +19,7 @@ from analysis.files import write_json
 from analysis.injected import injected_change_um
 from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash
 from analysis.phase2.error_motion_file import write_error_motions
+from analysis.phase2.figures import write_figures
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis
 
 __all__ = ["BacklashRun", "run"]
@@ -120,12 +121,10 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     write_error_motions(out / "error_motions.h5", result.error_motions)
     figures: list[Path] = []
     if plots and ses:
-        from analysis.phase2.report import write_figures
-
         injected = None
         if (directory / "truth.h5").exists():
             with open_truth(directory / "truth.h5") as t:
                 injected = (hours, list(injected_change_um(t, [s.session for s in ses],
                                                            result.baseline_sessions)))
-        figures = write_figures(result, out, trend=trend, dial=dial_delta, injected=injected)
+        figures = write_figures(result, doc, out, injected=injected)
     return BacklashRun(doc=doc, result=result, trend=trend, prognosis=prog, figures=figures)

@@ -41,7 +41,7 @@ import numpy as np
 
 from analysis.diagnosis import attribution, layout
 from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
-from analysis.diagnosis.report import write_diagnosis_report
+from analysis.diagnosis.gap_report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, signature
 from analysis.files import atomic_write, write_json, write_text
 from twin.campaign import simulate_campaigns_batched

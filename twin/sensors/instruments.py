@@ -164,7 +164,23 @@ def _check_daq(spec) -> None:
 
 
 @dataclass(frozen=True)
-class AnalogAccelerometerSpec:
+class _DaqAccelerometer:
+    """What the two analog accelerometers share: the DAQ channel that samples their voltage and
+    their error model. ``daq_range``: input range ±daq_range, V (outside it the reading clips);
+    ``daq_bits``: resolution over 2·daq_range (0 = no quantisation or clipping); ``error``: bias
+    (m/s²), scale and misalignment errors."""
+
+    daq_range: float = 10.0
+    daq_bits: int = 24
+    error: ErrorModel = field(default_factory=ErrorModel)
+
+    def __post_init__(self) -> None:
+        _check_common_spec(self)
+        _check_daq(self)
+
+
+@dataclass(frozen=True)
+class AnalogAccelerometerSpec(_DaqAccelerometer):
     """The IMU's analog triaxial accelerometer and the DAQ channel that samples it.
 
     Defaults [S: paper, section III]: 2000 mV/g, half-power bandwidth 0-300 Hz, 7 µg rms/√Hz,
@@ -189,13 +205,6 @@ class AnalogAccelerometerSpec:
     noise_density: float = 7.0 * MICRO_G
     filter_order: int = 2
     sensitivity: float = 2000.0 * MV_PER_G
-    daq_range: float = 10.0
-    daq_bits: int = 24
-    error: ErrorModel = field(default_factory=ErrorModel)
-
-    def __post_init__(self) -> None:
-        _check_common_spec(self)
-        _check_daq(self)
 
 
 @dataclass(frozen=True)
@@ -235,7 +244,7 @@ class DigitalGyroSpec:
 
 
 @dataclass(frozen=True)
-class NutAccelerometerSpec:
+class NutAccelerometerSpec(_DaqAccelerometer):
     """A triaxial IEPE (ICP) accelerometer on the ball nut and its DAQ channel.
 
     Defaults: [S: paper, section III] 100 mV/g, 10 kHz (Phase I rate).
@@ -271,13 +280,9 @@ class NutAccelerometerSpec:
     filter_order: int = 4
     highpass_hz: float = 0.5
     sensitivity: float = 100.0 * MV_PER_G
-    daq_range: float = 10.0
-    daq_bits: int = 24
-    error: ErrorModel = field(default_factory=ErrorModel)
 
     def __post_init__(self) -> None:
-        _check_common_spec(self)
-        _check_daq(self)
+        super().__post_init__()
         if not (self.highpass_hz >= 0 and self.highpass_hz < self.bandwidth_hz):
             raise ValueError(
                 "NutAccelerometerSpec.highpass_hz must be in [0, bandwidth_hz), "

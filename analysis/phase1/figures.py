@@ -1,10 +1,5 @@
-"""Phase I outputs: ``detection.json`` and the six-panel figure like the paper's Fig. 6.
-
-``detection.json`` schema (issue 3): ``{"methods": {NAME: {"detection_hours": float or null,
-"threshold": float, "scores": [...], "hours": [...]}}}``, one entry per method, scores oriented so
-that above the threshold is an alarm. Everything else (selected features, delays, false alarms)
-goes to ``detection_details.json``.
-"""
+"""The six-panel figure of Phase I like the paper's Fig. 6: each method's score against operating
+hours with its limit, the baseline, the onset and the detection (matplotlib, Agg)."""
 
 from __future__ import annotations
 
@@ -16,20 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-__all__ = ["detection_json", "plot_fig6"]
-
-
-def _num(x: float | None) -> float | None:
-    return None if x is None or not np.isfinite(x) else float(x)
-
-
-def detection_json(hours: np.ndarray, results: dict[str, dict], detections: dict[str, float | None]) -> dict:
-    """The ``detection.json`` object. results: {name: {"scores" (n,), "threshold"}}."""
-    return {"methods": {
-        name: {"detection_hours": _num(detections[name]), "threshold": float(r["threshold"]),
-               "scores": [float(v) for v in r["scores"]], "hours": [float(h) for h in hours]}
-        for name, r in results.items()}}
-
+__all__ = ["plot_fig6"]
 
 
 def plot_fig6(path: Path, hours: np.ndarray, results: dict[str, dict], titles: dict[str, str],
