@@ -295,11 +295,9 @@ class NutAccelerometerSpec(_DaqAccelerometer):
 # --------------------------------------------------------------------------------------------
 
 
-def specific_force_in_sensor_frame(
-    acceleration_world: np.ndarray,
-    rotation_world_from_sensor: np.ndarray,
-    gravity: float = STANDARD_GRAVITY,
-) -> np.ndarray:
+def specific_force_in_sensor_frame(acceleration_world: np.ndarray,
+                                   rotation_world_from_sensor: np.ndarray,
+                                   gravity: float = STANDARD_GRAVITY) -> np.ndarray:
     """What an ideal accelerometer senses: ``R^T (a - g_vec)`` with ``g_vec = (0, 0, -gravity)``.
 
     Exactly kinematic (no modelling shortcut): an accelerometer at rest and level reads +g on z;
@@ -390,13 +388,8 @@ def _output_count(n_in: int, fs_in: float, fs_out: float) -> int:
     return int(math.floor(span * fs_out * (1.0 + 1e-12))) + 1
 
 
-def decimate_to(
-    values: np.ndarray,
-    fs_in: float,
-    fs_out: float,
-    t0: float = 0.0,
-    kind: str = "cubic",
-) -> tuple[np.ndarray, np.ndarray]:
+def decimate_to(values: np.ndarray, fs_in: float, fs_out: float, t0: float = 0.0,
+                kind: str = "cubic") -> tuple[np.ndarray, np.ndarray]:
     """Sample a uniformly sampled signal at the instants ``t0 + k / fs_out``.
 
     This is a pure resampler: it applies **no** anti-alias filter. Callers (the instrument models
@@ -478,13 +471,8 @@ def _sensor_filter(spec, fs_sim: float) -> np.ndarray:
     return np.vstack(sections)
 
 
-def _instrument_chain(
-    true_values: np.ndarray,
-    fs_sim: float,
-    spec,
-    rng: np.random.Generator,
-    t0: float,
-) -> tuple[np.ndarray, np.ndarray]:
+def _instrument_chain(true_values: np.ndarray, fs_sim: float, spec, rng: np.random.Generator,
+                      t0: float) -> tuple[np.ndarray, np.ndarray]:
     """The chain shared by all triaxial instruments, before their output quantisation.
 
     1. error model on the true signal (bias, scale, misalignment);
@@ -523,13 +511,9 @@ def _instrument_chain(
 # --------------------------------------------------------------------------------------------
 
 
-def measure_imu_accelerometer(
-    specific_force: np.ndarray,
-    fs_sim: float,
-    spec: AnalogAccelerometerSpec,
-    rng: np.random.Generator,
-    t0: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
+def measure_imu_accelerometer(specific_force: np.ndarray, fs_sim: float,
+                              spec: AnalogAccelerometerSpec, rng: np.random.Generator,
+                              t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Samples of the IMU's analog triaxial accelerometer as the DAQ records them.
 
     Chain: error model, white noise at ``spec.noise_density`` (7 µg/√Hz), causal Butterworth
@@ -558,13 +542,8 @@ def measure_imu_accelerometer(
     return t_out, _daq_quantise(samples, spec.sensitivity, spec.daq_range, spec.daq_bits)
 
 
-def measure_gyroscope(
-    angular_velocity: np.ndarray,
-    fs_sim: float,
-    spec: DigitalGyroSpec,
-    rng: np.random.Generator,
-    t0: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
+def measure_gyroscope(angular_velocity: np.ndarray, fs_sim: float, spec: DigitalGyroSpec,
+                      rng: np.random.Generator, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Samples of the IMU's digital triaxial rate gyroscope.
 
     Chain: error model, white noise at ``spec.noise_density`` (35 (µrad/s)/√Hz), causal
@@ -590,13 +569,8 @@ def measure_gyroscope(
     return t_out, quantise(samples, spec.lsb, spec.full_scale)
 
 
-def measure_nut_accelerometer(
-    acceleration: np.ndarray,
-    fs_sim: float,
-    spec: NutAccelerometerSpec,
-    rng: np.random.Generator,
-    t0: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
+def measure_nut_accelerometer(acceleration: np.ndarray, fs_sim: float, spec: NutAccelerometerSpec,
+                              rng: np.random.Generator, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Samples of a triaxial IEPE accelerometer on the ball nut, as the 10 kHz DAQ records them.
 
     Chain: error model (cross-axis sensitivity in ``misalignment``), white noise at
@@ -639,15 +613,9 @@ def _validate_scalar_signal(values, name: str) -> np.ndarray:
     return values
 
 
-def measure_speed(
-    motor_angle: np.ndarray,
-    fs_sim: float,
-    encoder_counts_per_rev: int,
-    fs_hz: float,
-    rng: np.random.Generator,
-    average_samples: int = 1,
-    t0: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
+def measure_speed(motor_angle: np.ndarray, fs_sim: float, encoder_counts_per_rev: int,
+                  fs_hz: float, rng: np.random.Generator, average_samples: int = 1,
+                  t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Motor speed as a servo drive computes it from its encoder.
 
     At each controller instant ``t_k = t0 + k / fs_hz`` the drive latches the encoder counter
@@ -694,15 +662,8 @@ def measure_speed(
     return t_out, speed
 
 
-def measure_torque(
-    torque: np.ndarray,
-    fs_sim: float,
-    noise_Nm: float,
-    resolution_Nm: float,
-    fs_hz: float,
-    rng: np.random.Generator,
-    t0: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
+def measure_torque(torque: np.ndarray, fs_sim: float, noise_Nm: float, resolution_Nm: float,
+                   fs_hz: float, rng: np.random.Generator, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Motor torque as the drive reports it (torque constant × measured current).
 
     The true torque is read at the controller instants (linear interpolation; exact when fs_hz
