@@ -16,8 +16,8 @@
   estimate follows it as the preload, and with it K, falls); the predicted hour at which the change
   reaches the 10 µm limit against the hour the injected backlash does; the RMS error of the
   recovered straightness and angular error motions against the true ones after removal of the
-  unobservable terms (methods.md section 1; E_XX is left out because the kinematic truth lacks
-  the axial dynamics the IMU sees).
+  unobservable terms (:func:`analysis.phase2.fusion.remove_unobservable`; E_XX is left out
+  because the kinematic truth lacks the axial dynamics the IMU sees).
 
 Units: the JSON carries µm, µrad and h in its key names; :func:`flat` gives one row of scalars
 (dotted names) for sweep tables.

@@ -215,7 +215,7 @@ def test_stribeck_force_at_reversals_and_in_the_servo_torque():
     routine, nothing in the cruise. In a slow start (0.1 m/s², v_s = 20 mm/s, quasi-static for
     the servo) the servo torque exceeds the off case by ΔF·R·exp(−(v/v_s)²), R = lead/2π, from
     50 ms after the start (v = 5 mm/s) on, within 2 %; in the first milliseconds the step of the force makes
-    the servo overshoot (measured peak 1.18·ΔF·R)."""
+    the servo overshoot."""
     d_f = 100.0
     sim, cond = _sim(stribeck_excess_N=d_f, stribeck_velocity_mm_s=2.0)
     s = Scenario()

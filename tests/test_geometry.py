@@ -243,7 +243,7 @@ def test_true_error_motions_defaults():
     pv = np.ptp(e, axis=1)
     print("\ndefault p-v over the travel: E_XX/E_YX/E_ZX µm, E_AX/E_BX/E_CX µrad:",
           np.round(pv * 1e6, 2))
-    # Magnitudes in the ranges of methods.md §4 (a few µm, tens of µrad at most).
+    # Magnitudes in the twin's guideway ranges (a few µm, tens of µrad at most).
     assert np.all(pv[1:3] < 10e-6) and np.all(pv[3:] < 60e-6)
     # Screw errors follow θ: the lead error alone equals E_XX when the carriage has no angles.
     flat = geo.sinusoidal_rail_profiles(LENGTH, 0.1, 0.0)

@@ -1,4 +1,4 @@
-"""The paper's run-to-failure campaign at reduced scale (slow: a few minutes on 2 cores).
+"""The paper's run-to-failure campaign at reduced scale (marked slow).
 
 Run with: make test-slow   (or .venv/bin/python -m pytest -m slow -s)
 """

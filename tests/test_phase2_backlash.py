@@ -306,9 +306,9 @@ def test_check2_pitch_based_at_slow_speed(slow_campaign, slow_result):
 @pytest.mark.slow
 def test_paper_rtf_fig13_analogue(tmp_path_factory):
     """The paper's campaign (paper-rtf.toml) at a tenth of the runs and a session every 500 h
-    (17 sessions x 9 runs of 20/100/500 mm/s, Phase I off; about 4 min simulation, 1 min
-    analysis): the shift-based change stays near 0 before the wear onset (2500 h) and reaches
-    about 10 µm near 8000 h, as in the paper's Fig. 13a."""
+    (17 sessions x 9 runs of 20/100/500 mm/s, Phase I off): the shift-based change stays near 0
+    before the wear onset (2500 h) and reaches about 10 µm near 8000 h, as in the paper's
+    Fig. 13a."""
     out = tmp_path_factory.mktemp("rtf")
     run_twin("simulate", REPO / "scenarios/paper-rtf.toml", "-o", out, "--set", "campaign.scale=0.1",
              "--set", "phase2.session_interval_hours=500", "--set", "phase2.dwell_s=2",

@@ -194,7 +194,7 @@ def test_slow_traces_keep_the_backlash_lag(backlash_step_campaign):
 
 
 def test_fusion_recovers_synthetic_error_motions():
-    """Noise-free synthetic IMU signals from the measurement model (methods.md section 1) at three
+    """Noise-free synthetic IMU signals from the measurement model (analysis.phase2.fusion) at three
     speeds, both directions: the fusion returns the error motions (signs, gravity coupling)."""
     dx = 0.5e-3
     x = np.arange(0.05, 0.40, dx)

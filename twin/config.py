@@ -47,6 +47,8 @@ def _walk(data: dict, key: str, source: str, error: type[Exception], create: boo
     node: Any = data
     for i, (name, idx) in enumerate(parts):
         last = i == len(parts) - 1
+        if node is None:  # reading (create=False) through a missing section
+            raise error(f"{source}: key `{key}` is missing.")
         if not isinstance(node, dict):
             done = ".".join(k for k, _ in parts[:i])
             raise error(f"{source}: key `{key}`: `{done}` is a value, not a section.")
@@ -83,7 +85,7 @@ def set_dotted(data: dict, key: str, value: Any, *, source: str = "--set",
 def get_dotted(data: dict, key: str, *, source: str = "key", error: type[Exception] = KeyError) -> Any:
     """The value of ``key`` (dotted, ``name[i]`` for a list element) in ``data``."""
     container, name = _walk(data, key, source, error, create=False)
-    if not isinstance(container, dict) or (isinstance(name, str) and name not in container):
+    if container is None or (isinstance(name, str) and name not in container):
         raise error(f"{source}: key `{key}` is missing.")
     return container[name]
 

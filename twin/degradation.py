@@ -1,7 +1,7 @@
 """Degradation of a preloaded ball nut over operating hours, and the thermal transient after pauses.
 
-The wear state drives the twin's preload, backlash, contact stiffness and drag torque
-(DESIGN.md section 2, "Degradation over operating hours"). The chain is:
+The wear state drives the twin's preload, backlash, contact stiffness and drag torque over
+operating hours. The chain is:
 
     operating hours --(Archard)--> wear depth w --(Hertz, ball population)--> preload F, backlash b
     preload F --(catalogue)--> drag torque T, contact stiffness k
@@ -26,13 +26,13 @@ Sources cited in the docstrings:
 - [Catalogue] THK General Catalog, Ball Screw, "Preload torque" (dynamic preload torque of a
   preloaded nut: T_p = 0.05 (tan beta)^(-1/2) F_a0 Ph / (2 pi)); the same form is in NSK's
   "Precision Machine Components" catalogue. Nut stiffness K_N = 0.8 K (F_a0 / 0.1 C_a)^(1/3)
-  (THK/HIWIN catalogues; /work/shared/reference/methods.md section 4).
-- [Paper] "Ball Screw Health Monitoring with Inertial Sensors" (/work/shared/paper/): Table II
+  (THK/HIWIN catalogues).
+- [Paper] Pandhare et al., "Ball Screw Health Monitoring with Inertial Sensors": Table II
   (campaign timeline), section IV (preload loss detected ~2972 h, essentially gone ~6000 h),
   section V / Fig. 13 (backlash ~0 until ~2500 h, rising around 4000 h, ~10 um at 8000 h),
   section III.C (thermal transients after resuming, nominal 2 h warm-up).
 - [XJTU] XJTU Ball Screw Degradation Dataset, friction torque per stage
-  (/work/shared/data/xjtu-ball-screw-friction-torque/README.md).
+  (Xi'an Jiaotong University ball screw degradation data set, public).
 """
 
 from __future__ import annotations
@@ -285,7 +285,7 @@ def normalised_drag_torque(hours, law: WearLaw, no_load_fraction: float) -> np.n
 
 
 def lead_angle(lead_m, pitch_diameter_m) -> np.ndarray:
-    """Lead angle β = atan(l / (π D_pw)) [rad] (helix geometry; methods.md section 4).
+    """Lead angle β = atan(l / (π D_pw)) [rad] (helix geometry).
 
     Args:
         lead_m: screw lead l, scalar or array [m], > 0.
@@ -348,7 +348,7 @@ def contact_stiffness(k_ref_N_per_m, preload_N, preload_ref_N, min_fraction: flo
     """Hertzian contact stiffness k = k_ref · max((F/F_ref)^(1/3), min_fraction) [N/m].
 
     Hertz point contact [Hertz]: Q = K δ^(3/2) gives dQ/dδ ∝ Q^(1/3), hence the catalogue rule
-    K_N = 0.8 K (F_a0/(0.1 C_a))^(1/3) [Catalogue; methods.md section 4], written here relative
+    K_N = 0.8 K (F_a0/(0.1 C_a))^(1/3) [Catalogue], written here relative
     to a reference preload F_ref at which the stiffness is k_ref.
 
     Floor: a nut (or truck) that has lost all preload still has contact stiffness once the working
@@ -379,7 +379,7 @@ def contact_stiffness(k_ref_N_per_m, preload_N, preload_ref_N, min_fraction: flo
 
 
 def series_stiffness(*ks) -> np.ndarray:
-    """Stiffness of springs in series, 1/k = Σ 1/k_i [N/m] (methods.md section 4: total axial
+    """Stiffness of springs in series, 1/k = Σ 1/k_i [N/m] (THK catalogue: total axial
     stiffness 1/K = 1/K_S + 1/K_N + 1/K_B + 1/K_H).
 
     Args:

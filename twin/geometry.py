@@ -26,15 +26,17 @@ Frames and sign conventions
   * E_CX > 0: the front (+X) end moves to +Y.
   A point at offset r from C then moves by E_T + ε × r (small angles), ε = (E_AX, E_BX, E_CX).
 
-Sources (tags as in ``/work/shared/reference/methods.md``: [S] cited there, [D] derived, [M]
-plausible default without citation):
+Sources (tags: [S] stated in the cited source, [D] derived here, [M] a model assumption, a
+plausible magnitude without a citation):
 - Pandhare, Miller, Vogl, Lee, "Ball Screw Health Monitoring with Inertial Sensors", section III:
   450 mm travel, 10 mm lead, two rails, four trucks; section V: the nominal pitch of 1 cm.
-- methods.md §4: guideway magnitudes (straightness a few µm p-v over 0.5 m with a ~1/k spectrum,
-  bolt-pitch waviness ~60 mm with 0.2–1 µm, angles 5–20 µrad p-v, screw runout 0.1–0.5 µm), and
-  the ball-pass formula (bearing analogy).
-- DESIGN.md §2: waviness fixed to the rail, seen through the truck spacing (a spatial filter);
-  lead error = cumulative + cyclic (periodic with the screw revolution).
+- [M] guideway magnitudes (straightness a few µm p-v over 0.5 m with a ~1/k spectrum, bolt-pitch
+  waviness ~60 mm with 0.2–1 µm, angles 5–20 µrad p-v, screw runout 0.1–0.5 µm), in the range of
+  the running-parallelism grades of THK LM-guide catalogues.
+- [D] the ball-pass formula, by the rolling-bearing analogy (Harris & Kotzalas, "Rolling Bearing
+  Analysis", 5th ed., 2007, ch. 1).
+- Design of the twin: waviness fixed to the rail, seen through the truck spacing (a spatial
+  filter); lead error = cumulative + cyclic (periodic with the screw revolution).
 """
 
 from __future__ import annotations
@@ -122,10 +124,10 @@ class RailSpec:
 
     1. waviness ("straightness"): random-phase sum of sinusoids with PSD ∝ 1/k^p (k = 1/λ in
        1/m) for wavelengths from ``min_wavelength_m`` to ``max_wavelength_m`` (default: the rail
-       length); p = 2 gives amplitudes ∝ 1/k, the "roughly 1/k spectrum" of methods.md §4 [M].
+       length); p = 2 gives amplitudes ∝ 1/k, a "roughly 1/k" spectrum [M].
        Its rms over the generated rail is exactly ``straightness_rms_*_m``;
     2. bolt-pitch waviness: a sinusoid of period ``bolt_pitch_m`` and amplitude
-       ``bolt_amplitude_*_m`` (methods.md §4: about 60 mm, 0.2–1 µm [M]); the bolt positions of a
+       ``bolt_amplitude_*_m`` (about 60 mm, 0.2–1 µm [M]); the bolt positions of a
        rail are random (one phase per rail, shared by its vertical and lateral profiles);
     3. roughness: flat-PSD random-phase sum between ``min_wavelength_m`` and
        ``roughness_max_wavelength_m``, rms ``roughness_rms_m`` (both directions) [M].
@@ -138,9 +140,9 @@ class RailSpec:
     Attributes:
         straightness_rms_vertical_m: rms of the vertical waviness, m. Default 0.5 µm [M]: with
             the 1/k spectrum this gives 2–3 µm p-v per rail over the 450 mm travel ("a few µm
-            p-v over 0.5 m", methods.md §4) and, with the default carriage, carriage angles of
+            p-v over 0.5 m" [M]) and, with the default carriage, carriage angles of
             about 6–14 µrad (roll) and 17–27 µrad (pitch, yaw) p-v over the travel (seeds 0–7).
-            methods.md §4 gives 5–20 µrad: the two [M] figures are in mild tension, because a
+            [M] is 5–20 µrad: the two [M] figures are in mild tension, because a
             1/k spectrum puts most of the slope in the longest wavelengths.
         straightness_rms_lateral_m: rms of the lateral waviness, m. Default 0.5 µm [M].
         rail_correlation_vertical: ρ of the two rails' vertical waviness (default 0.8 [M]).
@@ -150,9 +152,9 @@ class RailSpec:
         min_wavelength_m: shortest wavelength of waviness and roughness, m (default 0.5 mm, the
             paper's section V high-pass cutoff; 10 grid steps at the default grid).
         max_wavelength_m: longest waviness wavelength, m; None → the rail length.
-        bolt_pitch_m: bolt spacing, m (default 0.060, methods.md §4 [M]).
+        bolt_pitch_m: bolt spacing, m (default 0.060 [M]).
         bolt_amplitude_vertical_m: bolt-pitch amplitude in Z, m (default 0.5 µm, in the 0.2–1 µm
-            range of methods.md §4 [M]).
+            range [M]).
         bolt_amplitude_lateral_m: bolt-pitch amplitude in Y, m (default 0.3 µm [M]).
         roughness_rms_m: rms of the short-wavelength roughness, m (default 0.02 µm [M]).
         roughness_max_wavelength_m: longest roughness wavelength, m (default 2 mm [M]).
@@ -535,14 +537,14 @@ class ScrewSpec:
             default +5 µm / 300 mm [M: the brief's P-grade example; precision-grade screws are
             specified at a few µm per 300 mm].
         cyclic_lead_error_m: amplitudes of the lead-error harmonics 1, 2, 3 per revolution, m
-            (default 0.3, 0.15, 0.1 µm [M]); DESIGN.md §2: 40/80/120 Hz at 400 mm/s.
+            (default 0.3, 0.15, 0.1 µm [M]): 40/80/120 Hz at 400 mm/s.
         cyclic_lead_phase_rad: their phases, rad (default 0).
         runout_m: radial runout of the screw axis at the nut, once per revolution, m
-            (default 0.3 µm, methods.md §4: 0.1–0.5 µm [M]).
+            (default 0.3 µm; 0.1–0.5 µm [M]).
         runout_phase_rad: its phase, rad.
-        pitch_diameter_m: ball pitch-circle diameter D_pw, m (25×10 screw: 25.5 mm, methods.md §4).
-        ball_diameter_m: D_w, m (3.969 mm = 5/32 in, methods.md §4).
-        contact_angle_rad: α (45°, methods.md §4).
+        pitch_diameter_m: ball pitch-circle diameter D_pw, m (25×10 screw: 25.5 mm, THK catalogue).
+        ball_diameter_m: D_w, m (3.969 mm = 5/32 in, THK catalogue).
+        contact_angle_rad: α (45°, gothic-arch groove).
         ball_pass_amplitude_m: axial displacement modulation of the nut as balls pass, m
             (default 30 nm [M]: "tens of nm").
         ball_pass_phase_rad: its phase, rad.
@@ -585,7 +587,7 @@ def lead_error(theta, spec: ScrewSpec) -> np.ndarray:
     """Lead error e(θ): axial deviation of the nut from its nominal position R·θ, m.
 
     e(θ) = c·R·θ + Σ_h A_h·sin(h·θ + φ_h), R = lead/2π, c = cumulative slope (m/m), h = 1, 2, 3…
-    (DESIGN.md §2: cumulative part + cyclic part periodic with the screw revolution). Hence the
+    (cumulative part + cyclic part periodic with the screw revolution). Hence the
     nut travel between angles 2πk apart is exactly k·lead·(1 + c).
 
     Args:
@@ -605,7 +607,7 @@ def runout(theta, spec: ScrewSpec) -> np.ndarray:
     """Radial displacement of the screw axis at the nut, once per revolution, m.
 
     (y, z) = r·(cos(θ + φ), sin(θ + φ)): an eccentricity turning with the screw about +X
-    (+Y toward +Z for positive θ). Amplitude from methods.md §4 [M]. This is a radial excitation
+    (+Y toward +Z for positive θ). Amplitude [M]. This is a radial excitation
     of the nut (a force through the nut's radial stiffness in the dynamics), not a carriage
     error motion: the rails fix the carriage's lateral/vertical position, so it is not part of
     :func:`true_error_motions`.
@@ -620,7 +622,7 @@ def runout(theta, spec: ScrewSpec) -> np.ndarray:
 
 
 def balls_per_turn(spec: ScrewSpec) -> float:
-    """Z ≈ π·D_pw / (D_w·cos λ), λ = atan(lead/(π D_pw)) the lead angle (methods.md §4 [D]).
+    """Z ≈ π·D_pw / (D_w·cos λ), λ = atan(lead/(π D_pw)) the lead angle [D].
 
     Kept non-integer (it is a count per helical turn, ≈ 20.3 for a 25×10 screw)."""
     lead_angle = math.atan(spec.lead_m / (math.pi * spec.pitch_diameter_m))
@@ -630,20 +632,20 @@ def balls_per_turn(spec: ScrewSpec) -> float:
 def ball_pass_per_rev(spec: ScrewSpec) -> float:
     """Balls passing a point on the nut per screw revolution, Z·(1 − γ)/2, dimensionless.
 
-    Bearing analogy (methods.md §4 [D]): f = Z·(f_s/2)·(1 − γ), γ = D_w·cos α / D_pw."""
+    Rolling-bearing analogy [D] (Harris & Kotzalas, ch. 1): f = Z·(f_s/2)·(1 − γ), γ = D_w·cos α / D_pw."""
     gamma = spec.ball_diameter_m * math.cos(spec.contact_angle_rad) / spec.pitch_diameter_m
     return balls_per_turn(spec) * (1.0 - gamma) / 2.0
 
 
 def ball_pass_period_m(spec: ScrewSpec) -> float:
-    """Spatial period of ball passing in nut travel, m: lead / (Z(1 − γ)/2) (methods.md §4 [D]).
+    """Spatial period of ball passing in nut travel, m: lead / (Z(1 − γ)/2) [D].
 
     ≈ 1.105 mm for the 25×10 screw."""
     return spec.lead_m / ball_pass_per_rev(spec)
 
 
 def ball_pass_frequency_hz(speed_m_s, spec: ScrewSpec):
-    """Ball-pass frequency f = Z·(f_s/2)·(1 − γ) with f_s = |v|/lead, Hz (methods.md §4 [D]).
+    """Ball-pass frequency f = Z·(f_s/2)·(1 − γ) with f_s = |v|/lead, Hz [D].
 
     Args:
         speed_m_s: scalar or array carriage speed, m/s (sign ignored).
@@ -657,7 +659,7 @@ def ball_pass(theta, spec: ScrewSpec) -> np.ndarray:
     """Axial displacement excitation of the nut from ball passing, m.
 
     A·sin(N_bp·θ + φ), N_bp = :func:`ball_pass_per_rev`: a sinusoid of spatial period
-    :func:`ball_pass_period_m` in nut travel (fixed in the spatial domain, methods.md §4).
+    :func:`ball_pass_period_m` in nut travel (fixed in the spatial domain).
     For a nut travel s instead of an angle, pass θ = 2π·s/lead.
 
     Args:
@@ -716,7 +718,7 @@ def true_error_motions(profiles: RailProfiles, geometry: CarriageGeometry, screw
     E_XX is the deviation of P's X position from the nominal R·θ of a perfect screw with no
     clearance; backlash and elastic axial deflection (x_true − nut_position(θ) in a simulation)
     are NOT included -- the dynamics supply them. Rail errors follow x_true, screw errors follow
-    θ, which is what makes backlash visible as a shift between the two (DESIGN.md §2, paper §V).
+    θ, which is what makes backlash visible as a shift between the two (paper §V).
 
     Args:
         profiles: rails. geometry: carriage layout. screw: screw imperfections.

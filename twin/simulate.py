@@ -165,9 +165,9 @@ def stribeck_force(v_cmd: np.ndarray, world: World) -> np.ndarray:
 
     Approximation: v is the COMMANDED carriage velocity ``v_cmd`` (n,) m/s, so the force is an
     open-loop input (the model's Coulomb part, ``frictionloss``, is the true-velocity one). The
-    carriage follows the command within µm; its velocity differs from the commanded one by
-    0.5 mm/s rms over the Phase I routine, with transients at the acceleration steps (where the
-    axial mode rings) of up to 5 mm/s at 4 m/s² and 15 mm/s at 19.6 m/s² (measured, new axis).
+    carriage follows the command within µm; its velocity differs from the commanded one by a
+    fraction of a mm/s over the Phase I routine, with transients of a few mm/s at the
+    acceleration steps (where the axial mode rings; see docs/validation.md).
     For v_s of a few mm/s the force is therefore the Stribeck friction of the ideal motion, not
     the flicker the ringing would give; a true stick phase (a carriage held by static friction
     while the servo winds up) is not modelled."""

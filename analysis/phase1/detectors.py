@@ -13,7 +13,7 @@ Common contract (all detectors):
   -1/1, which this package does not use anywhere).
 - ``threshold_``: float, the control limit on the score.
 
-Library conventions are those of ``methods.md`` section 3 and the scikit-learn docs cited per class.
+Library conventions are those of the scikit-learn documentation cited per class.
 Every random draw comes from ``random_state``.
 """
 
@@ -81,7 +81,7 @@ def _pca(X: np.ndarray, variance: float) -> PCA:
 
 
 class PCAT2(PhaseIDetector):
-    """PCA with Hotelling's T^2 (paper section IV, Eq. 2; methods.md section 3).
+    """PCA with Hotelling's T^2 (paper section IV, Eq. 2; NIST/SEMATECH e-Handbook §6.5.4.3).
 
     T^2 = sum_j t_j^2 / lambda_j over the a retained components (``variance`` = 0.95 of the
     baseline variance), lambda_j = ``PCA.explained_variance_`` (N-1 denominator) [sklearn PCA docs].
@@ -115,7 +115,7 @@ class GMMMD(PhaseIDetector):
     Score: MD^2 = (t - mu)^T Sigma^-1 (t - mu) on the a principal components kept as in
     :class:`PCAT2`, with ``GaussianMixture(n_components=1, covariance_type="full")`` [sklearn
     GaussianMixture docs; its covariance is the MLE (divisor N) plus ``reg_covar``]. Limit:
-    (N-1) Beta_{1-alpha}(a/2, (N-a-1)/2) (methods.md section 3), exact for the baseline points;
+    (N-1) Beta_{1-alpha}(a/2, (N-a-1)/2) (Tracy, Young & Mason 1992), exact for the baseline points;
     on new points it alarms more often (measured in ``tests/test_phase1_limits.py``). Trailing
     moving average of ``moving_average`` = 4 samples on the score (paper).
     """
@@ -151,7 +151,7 @@ class SOMMQE(PhaseIDetector):
 
     A ``som_rows`` x ``som_cols`` MiniSom [MiniSom docs] trained on the baseline for
     ``n_iterations`` steps (random order from ``random_state``). Score: MQE = min_j ||x - w_j||
-    (Euclidean, computed here from the weights, methods.md section 3). Limit: mean + 3 std of the
+    (Euclidean, computed here from the weights). Limit: mean + 3 std of the
     baseline MQE. The paper gives no map size; 3 x 3 has fewer nodes than the 15 baseline samples,
     so the map cannot put a node on every baseline sample (with 4 x 4 it nearly does, the baseline
     MQE collapses and healthy new samples alarm: 3 of 3 on the quick campaign).
@@ -183,7 +183,7 @@ class IForest(PhaseIDetector):
     """Isolation Forest with the 0.5 anomaly-score threshold (paper (iii); Liu et al. 2008).
 
     Score: the paper's anomaly score s = 2^(-E[h(x)]/c(psi)) = ``-IsolationForest.score_samples``
-    [sklearn IsolationForest docs; methods.md section 3]. Threshold 0.5 (with
+    [scikit-learn IsolationForest documentation]. Threshold 0.5 (with
     ``contamination="auto"``, s > 0.5 is exactly sklearn's ``predict == -1``).
     """
 
@@ -210,7 +210,7 @@ class OCSVM(PhaseIDetector):
 
     A linear one-class SVM separates the data from the *origin* (Schoelkopf et al. 2001). On
     baseline-standardised features the baseline's mean *is* the origin, the problem is degenerate
-    (w ~ 0, rho = 0) and every score is ~0 (measured: |score| < 0.02 on the quick campaign). With
+    (w ~ 0, rho = 0) and every score is ~0. With
     ``reflect`` = r (default 3) the SVM therefore works on ``u = r - |x|``: a baseline sample lies
     inside the positive box (0, r] per feature, away from the origin, and a feature drifting
     beyond r standard deviations in either direction moves the sample through the origin side of

@@ -88,7 +88,8 @@ FEATURE_NAMES: tuple[str, ...] = (
     "corr_tr_torque_fwd",
     "corr_tr_torque_rev",
 )
-assert len(FEATURE_NAMES) == 46
+if len(FEATURE_NAMES) != 46:  # the paper's section IV count; a new feature must say why
+    raise RuntimeError(f"FEATURE_NAMES has {len(FEATURE_NAMES)} entries; the paper's feature set has 46")
 
 
 class FeatureError(ValueError):

@@ -1,4 +1,4 @@
-"""Control limits and smoothing for the Phase I detectors (methods.md section 3).
+"""Control limits and smoothing for the Phase I detectors (NIST/SEMATECH e-Handbook §6.5.4.3).
 
 N: baseline samples; a: retained principal components (or dimensions); alpha: false-alarm rate.
 
@@ -11,7 +11,7 @@ N: baseline samples; a: retained principal components (or dimensions); alpha: fa
   (N+1)/N factor of the new-observation limit, so it alarms slightly more often than alpha.
 - :func:`md2_beta_limit`: squared Mahalanobis distance with the *maximum-likelihood* covariance
   (divisor N, as ``sklearn.mixture.GaussianMixture`` fits it) of a baseline point:
-  ``MD^2 / (N-1) ~ Beta(a/2, (N-a-1)/2)`` [Gnanadesikan & Kettenring 1972; methods.md section 3],
+  ``MD^2 / (N-1) ~ Beta(a/2, (N-a-1)/2)`` [Gnanadesikan & Kettenring 1972],
   so the limit is ``(N-1) * Beta_{1-alpha}(a/2, (N-a-1)/2)``. Exact on the baseline only.
 - :func:`three_sigma`: mean + 3 standard deviations (N-1) of baseline scores (paper, SOM and AE).
 - :func:`moving_average`: trailing moving average over the time order of samples (paper: "moving

@@ -5,7 +5,7 @@ Two-class Fisher score of feature j [paper Eq. 1]:
     F_j = (mu_H - mu_F)^2 / (sigma_H^2 + sigma_F^2)
 
 with the class means and (biased, N denominator) variances of the healthy (H) and faulty (F)
-samples of the reference data set. The general form (methods.md section 3,
+samples of the reference data set. The general form (the multi-class Fisher score,
 ``sum_c n_c (mu_c - mu)^2 / sum_c n_c sigma_c^2``) ranks features the same way for two classes of
 equal size. Features are ranked by decreasing score and the smallest leading set whose cumulative
 score reaches ``fraction`` (0.9) of the total is kept.

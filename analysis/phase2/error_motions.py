@@ -5,7 +5,7 @@
 
 - ``combined``: E_XX, E_YX, E_ZX (m), E_AX, E_BX, E_CX (rad) against the commanded position, for
   each direction, from all speeds and both sensors combined per spatial frequency
-  (:mod:`analysis.phase2.fusion`, ``reference/methods.md`` section 1), on a grid of step
+  (:mod:`analysis.phase2.fusion`, derived here as in Vogl et al., PHM Society 2016), on a grid of step
   ``dx_m`` (0.5 mm by default) over the stretch every speed covers at constant velocity;
 - ``slow``: the slow-speed component ``slow()`` of the paper: the same estimate from the slowest
   speed alone, on a fine grid (``slow_dx_m``, 10 µm by default) over the stretch that speed
@@ -16,7 +16,7 @@
 Both are averaged over the usable runs of the session (the gridded signals are averaged, then
 combined; the combination is linear, so this equals averaging the per-run estimates). Both have
 the unobservable terms removed: a least-squares quadratic from E_XX, E_YX, E_ZX, the mean from the
-angles (methods.md section 1).
+angles.
 
 Position reference: the commanded position ``position_cmd`` (proportional to the screw angle).
 Screw-fixed features (lead error, ball pass) therefore stay in place between forward and reverse
@@ -64,7 +64,7 @@ ANTIALIAS = 0.8
 SLOW_LOWPASS_FRACTION = 1.0
 LOWPASS_ORDER = 8
 #: Zero-mean priors of the six error motions (rows DOFS) for the Wiener combination: generous
-#: versions of the guideway magnitudes of methods.md section 4 (straightness a few µm over 0.5 m,
+#: versions of the twin's guideway magnitudes (straightness a few µm over 0.5 m,
 #: angles 5–20 µrad p-v; positioning larger: cumulative lead error).
 PRIORS = (fusion.Prior(20e-6), fusion.Prior(5e-6), fusion.Prior(5e-6),
           fusion.Prior(20e-6), fusion.Prior(20e-6), fusion.Prior(20e-6))

@@ -1,6 +1,7 @@
 """Multi-speed, multi-sensor combination of IMU signals into error motions, per spatial frequency.
 
-Measurement model at constant signed speed v (``reference/methods.md`` section 1, [D]; ′ = d/dx):
+Measurement model at constant signed speed v (derived here from rigid-body kinematics, as in
+Vogl et al., PHM Society 2016; ′ = d/dx):
 
     f_x = v²·E_XX'' − g·E_BX        ω_x = v·E_AX'
     f_y = v²·E_YX'' + g·E_AX        ω_y = v·E_BX'
@@ -15,14 +16,14 @@ to it through gravity obey, for every speed s,
 (2nd-order Butterworth |H| = 1/√(1+(f/f_c)⁴)) at the temporal frequency f = |v|κ/2π. Per κ the
 unknowns (T, R) are the weighted least-squares solution over all speeds and both sensors with
 weights 1/(|v|·n²) (white time noise of density n maps to the position-domain density |v|·n²,
-methods.md section 1 table) and weight 0 above ``f_max`` (the sensor response is no longer
+derived here) and weight 0 above ``f_max`` (the sensor response is no longer
 known well enough; each speed resolves only κ ≤ 2π·f_max/|v|). With one sensor that is the
-first-order complementary filter of methods.md; E_ZX uses f_z alone, E_CX ω_z alone.
+first-order complementary filter; E_ZX uses f_z alone, E_CX ω_z alone.
 
 Records are not periodic: accelerometer and tilt signals are mirrored evenly, rates oddly
 (half-sample symmetric extension to length 2n), which makes the model exact up to a quadratic of
 the translations (the kinks of an evenly mirrored straightness), removed afterwards together with
-the other unobservable terms (methods.md section 1, "Non-periodic records").
+the other unobservable terms (non-periodic records).
 """
 
 from __future__ import annotations
@@ -73,7 +74,7 @@ def _extend(y: np.ndarray, odd: bool) -> np.ndarray:
 @dataclass(frozen=True)
 class Prior:
     """Zero-mean prior of an error motion: one-sided position-domain PSD S(k) = rms²·k_min/k²
-    for k ≥ k_min (amplitude ∝ 1/k, "roughly 1/k spectrum" of methods.md section 4), so that
+    for k ≥ k_min (amplitude ∝ 1/k, "roughly 1/k" spectrum of guideways), so that
     ``rms`` is the RMS of the wavelengths up to 1/k_min. Units m or rad."""
 
     rms: float
@@ -92,7 +93,7 @@ def solve(streams: list[Stream], dx_m: float, *, coupling: float | None,
     weights w_s = count/(|v|·n²) (the inverse position-domain noise PSD of the averaged record)
     and the prior PSDs S of ``prior_t``/``prior_r``; both sides are per unit of the same DFT
     normalisation, so the weighting is absolute (Wiener filter; with a weak prior this is the
-    weighted least squares of methods.md section 1). Wavenumbers the data do not determine (a
+    weighted least squares). Wavenumbers the data do not determine (a
     single speed cannot split g·R from v²κ²·T at long wavelengths) fall back to the prior, zero.
 
     coupling: c in f = v²T'' + c·g·R (+1 for E_YX/E_AX, −1 for E_XX/E_BX); None for an
@@ -138,7 +139,7 @@ def solve(streams: list[Stream], dx_m: float, *, coupling: float | None,
 
 def remove_unobservable(e: np.ndarray, x_m: np.ndarray) -> np.ndarray:
     """Remove the unobservable terms from (6, n) error motions: a least-squares quadratic in x
-    from the translations (rows 0–2), the mean from the angles (rows 3–5). methods.md section 1."""
+    from the translations (rows 0–2), the mean from the angles (rows 3–5)."""
     out = np.array(e, dtype=float, copy=True)
     u = (x_m - x_m.mean()) / max(float(np.ptp(x_m)), 1e-12)
     basis = np.vstack([np.ones_like(u), u, u * u]).T

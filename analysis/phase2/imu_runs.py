@@ -1,6 +1,6 @@
 """One Phase II run: from IMU time series to IMU signals against commanded position.
 
-Steps (``reference/methods.md`` section 1, "Time → position"):
+Steps (time → position; the approach of Vogl et al., PHM Society 2016):
 
 1. **Segmentation** of the commanded position ``position_cmd`` (k,) m at ``fs_hz``: the
    constant-velocity part (cruise) of every motion and the stationary parts (dwells). The
@@ -10,7 +10,7 @@ Steps (``reference/methods.md`` section 1, "Time → position"):
    not rotate), so the mean rate over the dwells, interpolated linearly in time between dwells, is
    subtracted. The accelerometer reads bias + g·tilt at the dwell position; its stationary mean
    (z: g + bias) is subtracted too; for x and y this removes a constant only, and constants of
-   angles are unobservable anyway (methods.md section 1).
+   angles are unobservable anyway.
 3. **Time → position**: each IMU sample taken at t_s describes the motion at t_s − τ, τ the
    sensor's group delay (second-order Butterworth low-pass, τ = 1/(2π·f_c·sin(π/4)) =
    √2/(2π·f_c): 0.75 ms at 300 Hz, 1.13 ms at 200 Hz; ``twin.sensors.instruments``
@@ -21,7 +21,7 @@ Steps (``reference/methods.md`` section 1, "Time → position"):
 4. **Gridding** onto a uniform position grid: zero-phase low-pass in time (anti-aliasing for the
    grid; without it the ~450 Hz ball-pass vibration of the fast pass, sampled at 1613 Hz, folds
    into micrometre errors of the straightness), then cubic interpolation at the instant the
-   command passes each grid point (methods.md section 1 bins or interpolates; the low-pass plays
+   command passes each grid point (binning would do too; the low-pass plays
    the role of the bin average without its sinc ripple).
 
 Units SI: m, s, m/s, m/s², rad/s.

@@ -5,7 +5,7 @@ For two traces already passed through :func:`analysis.phase2.winfilt.winfilt` on
 same step dx:
 
 1. the normalised cross-correlation against position lag τ (``scipy.signal.correlate`` with
-   ``correlation_lags``, methods.md section 2), c(τ) = Σ a(x)·b(x − τ) / sqrt(Σa²·Σb²), so that
+   ``correlation_lags``, scipy.signal documentation), c(τ) = Σ a(x)·b(x − τ) / sqrt(Σa²·Σb²), so that
    a peak at τ means trace(x) ≈ reference(x − τ): **a positive shift means the features of the
    trace appear at a larger commanded position than in the reference**;
 2. γ = the largest correlation within ±``max_lag_m`` (Eq. 3); that peak is the main one (n = 0);
@@ -14,7 +14,7 @@ same step dx:
    the peak value gives its sub-sample position, the *local shift* (Fig. 9b);
 4. the peaks are numbered n by their spacing (median distance of neighbours) and a least-squares
    line τ_n = s + n·p through the local shifts gives the overall shift s and the observed peak
-   spacing p (Fig. 9c; methods.md section 2: "lag_n = s + n·p_obs"). With fewer than
+   spacing p (the paper's Fig. 9c: lag_n = s + n·p_obs). With fewer than
    ``min_peaks`` peaks (a trace without periodic content has a single peak) s is the main peak's
    local shift and p is NaN.
 

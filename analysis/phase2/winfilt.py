@@ -8,11 +8,11 @@ Steps, applied to an error motion sampled on a uniform position grid of step ``d
 3. multiplication by a symmetric Hann window (``scipy.signal.windows.hann(n, sym=True)``).
 
 Window length. A first-order Savitzky–Golay smoother is exactly a moving average of length W
-(``reference/methods.md`` section 2 [D]): its transmission at wavelength λ is
+(derived here; Savitzky & Golay, Anal. Chem. 36, 1964): its transmission at wavelength λ is
 sinc(W·dx/λ) (normalised sinc), so the high-pass passes 1 − sinc(W·dx/λ). We read the paper's
 "spatial cutoff wavelength of 0.5 mm" as a cutoff *wavelength* λc = 0.5 mm (not 0.5 cycles/mm)
 with the ISO 16610 convention of 50 % transmission at λc, which gives W·dx = 0.603·λc
-(methods.md section 2 table): features shorter than λc pass, longer ones are suppressed. The two
+(ISO 16610-21 convention): features shorter than λc pass, longer ones are suppressed. The two
 other definitions of the table are available through ``definition``. W is rounded to the nearest
 odd number of samples (at least 3): 31 samples for λc = 0.5 mm on a 10 µm grid.
 """
@@ -28,7 +28,7 @@ CUTOFF_WAVELENGTH_M = 0.5e-3
 
 WINDOW_PER_CUTOFF = {"iso50": 0.603, "lowpass-3db": 0.443, "highpass-3db": 0.755}
 """Moving-average length W·dx per cutoff wavelength λc for each cutoff definition
-(methods.md section 2): 50 % transmission (ISO 16610), low-pass −3 dB, high-pass −3 dB."""
+(derived here): 50 % transmission (ISO 16610-21), low-pass −3 dB, high-pass −3 dB."""
 
 
 def savgol_window(dx_m: float, cutoff_wavelength_m: float = CUTOFF_WAVELENGTH_M,
@@ -36,7 +36,7 @@ def savgol_window(dx_m: float, cutoff_wavelength_m: float = CUTOFF_WAVELENGTH_M,
     """Length W (odd number of samples, ≥ 3) of the first-order Savitzky–Golay smoother whose
     high-pass complement has its cutoff at ``cutoff_wavelength_m`` on a grid of step ``dx_m`` (m).
 
-    W = 0.603·λc/dx for ``definition="iso50"`` (methods.md section 2), rounded to the nearest odd
+    W = 0.603·λc/dx for ``definition="iso50"`` (ISO 16610-21 convention), rounded to the nearest odd
     integer."""
     if definition not in WINDOW_PER_CUTOFF:
         raise ValueError(f"definition is {definition!r}; expected one of {sorted(WINDOW_PER_CUTOFF)}")

@@ -7,7 +7,7 @@ noise at the datasheet density, the sensor's own (causal) low-pass, sampling at 
 own rate, and the DAQ's quantisation. Everything is pure numpy/scipy; every random draw comes from
 the ``numpy.random.Generator`` the caller passes in (derived from the scenario seed).
 
-Spec sources (defaults, tagged as in ``/work/shared/reference/methods.md``):
+Spec sources of the defaults ([S] stated in the source, [M] a model assumption):
 
 - [S: paper, section III] IMU accelerometer: analog, 2000 mV/g, half-power bandwidth 0-300 Hz,
   7 µg rms/√Hz, sampled at about 1613 Hz. IMU rate gyroscope: digital, half-power bandwidth
@@ -90,7 +90,7 @@ class ErrorModel:
             Element ``[i, j]`` is the sensitivity of output axis ``i`` to input axis ``j``; the
             diagonal is ignored (scale errors live in ``scale_error``).
 
-    All zero by default (DESIGN.md section 3: "bias, scale, misalignment and cross-axis
+    All zero by default (the error terms the twin models: "bias, scale, misalignment and cross-axis
     sensitivity as parameters (zero by default)"). Stored as tuples so the model is immutable and
     hashable; pass any array-like.
     """
@@ -302,7 +302,7 @@ def specific_force_in_sensor_frame(acceleration_world: np.ndarray,
 
     Exactly kinematic (no modelling shortcut): an accelerometer at rest and level reads +g on z;
     a sensor rotated by a small angle θ about +y (right-hand rule) reads ``-g·sin θ`` on x, which is
-    the ``f_x = ... - g·E_BX`` term of ``reference/methods.md`` section 1.
+    the ``f_x = ... - g·E_BX`` term of the IMU measurement model (:mod:`analysis.phase2.fusion`).
 
     Args:
         acceleration_world: (n, 3) or (3,) acceleration of the sensor point in the world frame
