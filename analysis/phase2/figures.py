@@ -14,7 +14,8 @@ analysed with ``--no-plots``) draw the same figure. :func:`write_figures` writes
 - ``fig11_delta_position_shift.png``: ΔPositionShift per DOF (Fig. 11);
 - ``fig12_gamma.png``: γ per DOF and ΔBacklash per DOF with the weighted sum (Fig. 12);
 - ``fig13_backlash.png``: Δbacklash by shifts and by pitch against hours, the Kalman-smoothed
-  trend, dial-indicator changes and, when given, the injected change (Fig. 13).
+  trend, the Savitzky–Golay trend the paper draws, dial-indicator changes and, when given, the
+  injected change (Fig. 13).
 """
 
 from __future__ import annotations
@@ -203,6 +204,11 @@ def draw_trend_figure(fig: str, doc: dict, path: Path,
                 ax.plot(hours, smoothed, "-", label="Kalman-smoothed")
                 if not np.all(np.isnan(std)):
                     ax.fill_between(hours, smoothed - 2 * std, smoothed + 2 * std, alpha=0.2)
+            sg = _column(ses, lambda s: s["savgol_um"])
+            if with_trend and not np.all(np.isnan(sg)):
+                p = (doc.get("parameters") or {}).get("savgol") or {}
+                ax.plot(hours, sg, "-.", color="tab:purple",
+                        label=f"Savitzky–Golay ({p.get('window_sessions')} sessions, order {p.get('polyorder')})")
             if not np.all(np.isnan(dial)):
                 ax.plot(hours, dial, "s", ms=3, mfc="none", label="dial indicator (change)")
             if injected is not None:

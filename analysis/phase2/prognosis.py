@@ -213,3 +213,44 @@ def prognosis_history(hours, values, limit_m: float = LIMIT_M, min_sessions: int
     model = BacklashTrend(**trend_kw)
     return [prognosis(model.fit(t[:i + 1], z[:i + 1]), limit_m)
             for i in range(min_sessions - 1, t.size)]
+
+
+#: Savitzky–Golay trend of Fig. 13: sessions in the window and polynomial order.
+SAVGOL_WINDOW_SESSIONS = 11
+SAVGOL_POLYORDER = 2
+
+
+@dataclass(frozen=True)
+class SavgolTrend:
+    """The paper's trend filter (Fig. 13: "Savitzky–Golay filtered"): values (n,) m at the
+    sessions (NaN where the estimate is missing); window: sessions in the window; polyorder."""
+
+    values: np.ndarray
+    window: int
+    polyorder: int
+
+
+def savgol_trend(values, window: int = SAVGOL_WINDOW_SESSIONS,
+                 polyorder: int = SAVGOL_POLYORDER) -> SavgolTrend | None:
+    """Savitzky–Golay smoothing of the per-session estimates ``values`` (n,) m, as the paper
+    draws in Fig. 13 (Savitzky & Golay, Anal. Chem. 36, 1964; ``scipy.signal.savgol_filter``
+    with ``mode="interp"``: the ends are the fitted polynomial of the first and last window).
+
+    The filter runs over the session index: it assumes evenly spaced sessions, as the paper's
+    (every 84 h). Missing (NaN) estimates are left out and stay NaN. With fewer finite sessions
+    than ``window`` the window shrinks to the largest odd count available; with too few for a
+    polynomial of ``polyorder`` (window ≤ polyorder) there is no trend (None). The paper gives
+    neither window nor order; 11 sessions (924 h at its interval) and order 2 follow its curve's
+    smoothness.
+    """
+    from scipy.signal import savgol_filter
+
+    z = np.asarray(values, dtype=float)
+    ok = np.isfinite(z)
+    n = int(ok.sum())
+    w = min(window, n if n % 2 else n - 1)
+    if w <= polyorder:
+        return None
+    out = np.full(z.shape, np.nan)
+    out[ok] = savgol_filter(z[ok], w, polyorder, mode="interp")
+    return SavgolTrend(values=out, window=w, polyorder=polyorder)

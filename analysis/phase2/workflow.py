@@ -20,7 +20,7 @@ from analysis.injected import injected_change_um
 from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash
 from analysis.phase2.error_motion_file import write_error_motions
 from analysis.phase2.figures import write_figures
-from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis
+from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis, savgol_trend
 
 __all__ = ["BacklashRun", "run"]
 
@@ -80,6 +80,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     if len(ses) >= 2 and np.isfinite(shift).any():
         trend = BacklashTrend(process_noise=process_noise).fit(hours, shift)
     prog = prognosis(trend) if trend is not None else None
+    savgol = savgol_trend(shift)
     dial_delta = None
     if dial is not None and len(dial[0]):
         dial_delta = (dial[0], dial[1] - dial[1][0])
@@ -89,6 +90,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         if trend is not None:
             rec["smoothed_um"] = float(trend.smoothed[i] * 1e6)
             rec["smoothed_std_um"] = float(trend.smoothed_std[i] * 1e6)
+        if savgol is not None and np.isfinite(savgol.values[i]):
+            rec["savgol_um"] = float(savgol.values[i] * 1e6)
         if dial_delta is not None:
             k = int(np.argmin(np.abs(dial_delta[0] - s.hours)))
             if abs(dial_delta[0][k] - s.hours) < 1e-6:
@@ -110,6 +113,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
                        "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
                                               "pitch": result.baseline_offset_m[1] * 1e6},
                        "kalman_process_noise_m2_per_h3": None if trend is None else trend.process_noise,
+                       "savgol": None if savgol is None else {"window_sessions": savgol.window,
+                                                               "polyorder": savgol.polyorder},
                        "window_definition": est.window_definition, "threshold": est.threshold,
                        "sigma": est.sigma, "dofs": list(est.dofs), "stationary": est.stationary,
                        "travel_mm": est.travel_m * 1e3, "lead_mm": est.lead_m * 1e3,
