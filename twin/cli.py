@@ -328,7 +328,7 @@ def backlash(
 # --- twin sweep (helper: sweep) ----------------------------------------------------------------
 @app.command()
 def sweep(
-    sweep_file: Path = typer.Argument(..., help="sweep TOML file (see twin/sweep.py and scenarios/sweeps/)"),
+    sweep_file: Path = typer.Argument(..., help="sweep TOML file (see docs/usage.md and scenarios/sweeps/)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: runs/sweeps/<file stem>)"),
     scheduler: str | None = typer.Option(None, "--scheduler",
                                             help="address of a running dask.distributed scheduler; "
