@@ -1,0 +1,175 @@
+"""The strokes of a Phase II run found from the IMU alone: when each acceleration and deceleration
+of the carriage happened, from the pulses they leave in the accelerometer's x axis.
+
+This is the first step of an IMU-based position reference (the paper's ref. [34], Vogl et al.,
+"Inertial Measurement Unit for On-Machine Diagnostics of Machine Tool Linear Axes", PHM Society
+2016): the stroke events are found in the IMU's own clock, without the controller's
+``position_cmd``, and the routine's nominal trapezoid is placed between them.
+
+Method (derived here). The routine is known from the recording's metadata: the speeds v, the
+acceleration a, and the order of the moves (forward then reverse at each speed, a dwell after each
+move). Each move leaves two rectangular pulses of height ±a and length T = v/a in the carriage's
+acceleration: + then − forward, − then + in reverse. The pulses are looked for in that order,
+each within a window around where the nominal routine puts it after the previous one (the
+cruise takes (L − v²/a)/v, the dwell is known), by a matched filter (a moving sum of length T of
+the signed acceleration). Each pulse is then timed by its centroid over the matched window
+widened by the sensor's response time: a linear low-pass of unit DC gain moves a pulse's centroid
+by exactly its group delay at DC, so the pulse's true centre is the measured centroid minus the
+delay, and the start of the pulse half its length earlier. The carriage's axial mode rings after
+each pulse and biases the centroid by a fixed amount for a given axis state; the bias is common to
+every session with the same dynamics.
+
+Units SI: s, m/s, m/s².
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Pulse", "StrokeError", "find_pulses", "half_velocity_delay", "routine_pulses"]
+
+
+class StrokeError(ValueError):
+    """The expected pulses of the routine could not be found in the accelerometer signal."""
+
+
+@dataclass(frozen=True)
+class Pulse:
+    """One acceleration pulse of the carriage.
+
+    sign: +1 (acceleration towards +X) or −1; speed_m_s: the cruise speed of its move;
+    start_s: when the pulse began (IMU clock, sensor delay removed), s; length_s: its nominal
+    length v/a, s; area_m_s: the measured velocity change over the window, m/s (≈ sign·v).
+    """
+
+    sign: int
+    speed_m_s: float
+    start_s: float
+    length_s: float
+    area_m_s: float
+
+    @property
+    def end_s(self) -> float:
+        return self.start_s + self.length_s
+
+
+def routine_pulses(speeds_m_s: tuple[float, ...], accel_m_s2: float, stroke_m: float,
+                   dwell_s: float) -> list[tuple[int, float, float]]:
+    """The nominal pulse sequence of one run: ``(sign, speed, time after the previous pulse's
+    start)`` per pulse, forward then reverse at each speed (the first pulse's delay is 0)."""
+    out = []
+    prev_t_acc = 0.0
+    for v in speeds_m_s:
+        t_acc = min(v / accel_m_s2, math.sqrt(stroke_m / accel_m_s2))
+        v_pk = accel_m_s2 * t_acc
+        cruise = max((stroke_m - v_pk * t_acc) / v_pk, 0.0)
+        for sign in (1, -1):
+            # accel: after the previous deceleration and the dwell; decel: after accel and cruise
+            out.append((sign, v, prev_t_acc + dwell_s if out else 0.0))
+            out.append((-sign, v, t_acc + cruise))
+            prev_t_acc = t_acc
+    return out
+
+
+def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float, speeds_m_s: tuple[float, ...],
+                accel_m_s2: float, stroke_m: float, dwell_s: float, *, first_after_s: float = 0.0,
+                window_fraction: float = 0.02, label: str = "imu_acc") -> list[Pulse]:
+    """Find and time every acceleration pulse of a run (see the module docstring).
+
+    Args:
+        acc_x: (n,) accelerometer samples along the travel, m/s² (bias included; the median,
+            the standstill reading of a run that mostly rests or cruises, is removed).
+        fs_hz: its sampling rate, Hz; delay_s: how late the sensor shows a pulse's
+            half-velocity instant, s (:func:`half_velocity_delay`).
+        speeds_m_s, accel_m_s2, stroke_m, dwell_s: the routine (from the recording's metadata).
+        first_after_s: the first pulse is searched after this time, s.
+        window_fraction: each later pulse is searched within ± (50 ms + this fraction of its
+            nominal delay after the previous one); a window must not reach the pulse after it.
+        label: names the channel in errors.
+
+    Returns:
+        The pulses in time order, four per speed.
+
+    Raises:
+        StrokeError: a pulse is missing, of the wrong sign or too small (less than half the
+            expected velocity change), naming the channel, the pulse and the time searched.
+    """
+    a = np.asarray(acc_x, dtype=float)
+    if a.ndim != 1 or a.size < 16 or not np.all(np.isfinite(a)):
+        raise StrokeError(f"{label}: expected a finite 1-D signal of at least 16 samples")
+    a = a - np.median(a)
+    t = np.arange(a.size) / fs_hz
+    csum = np.concatenate([[0.0], np.cumsum(a)]) / fs_hz  # ∫a dt up to each sample
+    plan = routine_pulses(tuple(speeds_m_s), accel_m_s2, stroke_m, dwell_s)
+    pulses: list[Pulse] = []
+    prev_start = None
+    for k, (sign, v, after) in enumerate(plan):
+        length = v / accel_m_s2
+        w = max(int(round(length * fs_hz)), 1)
+        if prev_start is None:
+            lo, hi = first_after_s, t[-1]
+        else:
+            slack = 0.05 + window_fraction * after
+            lo, hi = prev_start + after - slack, prev_start + after + slack
+        i0 = max(int(math.floor((lo + delay_s) * fs_hz)), 0)
+        i1 = min(int(math.ceil((hi + delay_s) * fs_hz)) + w, a.size - 1)
+        if i1 - i0 <= w:
+            raise StrokeError(f"{label}: pulse {k + 1} of {len(plan)} ({'+' if sign > 0 else '−'}"
+                              f"{accel_m_s2:g} m/s² at {v * 1e3:g} mm/s) expected at "
+                              f"{lo:.3f}–{hi:.3f} s, after the end of the recording ({t[-1]:.3f} s)")
+        # matched filter: the signed velocity change over w samples starting at each index
+        dv = sign * (csum[i0 + w:i1 + 1] - csum[i0:i1 + 1 - w])
+        if prev_start is None:  # the first pulse: the earliest window that changes v by half
+            above = np.flatnonzero(dv >= 0.5 * v)
+            j = int(above[0]) if above.size else int(np.argmax(dv))
+            j += int(np.argmax(dv[j:j + w + 1]))
+        else:
+            j = int(np.argmax(dv))
+        if dv[j] < 0.5 * v:
+            raise StrokeError(f"{label}: pulse {k + 1} of {len(plan)} ({'+' if sign > 0 else '−'}"
+                              f"{accel_m_s2:g} m/s² at {v * 1e3:g} mm/s) not found in "
+                              f"{lo:.3f}–{hi:.3f} s: the largest velocity change there is "
+                              f"{dv[j] * 1e3:+.1f} mm/s; expected about {v * 1e3:g} mm/s")
+        # half-velocity time: when the velocity change, integrated from before the pulse,
+        # reaches half the nominal v (sub-sample by linear interpolation)
+        pad = int(math.ceil(max(3.0 * delay_s, 0.01) * fs_hz)) + 2  # 10 ms: the axial mode's period
+        c0, c1 = max(i0 + j - pad, 0), min(i0 + j + w + pad, a.size - 1)
+        rise = sign * (csum[c0:c1 + 1] - csum[c0])
+        k_half = int(np.argmax(rise >= 0.5 * v))
+        if k_half == 0:
+            raise StrokeError(f"{label}: pulse {k + 1} of {len(plan)} at {t[c0]:.3f} s: the velocity "
+                              f"change does not rise through half of {v * 1e3:g} mm/s")
+        frac = (0.5 * v - rise[k_half - 1]) / (rise[k_half] - rise[k_half - 1])
+        # csum[i] sums samples 0..i-1, each standing for ±half a sample about its instant
+        t_half = (c0 + k_half - 1 + frac - 0.5) / fs_hz
+        area = float(rise[-1])
+        start = t_half - delay_s - 0.5 * length
+        pulses.append(Pulse(sign, v, start, length, sign * area))
+        prev_start = start
+    return pulses
+
+
+def half_velocity_delay(length_s: float, bandwidth_hz: float, order: int = 2) -> float:
+    """How much later a Butterworth low-pass of ``order`` and half-power ``bandwidth_hz`` shows
+    the half-velocity instant of a rectangular acceleration pulse of ``length_s``, s.
+
+    Computed by filtering the pulse on a fine clock (``scipy.signal.butter`` + ``lfilter``, a
+    causal filter as in the sensor). For pulses much longer than 1/bandwidth it tends to the
+    filter's group delay at DC (√2/(2π·f_c) for order 2).
+    """
+    from scipy import signal
+
+    fs = max(200.0 * bandwidth_hz, 20.0 / length_s)
+    n_pulse = max(int(round(length_s * fs)), 1)
+    n = n_pulse + int(40.0 * fs / bandwidth_hz)
+    x = np.zeros(n)
+    x[:n_pulse] = 1.0
+    b, a = signal.butter(order, bandwidth_hz, fs=fs)
+    y = np.cumsum(signal.lfilter(b, a, x)) / fs
+    half = 0.5 * n_pulse / fs
+    k = int(np.argmax(y >= half))
+    t_half = (k - 1 + (half - y[k - 1]) / (y[k] - y[k - 1])) / fs + 1.0 / fs
+    return float(t_half - 0.5 * n_pulse / fs)
