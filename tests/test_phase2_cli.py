@@ -117,3 +117,28 @@ def test_missing_campaign_exits_2(tmp_path):
     r = run_twin("backlash", tmp_path / "nowhere", check=False)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "measurements.h5" in r.stderr
+
+
+def test_imu_position_reference_is_recorded_and_needs_the_routine(small, tmp_path):
+    """``--position-reference imu`` analyses the runs without position_cmd (strokes from the
+    accelerometer, the routine from the runs' metadata) and says so in backlash.json and
+    error_motions.h5; a run without its routine metadata is refused naming the missing keys;
+    an unknown reference exits 2 naming it."""
+    out = tmp_path / "imu"
+    run_twin("backlash", small, "-o", out, "--position-reference", "imu", "--no-plots")
+    doc = json.loads((out / "backlash.json").read_text())
+    assert doc["parameters"]["position_reference"] == "imu"
+    assert doc["position_reference"].startswith("IMU-based position")
+    with h5py.File(out / "error_motions.h5") as f:
+        assert f.attrs["position_reference"] == "imu"
+    broken = tmp_path / "no-routine"
+    broken.mkdir()
+    shutil.copy(small / "measurements.h5", broken / "measurements.h5")
+    with h5py.File(broken / "measurements.h5", "r+") as f:
+        del f["phase2/s0001/r0000"].attrs["accel_mm_s2"]
+    r = run_twin("backlash", broken, "--position-reference", "imu", "--strict", "--no-plots", check=False)
+    msg = " ".join(r.stderr.split())
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "session s0001, run r0000, channel imu_acc: the run's routine metadata lacks accel_mm_s2" in msg
+    r = run_twin("backlash", small, "--position-reference", "gps", check=False)
+    assert r.returncode == 2 and "--position-reference 'gps': expected 'command' or 'imu'" in " ".join(r.stderr.split())

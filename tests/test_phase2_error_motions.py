@@ -43,10 +43,12 @@ def noisy_campaign(tmp_path_factory):
     return out
 
 
-@pytest.fixture(scope="module")
-def noisy_result(noisy_campaign):
+@pytest.fixture(scope="module", params=["command", "imu"])
+def noisy_result(noisy_campaign, request):
+    """The session's error motions on both position axes: the controller's position_cmd, and the
+    IMU-based one (strokes from the accelerometer, the routine from the run's metadata)."""
     with open_measurements(noisy_campaign / "measurements.h5") as m:
-        return session_error_motions(m, "s0000")
+        return session_error_motions(m, "s0000", position_reference=request.param)
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +87,8 @@ def test_check1_error_motions_against_truth(noisy_campaign, noisy_result):
     r = noisy_result
     tr = r.combined
     ref = truth_on_grid(noisy_campaign / "truth.h5", "s0000", tr.x_m)
-    print(f"\ncheck 1: combined grid {tr.x_m[0] * 1e3:.1f}..{tr.x_m[-1] * 1e3:.1f} mm, step "
+    print(f"\ncheck 1 ({r.position_reference} axis): combined grid {tr.x_m[0] * 1e3:.1f}.."
+          f"{tr.x_m[-1] * 1e3:.1f} mm, step "
           f"{tr.dx_m * 1e3:.2f} mm, {len(r.runs)} runs; RMS error (all | < 20 mm) / truth RMS")
     failures = []
     for name, est in (("forward", tr.forward), ("reverse", tr.reverse)):

@@ -397,7 +397,9 @@ def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
             attrs, data, dattrs = store.read("phase2", u.name)
             runs = sorted({k.split("/")[0] for k in data if k.startswith("r")})
             yield (u.name, {"hours": attrs["hours"]},
-                   [(r, {"speeds_mm_s": list(s.phase2.speeds_mm_s)},
+                   [(r, {"speeds_mm_s": list(s.phase2.speeds_mm_s), "accel_mm_s2": s.phase2.accel_mm_s2,
+                         "start_mm": s.phase2.start_mm, "end_mm": s.phase2.end_mm,
+                         "dwell_s": s.phase2.dwell_s},
                      {k.split("/")[1]: data[k] for k in data if k.startswith(r + "/")},
                      {k.split("/")[1]: dattrs.get(k, {}) for k in data if k.startswith(r + "/")})
                     for r in runs])

@@ -262,6 +262,10 @@ def backlash(
                                           help="leading sessions known to share the initial backlash; "
                                                "the estimates are re-zeroed on their mean (1 = the paper's "
                                                "single reference)"),
+    position_reference: str = typer.Option("command", "--position-reference",
+                                           help="position axis of the traces: 'command' (the controller's "
+                                                "position_cmd) or 'imu' (strokes from the accelerometer and "
+                                                "the run's routine metadata; Eq. 5)"),
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
@@ -280,8 +284,10 @@ def backlash(
     except ValueError:
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
     try:
+        if position_reference not in ("command", "imu"):
+            _fail(f"--position-reference {position_reference!r}: expected 'command' or 'imu'")
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
-                 baseline_sessions=baseline_sessions)
+                 baseline_sessions=baseline_sessions, position_reference=position_reference)
     except (DatasetError, FileNotFoundError, OSError) as exc:
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ from analysis.dataset.schema import (
     MEASUREMENTS_FORMAT,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
+    ROUTINE_ATTRS,
     SESSION_TRUTH_REQUIRED,
     TIMELINE_REQUIRED,
     TRUTH_FORMAT,
@@ -61,7 +63,9 @@ class Phase2Run:
 
     imu_acc (n, 3) m/s^2 at imu_acc_fs_hz; imu_gyro (m, 3) rad/s at imu_gyro_fs_hz;
     position_cmd (k,) m at position_cmd_fs_hz; hours: operating hours of the session;
-    speeds_mm_s: commanded traverse speeds in mm/s if recorded, else None.
+    speeds_mm_s: commanded traverse speeds in mm/s if recorded, else None; routine: the run's
+    :data:`~analysis.dataset.schema.ROUTINE_ATTRS` that are recorded (``accel_mm_s2``,
+    ``start_mm``, ``end_mm``, ``dwell_s``; floats).
     """
 
     session: str
@@ -74,6 +78,7 @@ class Phase2Run:
     position_cmd: np.ndarray
     position_cmd_fs_hz: float
     speeds_mm_s: tuple[float, ...] | None = None
+    routine: dict[str, float] = field(default_factory=dict)
 
 
 class _Reader:
@@ -232,7 +237,14 @@ class Measurements(_Reader):
                 raise DatasetError(f"{self.label}: {rkey}@speeds_mm_s is {_fmt(rattrs['speeds_mm_s'])}; "
                                    "expected finite speeds in mm/s")
             speeds = tuple(float(v) for v in sp.reshape(-1))
-        return Phase2Run(session, run, hours, speeds_mm_s=speeds, **out)
+        routine = {}
+        for key, what in ROUTINE_ATTRS.items():
+            if key in rattrs:
+                x = _as_number(rattrs[key])
+                if x is None or not math.isfinite(x):
+                    raise DatasetError(f"{self.label}: {rkey}@{key} is {_fmt(rattrs[key])}; expected {what}")
+                routine[key] = x
+        return Phase2Run(session, run, hours, speeds_mm_s=speeds, routine=routine, **out)
 
     def dial_indicator(self) -> tuple[np.ndarray, np.ndarray] | None:
         """Dial-indicator readings ``(hours (n,) h, backlash_um (n,) um)``, or None if absent."""

@@ -24,6 +24,14 @@ PHASE2_CHANNELS: dict[str, tuple[str, str, int]] = {
     "position_cmd": ("m", "commanded carriage position", 1),
 }
 DIAL_UNITS = {"hours": "h", "backlash_um": "um"}
+#: Optional Phase II run attributes describing the routine (Table I of the paper), needed to
+#: analyse a run from the IMU alone: name -> what it holds. ``speeds_mm_s`` is a list.
+ROUTINE_ATTRS = {
+    "accel_mm_s2": "the acceleration and deceleration of every move, mm/s²",
+    "start_mm": "the commanded position where each forward move starts, mm",
+    "end_mm": "the commanded position where each forward move ends, mm",
+    "dwell_s": "the standstill after each move, s",
+}
 #: Order of the six error motions in ``truth.h5`` ``/phase2/<session>/E``.
 DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
 DOF_UNITS = ("m", "m", "m", "rad", "rad", "rad")

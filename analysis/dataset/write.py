@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -21,12 +22,14 @@ from analysis.dataset.schema import (
     MEASUREMENTS_FORMAT,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
+    ROUTINE_ATTRS,
     SESSION_TRUTH_REQUIRED,
     TIMELINE_REQUIRED,
     TRUTH_FORMAT,
     DatasetError,
 )
 from analysis.dataset.validate import (
+    _as_number,
     _attr_fs,
     _attr_hours,
     _attr_int,
@@ -36,6 +39,7 @@ from analysis.dataset.validate import (
     _check_shape,
     _check_unit,
     _dims,
+    _fmt,
     check_dtype,
 )
 from analysis.files import atomic_write
@@ -112,7 +116,8 @@ def assemble_measurements(
         ``hours``; ``runs`` is an iterable of ``(run_name, run_attrs, datasets, dataset_attrs)``
         with datasets ``imu_acc`` (n, 3) m/s^2, ``imu_gyro`` (m, 3) rad/s, ``position_cmd`` (k,) m,
         and ``dataset_attrs[channel]["fs_hz"]`` (Hz) for each (``unit`` is added if absent and
-        checked if given); ``run_attrs`` may hold ``speeds_mm_s`` (list of float).
+        checked if given); ``run_attrs`` may hold ``speeds_mm_s`` (list of float) and the routine's
+        :data:`~analysis.dataset.schema.ROUTINE_ATTRS` (numbers).
     dial : ``(hours, backlash_um)``, two (n,) arrays of dial-indicator readings, or None.
 
     Iterables are consumed lazily, one capture or run in memory at a time; pass them sorted by
@@ -174,6 +179,12 @@ def assemble_measurements(
                         raise DatasetError(
                             f"{label}: {rkey}@speeds_mm_s is {sp.tolist()}; expected finite speeds in mm/s")
                     rattrs["speeds_mm_s"] = sp
+                for key, what in ROUTINE_ATTRS.items():
+                    if key in rattrs:
+                        x = _as_number(rattrs[key])
+                        if x is None or not math.isfinite(x):
+                            raise DatasetError(f"{label}: {rkey}@{key} is {_fmt(rattrs[key])}; expected {what}")
+                        rattrs[key] = float(x)
                 gr = gs.create_group(rname)
                 write_attrs(gr, rattrs)
                 for ch in PHASE2_CHANNELS:

@@ -17,12 +17,13 @@ __all__ = ["read_error_motions", "write_error_motions"]
 
 def write_error_motions(path: Path, ems) -> None:
     """Write the combined error motions of every session: group ``/<session>`` with ``x_m`` (n,)
-    commanded position in m and ``forward``, ``reverse`` (6, n) in m and rad (rows ``dofs``
+    position in m (on the sessions' position axis, attribute
+    ``position_reference``: "command" or "imu") and ``forward``, ``reverse`` (6, n) in m and rad (rows ``dofs``
     attribute), attributes ``hours``, ``runs``. Read back by :func:`read_error_motions`."""
     def create(tmp: Path) -> None:
         with h5py.File(tmp, "w") as f:
             f.attrs["dofs"] = list(DOFS)
-            f.attrs["position_reference"] = "position_cmd, m"
+            f.attrs["position_reference"] = ems[0].position_reference if ems else "command"
             for em in ems:
                 g = f.create_group(em.session)
                 g.attrs["hours"] = em.hours

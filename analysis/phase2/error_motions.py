@@ -45,6 +45,7 @@ from analysis.phase2.imu_runs import (
     remove_bias,
     segment_run,
 )
+from analysis.phase2.strokes import imu_segments
 from analysis.phase2.traces import DirectionalTraces, SessionErrorMotions
 
 __all__ = ["SensorModel", "sensor_model", "session_error_motions"]
@@ -68,6 +69,10 @@ LOWPASS_ORDER = 8
 #: angles 5–20 µrad p-v; positioning larger: cumulative lead error).
 PRIORS = (fusion.Prior(20e-6), fusion.Prior(5e-6), fusion.Prior(5e-6),
           fusion.Prior(20e-6), fusion.Prior(20e-6), fusion.Prior(20e-6))
+
+
+#: The position axes a session's traces can be functions of.
+POSITION_REFERENCES = ("command", "imu")
 
 
 @dataclass(frozen=True)
@@ -134,12 +139,21 @@ def _match_speed(speed_mm_s: float, expected: tuple[float, ...]) -> float | None
     return None
 
 
-def _prepare_run(m: Measurements, session: str, run: str,
-                 expected: tuple[float, ...] | None) -> tuple[_Prepared, tuple[float, ...]]:
-    """Read, check, segment and de-bias one run; raises :class:`BadRunError` naming the channel."""
+def _prepare_run(m: Measurements, session: str, run: str, expected: tuple[float, ...] | None,
+                 position_reference: str = "command",
+                 sm: SensorModel | None = None) -> tuple[_Prepared, tuple[float, ...]]:
+    """Read, check, segment and de-bias one run; raises :class:`BadRunError` naming the channel.
+
+    ``position_reference``: "command" segments the run by ``position_cmd``; "imu" finds its
+    strokes from the accelerometer and the run's routine metadata
+    (:func:`analysis.phase2.strokes.imu_segments`)."""
     r = load_run(m, session, run)
     where = f"{m.label}: session {session}, run {run}"
-    seg = segment_run(r.position_cmd, r.position_cmd_fs_hz)
+    if position_reference == "imu":
+        seg = imu_segments(r.imu_acc[:, 0], r.imu_acc_fs_hz, r.speeds_mm_s or (), r.routine,
+                           (sm or SensorModel()).acc_bandwidth_hz, label=f"{where}, channel imu_acc")
+    else:
+        seg = segment_run(r.position_cmd, r.position_cmd_fs_hz)
     if expected is None:
         expected = r.speeds_mm_s
     if expected is None:
@@ -291,7 +305,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                           f_max_fraction: float = 0.5, slow_f_max_fraction: float = 1.0,
                           pool_wavelength_m: float | None = 0.05,
                           sensors: SensorModel | None = None,
-                          runs: Sequence[str] | None = None) -> SessionErrorMotions:
+                          runs: Sequence[str] | None = None,
+                          position_reference: str = "command") -> SessionErrorMotions:
     """Error motions of one Phase II session, averaged over its runs.
 
     Args:
@@ -315,6 +330,9 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
         sensors: IMU figures; default :func:`sensor_model` of ``m``.
         runs: the run names to use (default all runs of the session); an unknown name raises
             :class:`analysis.dataset.DatasetError` naming it.
+        position_reference: "command": positions are the controller's ``position_cmd``;
+            "imu": the IMU-based position, strokes found from the accelerometer and placed on the
+            routine's nominal trapezoid (the run's metadata; ``position_cmd`` is not read).
 
     Returns:
         :class:`SessionErrorMotions`; ``combined`` on the stretch every speed covers at constant
@@ -322,6 +340,9 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
     """
     if on_bad_run not in ("raise", "skip"):
         raise ValueError(f"on_bad_run is {on_bad_run!r}; expected 'raise' or 'skip'")
+    if position_reference not in POSITION_REFERENCES:
+        raise ValueError(f"position_reference is {position_reference!r}; expected one of "
+                         f"{', '.join(POSITION_REFERENCES)}")
     if not (dx_m > 0 and slow_dx_m > 0):
         raise ValueError(f"grid steps must be > 0 m, got dx_m={dx_m!r}, slow_dx_m={slow_dx_m!r}")
     sm = sensors or sensor_model(m)
@@ -345,7 +366,7 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
     for name in names:
         label = f"{m.label}: session {session}, run {name}"
         try:
-            p, exp = _prepare_run(m, session, name, expected)
+            p, exp = _prepare_run(m, session, name, expected, position_reference, sm)
             if not layers:
                 speeds = tuple(sorted(exp))
                 layers = [_new_layer(p, speeds, dx_m, trim_s, trim_end_s, "all speeds"),
@@ -375,4 +396,5 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                  **{**fkw, "lowpass_fraction": SLOW_LOWPASS_FRACTION,
                     "f_max_fraction": slow_f_max_fraction})
     return SessionErrorMotions(session=session, hours=hours, runs=tuple(used),
-                               combined=combined, slow=slow, skipped=tuple(skipped))
+                               combined=combined, slow=slow, skipped=tuple(skipped),
+                               position_reference=position_reference)

@@ -25,14 +25,17 @@ Units SI: s, m/s, m/s².
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Pulse", "StrokeError", "find_pulses", "half_velocity_delay", "routine_pulses"]
+from analysis.phase2.imu_runs import BadRunError, Motion, RunSegments
+
+__all__ = ["Pulse", "StrokeError", "find_pulses", "half_velocity_delay", "imu_segments", "routine_pulses"]
 
 
-class StrokeError(ValueError):
+class StrokeError(BadRunError):
     """The expected pulses of the routine could not be found in the accelerometer signal."""
 
 
@@ -74,7 +77,8 @@ def routine_pulses(speeds_m_s: tuple[float, ...], accel_m_s2: float, stroke_m: f
     return out
 
 
-def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float, speeds_m_s: tuple[float, ...],
+def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float | Mapping[float, float],
+                speeds_m_s: tuple[float, ...],
                 accel_m_s2: float, stroke_m: float, dwell_s: float, *, first_after_s: float = 0.0,
                 window_fraction: float = 0.02, label: str = "imu_acc") -> list[Pulse]:
     """Find and time every acceleration pulse of a run (see the module docstring).
@@ -83,7 +87,7 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float, speeds_m_s: tup
         acc_x: (n,) accelerometer samples along the travel, m/s² (bias included; the median,
             the standstill reading of a run that mostly rests or cruises, is removed).
         fs_hz: its sampling rate, Hz; delay_s: how late the sensor shows a pulse's
-            half-velocity instant, s (:func:`half_velocity_delay`).
+            half-velocity instant, s (:func:`half_velocity_delay`), or {speed: delay}.
         speeds_m_s, accel_m_s2, stroke_m, dwell_s: the routine (from the recording's metadata).
         first_after_s: the first pulse is searched after this time, s.
         window_fraction: each later pulse is searched within ± (50 ms + this fraction of its
@@ -107,6 +111,7 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float, speeds_m_s: tup
     pulses: list[Pulse] = []
     prev_start = None
     for k, (sign, v, after) in enumerate(plan):
+        delay = float(delay_s) if isinstance(delay_s, (int, float)) else delay_s[v]
         length = v / accel_m_s2
         w = max(int(round(length * fs_hz)), 1)
         if prev_start is None:
@@ -114,8 +119,8 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float, speeds_m_s: tup
         else:
             slack = 0.05 + window_fraction * after
             lo, hi = prev_start + after - slack, prev_start + after + slack
-        i0 = max(int(math.floor((lo + delay_s) * fs_hz)), 0)
-        i1 = min(int(math.ceil((hi + delay_s) * fs_hz)) + w, a.size - 1)
+        i0 = max(int(math.floor((lo + delay) * fs_hz)), 0)
+        i1 = min(int(math.ceil((hi + delay) * fs_hz)) + w, a.size - 1)
         if i1 - i0 <= w:
             raise StrokeError(f"{label}: pulse {k + 1} of {len(plan)} ({'+' if sign > 0 else '−'}"
                               f"{accel_m_s2:g} m/s² at {v * 1e3:g} mm/s) expected at "
@@ -135,7 +140,7 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float, speeds_m_s: tup
                               f"{dv[j] * 1e3:+.1f} mm/s; expected about {v * 1e3:g} mm/s")
         # half-velocity time: when the velocity change, integrated from before the pulse,
         # reaches half the nominal v (sub-sample by linear interpolation)
-        pad = int(math.ceil(max(3.0 * delay_s, 0.01) * fs_hz)) + 2  # 10 ms: the axial mode's period
+        pad = int(math.ceil(max(3.0 * delay, 0.01) * fs_hz)) + 2  # 10 ms: the axial mode's period
         c0, c1 = max(i0 + j - pad, 0), min(i0 + j + w + pad, a.size - 1)
         rise = sign * (csum[c0:c1 + 1] - csum[c0])
         k_half = int(np.argmax(rise >= 0.5 * v))
@@ -146,7 +151,7 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float, speeds_m_s: tup
         # csum[i] sums samples 0..i-1, each standing for ±half a sample about its instant
         t_half = (c0 + k_half - 1 + frac - 0.5) / fs_hz
         area = float(rise[-1])
-        start = t_half - delay_s - 0.5 * length
+        start = t_half - delay - 0.5 * length
         pulses.append(Pulse(sign, v, start, length, sign * area))
         prev_start = start
     return pulses
@@ -173,3 +178,55 @@ def half_velocity_delay(length_s: float, bandwidth_hz: float, order: int = 2) ->
     k = int(np.argmax(y >= half))
     t_half = (k - 1 + (half - y[k - 1]) / (y[k] - y[k - 1])) / fs + 1.0 / fs
     return float(t_half - 0.5 * n_pulse / fs)
+
+
+def imu_segments(acc_x: np.ndarray, fs_hz: float, speeds_mm_s: tuple[float, ...], routine: Mapping[str, float],
+                 acc_bandwidth_hz: float, *, settle_s: float = 0.2, label: str = "imu_acc") -> RunSegments:
+    """The cruises and stationary parts of a run on the IMU-based position axis.
+
+    The strokes are timed from the accelerometer (:func:`find_pulses`, the sensor's delay from its
+    bandwidth, a 2nd-order Butterworth); between the end of each acceleration and the start of the
+    deceleration the carriage is taken to cruise along the routine's nominal trapezoid: from
+    start + v²/2a to end − v²/2a forward (the reverse mirrored), at the speed that covers that
+    nominal length in the time the IMU saw. The axis is the nominal stroke mapped onto the
+    carriage's own motion: rail-fixed features stay put, and a carriage that travels D ≠ L
+    between rests stretches onto L (what the paper's Eq. 9 reads).
+
+    Args:
+        acc_x: (n,) accelerometer samples along the travel, m/s²; fs_hz: its rate, Hz.
+        speeds_mm_s: the routine's speeds, mm/s; routine: ``accel_mm_s2``, ``start_mm``,
+            ``end_mm``, ``dwell_s`` (the run's metadata).
+        acc_bandwidth_hz: the accelerometer's half-power frequency, Hz.
+        settle_s: time left out after each stop before a stationary part begins, s.
+
+    Raises:
+        BadRunError: routine metadata missing (naming the keys), or a pulse not found.
+    """
+    missing = [k for k in ("accel_mm_s2", "start_mm", "end_mm", "dwell_s") if k not in routine]
+    if missing or not speeds_mm_s:
+        what = ", ".join(missing + ([] if speeds_mm_s else ["speeds_mm_s"]))
+        raise BadRunError(f"{label}: the run's routine metadata lacks {what}; expected the attributes "
+                          "speeds_mm_s, accel_mm_s2, start_mm, end_mm, dwell_s to find the strokes from "
+                          "the IMU (or analyse with the command position reference)")
+    accel = routine["accel_mm_s2"] * 1e-3
+    start, end = routine["start_mm"] * 1e-3, routine["end_mm"] * 1e-3
+    speeds = tuple(v * 1e-3 for v in speeds_mm_s)
+    delays = {v: half_velocity_delay(v / accel, acc_bandwidth_hz) for v in speeds}
+    pulses = find_pulses(acc_x, fs_hz, delays, speeds, accel, abs(end - start), routine["dwell_s"], label=label)
+    motions = []
+    for acc_p, dec_p in zip(pulses[0::2], pulses[1::2], strict=True):
+        v = acc_p.speed_m_s
+        ramp = 0.5 * v * v / accel
+        forward = acc_p.sign > 0
+        x0, x1 = (start + ramp, end - ramp) if forward else (end - ramp, start + ramp)
+        t0, t1 = acc_p.end_s, dec_p.start_s
+        if t1 - t0 <= 0:
+            raise BadRunError(f"{label}: the {v * 1e3:g} mm/s {'forward' if forward else 'reverse'} stroke "
+                              f"has no constant-velocity part between {t0:.3f} s and {t1:.3f} s")
+        motions.append(Motion(1 if forward else -1, abs(x1 - x0) / (t1 - t0), t0, t1, x0, x1))
+    t_end = (np.asarray(acc_x).size - 1) / fs_hz
+    bounds = [(0.0, pulses[0].start_s)]
+    bounds += [(dec.end_s + settle_s, nxt.start_s) for dec, nxt in zip(pulses[1::2], pulses[2::2], strict=False)]
+    bounds.append((pulses[-1].end_s + settle_s, t_end))
+    still = tuple((a, b) for a, b in bounds if b - a > 0.05)
+    return RunSegments(tuple(motions), still)

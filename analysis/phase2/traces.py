@@ -49,6 +49,8 @@ class SessionErrorMotions:
     slow: the slow-speed component ``slow()`` of the paper, the high-spatial-frequency content
         that the backlash methods correlate.
     skipped: (run, reason) for each run left out.
+    position_reference: the position axis of the traces: "command" (the controller's
+        ``position_cmd``) or "imu" (the IMU-based position).
     """
 
     session: str
@@ -57,3 +59,4 @@ class SessionErrorMotions:
     combined: DirectionalTraces
     slow: DirectionalTraces
     skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+    position_reference: str = "command"

@@ -24,8 +24,14 @@ from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis, savgo
 
 __all__ = ["BacklashRun", "run"]
 
-POSITION_REFERENCE = ("commanded position (position_cmd, screw-locked); rail-fixed features shift "
-                      "by +Δbacklash forward minus reverse")
+#: What the traces' position axis is, per ``position_reference``, as written in backlash.json.
+POSITION_REFERENCES = {
+    "command": ("commanded position (position_cmd, screw-locked); rail-fixed features shift "
+                "by +Δbacklash forward minus reverse"),
+    "imu": ("IMU-based position (strokes timed from the accelerometer, the routine's nominal trapezoid "
+            "between them); rail-fixed features stay put, E_XX's screw-locked content moves with the "
+            "backlash: Eq. 5 subtracts each DOF's shift from E_XX's"),
+}
 
 
 @dataclass
@@ -49,7 +55,8 @@ class BacklashRun:
 
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
         plots: bool = True, process_noise: float | str = 1e-23,
-        baseline_sessions: int = 1, estimator: BacklashEstimator | None = None) -> BacklashRun:
+        baseline_sessions: int = 1, estimator: BacklashEstimator | None = None,
+        position_reference: str = "command") -> BacklashRun:
     """Estimate the change of backlash of every Phase II session of ``directory``.
 
     Args:
@@ -61,7 +68,11 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         baseline_sessions: leading sessions known to share the initial backlash; the estimates
             are re-zeroed on their mean.
         estimator: an unfitted backlash estimator (default :class:`BacklashEstimator()`, the
-            paper's method); its class is recorded in ``parameters.estimator``.
+            paper's method; on the IMU axis with ``stationary="E_XX"``, Eq. 5); its class is
+            recorded in ``parameters.estimator``.
+        position_reference: "command" (the controller's ``position_cmd``) or "imu" (the
+            IMU-based position: strokes from the accelerometer and the run's routine metadata;
+            ``position_cmd`` is not read). Recorded in ``parameters.position_reference``.
 
     Raises:
         DatasetError, FileNotFoundError, OSError: unreadable input (names file, key, channel).
@@ -70,8 +81,14 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     directory = Path(directory)
     out = Path(out) if out is not None else directory / "backlash"
     with open_measurements(directory / "measurements.h5") as m:
+        if position_reference not in POSITION_REFERENCES:
+            raise ValueError(f"position reference {position_reference!r}: expected one of "
+                             f"{', '.join(POSITION_REFERENCES)}")
+        if estimator is None and position_reference == "imu":
+            estimator = _imu_estimator(m)
         result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
-                                   baseline_sessions=baseline_sessions, estimator=estimator)
+                                   baseline_sessions=baseline_sessions, estimator=estimator,
+                                   position_reference=position_reference)
         dial = m.dial_indicator()
     ses = result.sessions
     hours = [s.hours for s in ses]
@@ -103,11 +120,12 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         "sessions": records,
         "prognosis": prog.to_json() if prog is not None else None,
         "reference_session": ses[0].session if ses else None,
-        "position_reference": POSITION_REFERENCE,
+        "position_reference": POSITION_REFERENCES[position_reference],
         "sign": "positive = more backlash than in the reference session",
         "skipped_runs": [{"session": a, "run": b, "reason": c} for a, b, c in result.skipped_runs],
         "skipped_sessions": [{"session": a, "reason": b} for a, b in result.skipped_sessions],
         "parameters": {"estimator": f"{type(est).__module__}.{type(est).__qualname__}",
+                       "position_reference": position_reference,
                        "cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
                        "baseline_sessions": result.baseline_sessions,
                        "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
@@ -133,3 +151,15 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
                                                            result.baseline_sessions)))
         figures = write_figures(result, doc, out, injected=injected)
     return BacklashRun(doc=doc, result=result, trend=trend, prognosis=prog, figures=figures)
+
+
+def _imu_estimator(m) -> BacklashEstimator:
+    """The paper's estimator on the IMU axis: Eq. 5, each DOF's shift subtracted from E_XX's
+    (``stationary="E_XX"``), L and p from the file's axis description."""
+    axis = m.axis() or {}
+    kw = {}
+    if isinstance(axis.get("travel_mm"), (int, float)):
+        kw["travel_m"] = float(axis["travel_mm"]) * 1e-3
+    if isinstance(axis.get("lead_mm"), (int, float)):
+        kw["lead_m"] = float(axis["lead_mm"]) * 1e-3
+    return BacklashEstimator(stationary="E_XX", **kw)
