@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,7 +16,6 @@ from analysis.dataset.schema import (
     MEASUREMENTS_FORMAT,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
-    ROUTINE_ATTRS,
     SESSION_TRUTH_REQUIRED,
     TIMELINE_REQUIRED,
     TRUTH_FORMAT,
@@ -34,6 +32,7 @@ from analysis.dataset.validate import (
     _check_unit,
     _dims,
     _fmt,
+    _routine,
     _shape_pattern,
     check_dtype,
 )
@@ -237,14 +236,8 @@ class Measurements(_Reader):
                 raise DatasetError(f"{self.label}: {rkey}@speeds_mm_s is {_fmt(rattrs['speeds_mm_s'])}; "
                                    "expected finite speeds in mm/s")
             speeds = tuple(float(v) for v in sp.reshape(-1))
-        routine = {}
-        for key, what in ROUTINE_ATTRS.items():
-            if key in rattrs:
-                x = _as_number(rattrs[key])
-                if x is None or not math.isfinite(x):
-                    raise DatasetError(f"{self.label}: {rkey}@{key} is {_fmt(rattrs[key])}; expected {what}")
-                routine[key] = x
-        return Phase2Run(session, run, hours, speeds_mm_s=speeds, routine=routine, **out)
+        return Phase2Run(session, run, hours, speeds_mm_s=speeds, routine=_routine(self.label, rkey, rattrs),
+                         **out)
 
     def dial_indicator(self) -> tuple[np.ndarray, np.ndarray] | None:
         """Dial-indicator readings ``(hours (n,) h, backlash_um (n,) um)``, or None if absent."""

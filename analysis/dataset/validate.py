@@ -6,13 +6,14 @@ offending value and what was expected.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from analysis.dataset.schema import DatasetError
+from analysis.dataset.schema import ROUTINE_ATTRS, DatasetError
 
 #: A group name: letters, digits, "_", "-", "." (not starting with ".").
 NAME_RE = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
@@ -157,3 +158,16 @@ def _check_name(label: str, key: str, name: str, what: str) -> None:
 
 def _dims(cols: int, sym: str) -> tuple[int | str, ...]:
     return (sym,) if cols == 1 else (sym, cols)
+
+
+def _routine(label: str, rkey: str, rattrs: Mapping[str, Any]) -> dict[str, float]:
+    """The run's routine attributes (:data:`~analysis.dataset.schema.ROUTINE_ATTRS`) that are
+    present, as floats; a non-finite or non-numeric one raises :class:`DatasetError` naming it."""
+    out = {}
+    for key, what in ROUTINE_ATTRS.items():
+        if key in rattrs:
+            x = _as_number(rattrs[key])
+            if x is None or not math.isfinite(x):
+                raise DatasetError(f"{label}: {rkey}@{key} is {_fmt(rattrs[key])}; expected {what}")
+            out[key] = float(x)
+    return out

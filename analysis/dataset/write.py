@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -22,14 +21,12 @@ from analysis.dataset.schema import (
     MEASUREMENTS_FORMAT,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
-    ROUTINE_ATTRS,
     SESSION_TRUTH_REQUIRED,
     TIMELINE_REQUIRED,
     TRUTH_FORMAT,
     DatasetError,
 )
 from analysis.dataset.validate import (
-    _as_number,
     _attr_fs,
     _attr_hours,
     _attr_int,
@@ -39,7 +36,7 @@ from analysis.dataset.validate import (
     _check_shape,
     _check_unit,
     _dims,
-    _fmt,
+    _routine,
     check_dtype,
 )
 from analysis.files import atomic_write
@@ -179,12 +176,7 @@ def assemble_measurements(
                         raise DatasetError(
                             f"{label}: {rkey}@speeds_mm_s is {sp.tolist()}; expected finite speeds in mm/s")
                     rattrs["speeds_mm_s"] = sp
-                for key, what in ROUTINE_ATTRS.items():
-                    if key in rattrs:
-                        x = _as_number(rattrs[key])
-                        if x is None or not math.isfinite(x):
-                            raise DatasetError(f"{label}: {rkey}@{key} is {_fmt(rattrs[key])}; expected {what}")
-                        rattrs[key] = float(x)
+                rattrs.update(_routine(label, rkey, rattrs))
                 gr = gs.create_group(rname)
                 write_attrs(gr, rattrs)
                 for ch in PHASE2_CHANNELS:

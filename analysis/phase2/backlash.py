@@ -334,6 +334,17 @@ def rezero_on_baseline(sessions: list, k: int) -> tuple[list, tuple[float, float
     return out, (off_shift, off_pitch)
 
 
+def estimator_for(m, **params) -> BacklashEstimator:
+    """The paper's estimator for the axis of an open ``measurements.h5``: stroke L and lead p from
+    its ``axis`` description (``travel_mm``, ``lead_mm``) where given; ``params``: further
+    :class:`BacklashEstimator` parameters (e.g. ``stationary="E_XX"``)."""
+    axis = m.axis() or {}
+    for key, name in (("travel_mm", "travel_m"), ("lead_mm", "lead_m")):
+        if isinstance(axis.get(key), (int, float)):
+            params.setdefault(name, float(axis[key]) * 1e-3)
+    return BacklashEstimator(**params)
+
+
 def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimator | None = None,
                       progress=None, baseline_sessions: int = 1,
                       **error_motion_kw) -> CampaignBacklash:
@@ -359,13 +370,7 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
     if not names:
         raise DatasetError(f"{m.label}: /phase2 has no session; expected at least two sessions")
     if estimator is None:
-        axis = m.axis() or {}
-        kw = {}
-        if isinstance(axis.get("travel_mm"), (int, float)):
-            kw["travel_m"] = float(axis["travel_mm"]) * 1e-3
-        if isinstance(axis.get("lead_mm"), (int, float)):
-            kw["lead_m"] = float(axis["lead_mm"]) * 1e-3
-        estimator = BacklashEstimator(**kw)
+        estimator = estimator_for(m)
     ems, skipped_runs, skipped_sessions = [], [], []
     for i, name in enumerate(names):
         try:

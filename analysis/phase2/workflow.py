@@ -17,7 +17,7 @@ import numpy as np
 from analysis.dataset import open_measurements, open_truth
 from analysis.files import write_json
 from analysis.injected import injected_change_um
-from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash
+from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash, estimator_for
 from analysis.phase2.error_motion_file import write_error_motions
 from analysis.phase2.figures import write_figures
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis, savgol_trend
@@ -85,7 +85,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
             raise ValueError(f"position reference {position_reference!r}: expected one of "
                              f"{', '.join(POSITION_REFERENCES)}")
         if estimator is None and position_reference == "imu":
-            estimator = _imu_estimator(m)
+            estimator = estimator_for(m, stationary="E_XX")  # Eq. 5
         result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
                                    baseline_sessions=baseline_sessions, estimator=estimator,
                                    position_reference=position_reference)
@@ -151,15 +151,3 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
                                                            result.baseline_sessions)))
         figures = write_figures(result, doc, out, injected=injected)
     return BacklashRun(doc=doc, result=result, trend=trend, prognosis=prog, figures=figures)
-
-
-def _imu_estimator(m) -> BacklashEstimator:
-    """The paper's estimator on the IMU axis: Eq. 5, each DOF's shift subtracted from E_XX's
-    (``stationary="E_XX"``), L and p from the file's axis description."""
-    axis = m.axis() or {}
-    kw = {}
-    if isinstance(axis.get("travel_mm"), (int, float)):
-        kw["travel_m"] = float(axis["travel_mm"]) * 1e-3
-    if isinstance(axis.get("lead_mm"), (int, float)):
-        kw["lead_m"] = float(axis["lead_mm"]) * 1e-3
-    return BacklashEstimator(stationary="E_XX", **kw)
