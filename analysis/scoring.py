@@ -1,4 +1,4 @@
-"""Scores of both phases against the injected truth (DESIGN section 6, "Scoring").
+"""Scores of both phases against the injected truth (``twin score`` in docs/usage.md).
 
 :func:`score` reads what the analyses wrote into a campaign directory and the directory's
 ``truth.h5``; it never reruns an estimator, so the same numbers come out of ``twin score``,

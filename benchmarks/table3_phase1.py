@@ -7,8 +7,8 @@ Simulates, unless already there,
   10 backlash samples of 10-s captures);
 then runs ``twin detect`` and prints the paper's detection hours beside ours.
 
-Run: .venv/bin/python benchmarks/table3_phase1.py [WORKDIR]   (default runs/table3; ~5-10 min on
-2 cores). Not part of ``make bench``.
+Run: .venv/bin/python benchmarks/table3_phase1.py [WORKDIR]   (default runs/table3; its run time
+is in docs/validation.md). Not part of ``make bench``.
 """
 
 from __future__ import annotations

@@ -68,8 +68,8 @@ def test_analysis_never_imports_the_simulator():
 
 def test_simulated_motion_matches_the_kinematic_truth():
     """At constant speed the simulated carriage pose at the IMU equals the quasi-static error
-    motions stored in truth.h5 (twin.geometry.true_error_motions), once the pitch ringing of the
-    acceleration (27 µrad at 19.6 m/s², decaying in ~15 ms) has settled."""
+    motions stored in truth.h5 (twin.geometry.true_error_motions), once the pitch ringing after
+    the 19.6 m/s² acceleration has settled (its size and decay: docs/validation.md)."""
     from twin import geometry as geo
     from twin.simulate import phase2_trajectory
 

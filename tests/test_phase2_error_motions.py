@@ -179,8 +179,8 @@ def test_slow_traces_keep_the_backlash_lag(backlash_step_campaign):
     (and a new origin) the lag in the 0.5-20 mm band grows by 20 µm for E_YX and E_CX, whose
     short wavelengths are rail-fixed (within 1.5 µm), and grows (by > 2 µm) for every DOF. The
     others grow by less because the carriage really moves with screw-fixed features there
-    (ball-pass pitching of the nut load, runout), which the kinematic truth leaves out: about
-    18 µm for E_ZX, 15 for E_AX, 6.5 for E_BX, 6 for E_XX in this campaign."""
+    (ball-pass pitching of the nut load, runout), which the kinematic truth leaves out (printed
+    with -s; figures in docs/validation.md)."""
     lags = {}
     with open_measurements(backlash_step_campaign / "measurements.h5") as m:
         for s in ("s0000", "s0001"):

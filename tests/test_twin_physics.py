@@ -215,11 +215,11 @@ def test_lead_quasi_static_default_world():
     point's displacement between the positions must equal k·lead·(1+s) + Δε(θ_cmd), ε the cyclic
     part nut_axial_deviation − cumulative·R·θ at the commanded angle, within 0.1 µm (the positions
     are not whole revolutions apart: Δε up to 0.8 µm, so leaving it out must fail). The centre of
-    mass additionally moves by the Abbe term −ZN·ΔE_BX of the rail pitch (up to ~1.5 µm here),
+    mass additionally moves by the Abbe term −ZN·ΔE_BX of the rail pitch (printed),
     predicted from the rail geometry at the true x.
 
     In motion at 20 mm/s: x_nut − (1+s)·R·θ − ε(θ) is constant (peak-to-peak ≤ 0.1 µm, against
-    ~0.9 µm without subtracting ε) and equals the elastic lag −F_rail/K_axial within 0.01 µm."""
+    over 0.5 µm without subtracting ε, asserted) and equals the elastic lag −F_rail/K_axial within 0.01 µm."""
     world = WORLD
     cond = _healthy(temperature_rise=3.0)
     sim, cmd, traj, ends = _lead_run(world, cond)
@@ -346,13 +346,13 @@ def test_axial_natural_frequency_follows_preload():
     """Check 3: the axial natural frequency (screw locked, carriage given 10 mm/s) is within 5 %
     of sqrt(K_axial/m)/2π at 100/50/10 % preload.
 
-    The measured frequency sits ~3 % below sqrt(K/m)/2π because the nut pushes ZN = −50 mm below
+    The measured frequency sits a little below sqrt(K/m)/2π because the nut pushes ZN = −50 mm below
     the centre of mass and so couples the axial mode to pitch; it matches the two-degree-of-
     freedom (x, pitch) eigenvalue within 0.5 %, asserted too. Set-up: flat rails and no screw
     errors (no excitation), contact damping ratio 0.002 (long ring), and rail friction 0: MuJoCo's
     regularised ``frictionloss`` acts against the acceleration rather than the velocity in a fast
-    oscillation and lowers the ring frequency in an amplitude-dependent way (printed: ~127 Hz
-    instead of 130.7 Hz at 12 µm amplitude with the 12 N rail friction)."""
+    oscillation and lowers the ring frequency in an amplitude-dependent way (printed for the 12 N
+    rail friction; figures in docs/validation.md)."""
     ax = replace(AXIS, screw=replace(AXIS.screw, contact_damping_ratio=0.002),
                  carriage=replace(AXIS.carriage, rail_friction=0.0))
     world = replace(WORLD, axis=ax, rails=_flat_rails(), screw=_no_screw_errors(WORLD.screw))
@@ -603,21 +603,21 @@ def test_carriage_stays_on_driving_flank(phase2_passes, phase1_contact):
     """The cyclic lead error moves the flanks, so it no longer pushes the carriage into the gap;
     b = 10 µm, constant-speed parts (0.1 s / 0.05 s trimmed after reaching speed).
 
-    - 20 mm/s (Phase II-like run, pass 2): never inside the gap (asserted; at least ~0.12 µm of
-      compression beyond the flank), the driving nut force stays positive (~10-14 N around the
+    - 20 mm/s (Phase II-like run, pass 2): never inside the gap (asserted; the smallest
+      compression beyond the flank is printed), the driving nut force stays positive (around the
       12 N rail friction).
     - 400 mm/s (Phase I capture) the carriage does leave the driving flank, and rightly: it does so
       exactly when the nut would have to PULL to keep it on the flank, i.e. when the nut force of
       the same capture with b = 0 (bilateral contact) changes sign (asserted for three worlds).
-      In the default world the rail waviness excites the pitch mode (~245 Hz), whose Abbe offset
-      ZN = −50 mm moves the nut point (x + ZN·pitch ~0.26 µm rms) and swings the bilateral nut
-      force between about −50 and +75 N, far beyond the 12 N of rail friction that holds the nut
-      on its flank: ~43 % of the cruise time inside the gap, up to ~1.2 µm deep. With flat rails
-      the cyclic lead error alone (its 120 Hz line near the axial mode) still takes the force to
-      ~−7 N (~7 % of the cruise time in the gap, ~0.1 µm deep); with flat rails and no cyclic
-      error the force stays within ~5-18 N and the carriage never enters the gap (asserted).
-    Printed for information: the fractions at 100 and 500 mm/s of the Phase II-like run (~2.5 %
-    and ~46 %, same cause)."""
+      In the default world the rail waviness excites the pitch mode, whose Abbe offset
+      ZN = −50 mm moves the nut point (x + ZN·pitch) and swings the bilateral nut force far
+      beyond the 12 N of rail friction that holds the nut on its flank: the carriage spends a
+      large part of the cruise time inside the gap. With flat rails the cyclic lead error alone
+      (its 120 Hz line near the axial mode) still takes the force below zero (a small part of the
+      cruise time in the gap, shallow); with flat rails and no cyclic error the force stays
+      positive and the carriage never enters the gap (asserted).
+    Printed for information: the fractions at 100 and 500 mm/s of the Phase II-like run (same
+    cause); the printed figures are in docs/validation.md."""
     sim, cfg, cmd, cond, trajs, _ = phase2_passes
     traj = trajs[1]
     for v in cfg.speeds_mm_s:
@@ -673,8 +673,8 @@ def test_lead_flank_follows_command(phase2_passes, phase1_contact):
     What remains is the compliance of the flank drive, F_nut/kp (kp = M·(0.5/dt)²: 0.4 nm/kN at
     0.1 ms, 1.6 nm/kN at 0.2 ms; the nut carries ~2.4 kN when the carriage accelerates at
     19.6 m/s²), printed. (With the central-difference velocity and feed-forward first used in
-    Simulator.flank_motion the error was 5 nm in Phase I and 23 nm at 500 mm/s, the ball-pass
-    line −7 % and −18° there: MuJoCo's implicit damping of the velocity term takes half the
+    Simulator.flank_motion the error was larger, most at 500 mm/s, and the ball-pass line lost
+    amplitude and phase there: MuJoCo's implicit damping of the velocity term takes half the
     feed-forward unless the velocity target is the one the step reaches.)"""
     sim2, cfg, cmd, cond2, trajs, _ = phase2_passes
     sim1, cond1, traj1 = phase1_contact["default"][10e-6]
@@ -815,22 +815,22 @@ def test_phase1_trends_with_preload(phase1_runs):
     """Check 6, trends as the preload falls 100 → 50 → 10 % (observed and asserted):
 
     - the axial resonance falls: (i) the ring-down after the stops, in the dwell parts of the
-      nut accelerometer (~119.6 → 118.4 → 108.0 Hz; below the locked-screw 131 Hz because MuJoCo's
-      regularised friction on the stuck screw and carriage softens the small ring), and (ii) the
-      servo-held axial mode linearised in motion (~174.2 → 168.4 → 151.5 Hz, damping ratio ~0.2);
-    - the 120 Hz line in the nut acceleration (x) grows (~4.4e-4 → 4.9e-4 → 6.7e-4 (m/s²)²/Hz):
+      nut accelerometer (below the locked-screw 131 Hz because MuJoCo's regularised friction on
+      the stuck screw and carriage softens the small ring), and (ii) the servo-held axial mode
+      linearised in motion (well damped);
+    - the 120 Hz line in the nut acceleration (x) grows:
       the lead flank moves by the error e and drives the carriage through the nut spring K; below
       the resonance the carriage follows e as a displacement (acceleration ~ω²·e, independent of
       K) and the falling resonance amplifies the 120 Hz line more. The 40 Hz line (far below
-      resonance) stays within 15 % (~7.2e-5 → 7.3e-5 → 7.7e-5);
+      resonance) stays within 15 %;
     - the ball-pass line (~362 Hz, above the resonance, where the spring passes the force K·e and
-      the acceleration is ~K·e/m) falls with K (~3.4e-4 → 2.9e-4 → 1.9e-4 (m/s²)²/Hz).
-    The torque lines follow the same pattern (printed: 120 Hz 1.35e-5 → 1.48e-5 → 1.93e-5,
-    ball pass 5.6e-7 → 4.6e-7 → 2.7e-7 (N·m)²/Hz). The resonances and the 40-120 Hz lines are
-    those of the earlier force-pair model (K·e on the tendon) to < 1 %: with b = 0 the nut
-    never leaves its flank, where both give the same spring force. The ball-pass line is 3-4 %
-    (acceleration) and 6-8 % (torque) higher than with the force pair, mostly because that left
-    out the tendon damping's share c·ε̇ (~16 % of K·e, in quadrature, at 362 Hz)."""
+      the acceleration is ~K·e/m) falls with K.
+    The torque lines follow the same pattern (printed). The resonances and the 40-120 Hz lines
+    are those of the earlier force-pair model (K·e on the tendon): with b = 0 the nut never
+    leaves its flank, where both give the same spring force. The ball-pass line is a few %
+    higher than with the force pair, mostly because that left out the tendon damping's share
+    c·ε̇ (~16 % of K·e, in quadrature, at 362 Hz). The printed figures are in
+    docs/validation.md."""
     sim, runs = phase1_runs
     omega = SCEN.phase1.speed_mm_s * 1e-3 / R
     f_bp = float(geo.ball_pass_frequency_hz(SCEN.phase1.speed_mm_s * 1e-3, WORLD.screw))
@@ -871,15 +871,15 @@ def test_two_pass_rail_lookup_converges(phase2_passes):
     the whole run (pass 2 is a fixed point); the rail input (truck displacements looked up at the
     x of pass 2 vs pass 3) agrees to < 0.1 nm.
 
-    Not asserted, printed: per speed, and over the whole run, where passes 1 and 2 differ by tens
-    of nm rms. At the stops and reversals the carriage crosses the 10 µm gap and comes to rest
+    Not asserted, printed: per speed, and over the whole run, where passes 1 and 2 differ by
+    more. At the stops and reversals the carriage crosses the 10 µm gap and comes to rest
     somewhere in it (rail friction); where (and the following start transient) is sensitive to
     nm-level differences of the Abbe term ZN·pitch between pass 1 (rails at the command) and
-    pass 2, giving rest-position differences of up to ~1 µm in the dwells: indeterminacy of the
+    pass 2, giving rest-position differences in the dwells: indeterminacy of the
     rest point inside the clearance, not a failure of the rail lookup (a 0.3 µm position error
     moves the rail input by < 0.1 nm). Likewise at 500 mm/s, where the carriage rattles in the
-    gap (test_carriage_stays_on_driving_flank), passes 1 and 2 differ by ~1.7 nm rms (0.2 and
-    0.3 nm at 20 and 100 mm/s; 0.3 nm pooled, which is what is asserted)."""
+    gap (test_carriage_stays_on_driving_flank), passes 1 and 2 differ more than at 20 and
+    100 mm/s; the pooled figure is what is asserted (figures: docs/validation.md)."""
     sim, cfg, cmd, cond, trajs, elapsed = phase2_passes
     world = sim.world
     x = [t.x for t in trajs]

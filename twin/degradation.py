@@ -90,7 +90,7 @@ class WearLaw:
     10 µm). Figures: ``preload_fraction`` 0.783 / 0.430 / 0.068 at 3000 / 4000 / 6000 h;
     ``backlash_um`` 0.47 / 3.71 / 10.49 µm at 4000 / 6000 / 8000 h. The life δ0/rate = 2860 h is
     of the order of what the XJTU upper screw's friction-torque trend gives when fitted
-    (``fit_friction_trend``: about 3500 h; that screw ran at a higher load and speed, and its
+    (``fit_friction_trend``, see docs/validation.md; that screw ran at a higher load and speed, and its
     ~1000 h of data do not pin the scatter). δ0 = 4 µm is the order of the ball oversize of a
     preloaded single nut.
 

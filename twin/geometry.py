@@ -139,10 +139,10 @@ class RailSpec:
 
     Attributes:
         straightness_rms_vertical_m: rms of the vertical waviness, m. Default 0.5 µm [M]: with
-            the 1/k spectrum this gives 2–3 µm p-v per rail over the 450 mm travel ("a few µm
-            p-v over 0.5 m" [M]) and, with the default carriage, carriage angles of
-            about 6–14 µrad (roll) and 17–27 µrad (pitch, yaw) p-v over the travel (seeds 0–7).
-            [M] is 5–20 µrad: the two [M] figures are in mild tension, because a
+            the 1/k spectrum this gives a few µm p-v per rail over the 450 mm travel ("a few µm
+            p-v over 0.5 m" [M]) and, with the default carriage, carriage angles p-v over the
+            travel within [M]'s 5–20 µrad in roll but partly above it in pitch and yaw (per-seed
+            figures: docs/validation.md): the two [M] figures are in mild tension, because a
             1/k spectrum puts most of the slope in the longest wavelengths.
         straightness_rms_lateral_m: rms of the lateral waviness, m. Default 0.5 µm [M].
         rail_correlation_vertical: ρ of the two rails' vertical waviness (default 0.8 [M]).

@@ -32,8 +32,9 @@ class PartStore:
     :meth:`remove_temporaries` deletes them. :meth:`has` also returns False for a part that is
     not a complete, readable part file (e.g. truncated by a disk problem), so it gets recomputed.
 
-    Arrays are stored uncompressed in the dtype given (gzip level 1 saves under 10 % on float32
-    sensor noise but makes a 100k x 8 capture 30-40x slower to write) and read back bit for bit,
+    Arrays are stored uncompressed in the dtype given (gzip level 1 saves little on float32
+    sensor noise but makes a capture many times slower to write; figures in docs/validation.md)
+    and read back bit for bit,
     so a campaign assembled from parts of an interrupted run equals an uninterrupted one.
 
     ``kind`` is a relative path of names (e.g. ``"phase1"``, ``"phase2/s0007"``), ``name`` a

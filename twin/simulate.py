@@ -13,10 +13,11 @@ Rail waviness follows the carriage's TRUE position. The carriage's travel depend
 forces only weakly (through the pitch of the carriage, since the nut sits below its centre of
 mass), so a first rollout with the rails looked up at the commanded position gives the true
 travel x(t), and a second rollout with the rails looked up at that x(t) is the fixed point: at
-steady speed a third pass changes x by less than 1 pm, and passes 1 and 2 differ by 0.3 nm rms
-(see ``tests/test_twin_physics.py``). Phase II, where the micrometre shift between the
-forward and reverse traces is the measured quantity, always does both passes. Phase I does one
-pass with the rails at the commanded position plus the known backlash lag: the residual error in
+steady speed a third pass changes x by far less than a nm, and passes 1 and 2 differ by a
+fraction of a nm rms (asserted in ``tests/test_twin_physics.py``; figures in docs/validation.md).
+Phase II, where the micrometre shift between the forward and reverse traces is the measured
+quantity, always does both passes. Phase I does one pass with the rails at the commanded
+position plus the known backlash lag: the residual error in
 the rail input is (slope of the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm,
 far below anything the nut accelerometers see.
 """
@@ -529,9 +530,10 @@ def true_error_motions(world: World, cfg, cond: Condition, dx: float = 0.05e-3
 class DialResult:
     """backlash_um: the reading a technician reports (mean over repeats), µm; elastic_um: the
     largest elastic part of the lost motion, 2·F_rail/K_axial, µm (the rail friction fully
-    loading the nut in both directions). In the simulation the reading lands 0.08 µm *below*
-    the clearance rather than up to elastic_um above it: MuJoCo's Coulomb friction is a soft
-    constraint, so the settled carriage slowly relaxes the nut's load at each 30 ms step.
+    loading the nut in both directions). In the simulation the reading lands slightly *below*
+    the clearance (docs/validation.md) rather than up to elastic_um above it: MuJoCo's Coulomb
+    friction is a soft constraint, so the settled carriage slowly relaxes the nut's load at each
+    30 ms step.
     repeats_um: the single readings, µm."""
 
     backlash_um: float

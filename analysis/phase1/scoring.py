@@ -1,4 +1,4 @@
-"""Scoring of Phase I detection against the injected fault onset (DESIGN section 6, "Scoring").
+"""Scoring of Phase I detection against the injected fault onset (``twin score`` in docs/usage.md).
 
 Alarms are counted on the samples after the baseline only (the baseline is what the detector was
 fitted on). The detection hour is the hour of the first alarm after the baseline, or, with

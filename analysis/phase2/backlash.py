@@ -27,9 +27,9 @@ commanded position) a **positive change of backlash comes out positive**: ΔPosi
 ΔPositionShift_i1, Eq. 5 with the moving and stationary roles of this reference); it only makes
 sense if the high-pass-filtered E_XX is purely screw-fixed. At the IMU it is not: its content above
 the 0.5 mm cutoff mixes the motor's 8-per-revolution torque ripple and ball passing (screw-fixed)
-with the Abbe terms of pitch and yaw (rail-fixed): in the twin it shifts by about 0 % of the
-backlash at 20 mm/s (torque ripple dominates) but about 90 % at 100 mm/s, so E_XX is left out of the
-default sum.
+with the Abbe terms of pitch and yaw (rail-fixed): in the twin it shifts by hardly any of the
+backlash at 20 mm/s (torque ripple dominates) but by most of it at 100 mm/s (docs/validation.md),
+so E_XX is left out of the default sum.
 
 Weighted sum (Eqs. 6–7): γ_ij = min(γ_ij1, γ_ij2), ΔBacklash_i = Σ_j γ_ij^σ ΔBacklash_ij /
 Σ_j γ_ij^σ with σ = 4 over ``dofs`` (by default the straightness pair E_YX, E_ZX; the paper's
@@ -47,7 +47,7 @@ p_i = Σ γ_ijk^σ p_ijk / Σ γ_ijk^σ over (j, k) with the γ of the correlati
 pitch of the first session. Eq. 9 assumes that backlash makes the IMU-based position scale with
 L/(L − b), and recovers b on such traces; under the commanded reference the comb is locked to the
 screw angle, so its spacing cannot change with backlash (nor with the lead's thermal growth), and
-this estimate only shows its noise (±3 µm on the paper's campaign, see the README).
+this estimate only shows its noise (its size on the paper's campaign: docs/validation.md).
 
 Units: SI inside (m, rad); results carry µm / mm only in the names of the JSON fields.
 """
@@ -157,10 +157,11 @@ class BacklashEstimator(BaseEstimator):
         dofs: DOFs of the shift-based sum (Eq. 6). Default: the straightness pair E_YX, E_ZX.
             The paper sums the five non-positioning DOFs (``NON_POSITIONING``) and relies on
             γ^σ to silence poor ones; in the twin the gyro-based angles at 100 mm/s correlate
-            at γ ≈ 0.7 while their shifts scatter by 5–20 µm (the winfilt band sits at the edge
-            of the gyro's 200 Hz bandwidth), which with σ = 4 still weighs 20–25 % and spoils
-            the sum by µm, whereas E_YX and E_ZX resolve 0.1 µm at γ ≈ 0.998. At 20 mm/s the
-            angles reach only γ ≈ 0.1–0.2 and the two choices agree.
+            only moderately while their shifts scatter by several µm (the winfilt band sits at
+            the edge of the gyro's 200 Hz bandwidth), which with σ = 4 still weighs enough to
+            spoil the sum by µm, whereas E_YX and E_ZX correlate almost perfectly and resolve a
+            fraction of a µm (figures: docs/validation.md). At 20 mm/s the angles hardly
+            correlate and the two choices agree.
         pitch_dofs: DOFs of the perceived pitch (Eq. 8).
         stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
         travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).

@@ -71,8 +71,8 @@ def correlate_traces(trace: np.ndarray, reference: np.ndarray, dx_m: float,
     one, as ``scipy.signal.correlate(..., method="fft")``); with ``upsample`` > 1 the spectrum is
     zero-padded so that c(τ) comes on a lag grid ``upsample`` times finer than dx (band-limited
     interpolation of the correlation, exact for band-limited traces). The quadratic peak fits are
-    then free of the bias that the coarse sampling of an asymmetric lobe gives (about 0.1 µm at
-    dx = 10 µm for rail-like traces without upsampling, < 10 nm with 8×).
+    then free of the bias that the coarse sampling of an asymmetric lobe gives (its size for
+    rail-like traces at dx = 10 µm, with and without upsampling: docs/validation.md).
 
     Args:
         trace, reference: (n,) and (m,) signals on uniform grids of the same step ``dx_m`` (m),
