@@ -39,7 +39,7 @@ from twin.simulate import (
     phase1_measure,
     phase1_profile,
     phase2_command,
-    phase2_measure,
+    phase2_measure_runs,
     phase2_trajectory,
     run_many,
     true_error_motions,
@@ -275,8 +275,8 @@ def _store_phase1(store: PartStore, unit: Unit, sig: dict) -> None:
 def _store_phase2(s: Scenario, sim: Simulator, store: PartStore, unit: Unit, cond: Condition,
                   traj) -> None:
     datasets, dattrs = {}, {}
-    for r in range(s.runs_per_session):
-        m = phase2_measure(sim, traj, rng_for(s.seed, KIND_PHASE2, unit.index, r))
+    rngs = [rng_for(s.seed, KIND_PHASE2, unit.index, r) for r in range(s.runs_per_session)]
+    for r, m in enumerate(phase2_measure_runs(sim, traj, rngs)):
         for key in ("imu_acc", "imu_gyro", "position_cmd"):
             datasets[f"r{r:04d}/{key}"] = m[key]
             dattrs[f"r{r:04d}/{key}"] = {"fs_hz": m[f"{key}_fs_hz"]}
