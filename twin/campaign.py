@@ -12,11 +12,8 @@ Resuming: each finished unit is stored as its own part file (atomic rename, see
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -457,17 +454,25 @@ def _diff_keys(a, b, prefix: str = "") -> list[str]:
 
 
 def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = None,
-                      on_progress: Callable[[int, int, str], None] | None = None) -> dict:
+                      on_progress: Callable[[int, int, str], None] | None = None,
+                      scheduler: str | None = None) -> dict:
     """Simulate every unit of the campaign not yet stored, then assemble the two files.
 
     Args:
         s: the scenario. out_dir: campaign directory (created).
-        workers: processes (default: all local cores; 1 runs in this process).
+        workers: local processes (default: all local cores; 1 runs in this process).
         on_progress: called as (done, total, unit name) after each unit.
+        scheduler: address of a running Dask scheduler to send the units to instead
+            (:mod:`twin.harness.executors`); its workers must see ``out_dir`` at the same path.
     Returns:
-        {"units": n, "simulated": n_new, "skipped": n_existing}.
+        {"units": n, "simulated": n_new, "skipped": n_existing, "executor": where they ran}.
+
+    Raises:
+        twin.harness.executors.ExecutorError: no scheduler answers at ``scheduler``.
     """
-    out = Path(out_dir)
+    from twin.harness.executors import make_executor
+
+    out = Path(out_dir).resolve()  # the workers (possibly elsewhere) get absolute paths
     out.mkdir(parents=True, exist_ok=True)
     _claim(out, s)
     store = PartStore(out)
@@ -477,26 +482,21 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     done = len(units) - len(todo)
     if on_progress:
         on_progress(done, len(units), "")
-    workers = workers or os.cpu_count() or 1
     payload = s.to_json()
-    if workers == 1 or len(todo) <= 1:
-        for u in todo:
-            run_unit(payload, u, str(out))
+    # Phase II sessions first: they are the longest units.
+    todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
+    processes = 1 if len(todo) <= 1 and scheduler is None else workers
+    with make_executor(processes, scheduler=scheduler, prefix="unit") as ex:
+        futures = [ex.submit(run_unit, payload, u, str(out), key=u.name) for u in todo]
+        for fut in ex.completed(futures):
+            name = fut.result()
             done += 1
             if on_progress:
-                on_progress(done, len(units), u.name)
-    else:
-        # Phase II sessions first: they are the longest units.
-        todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            futures = [pool.submit(run_unit, payload, u, str(out)) for u in todo]
-            for fut in as_completed(futures):
-                name = fut.result()
-                done += 1
-                if on_progress:
-                    on_progress(done, len(units), name)
+                on_progress(done, len(units), name)
+        where = ex.description
     assemble(s, out, units)
-    return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo)}
+    return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo),
+            "executor": where}
 
 
 def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | Path]) -> None:

@@ -29,8 +29,10 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
-def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None) -> dict:
+def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None,
+                    scheduler: str | None = None) -> dict:
     from twin.campaign import CampaignDirectoryError, plan, simulate_campaign
+    from twin.harness.executors import ExecutorError
 
     try:
         s = load(scenario, overrides)
@@ -50,8 +52,9 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: in
             progress.update(task, completed=done, description=f"simulating {name}")
 
         try:
-            summary = simulate_campaign(s, out, workers=workers, on_progress=on_progress)
-        except CampaignDirectoryError as exc:
+            summary = simulate_campaign(s, out, workers=workers, on_progress=on_progress,
+                                        scheduler=scheduler)
+        except (CampaignDirectoryError, ExecutorError) as exc:
             progress.stop()
             _fail(str(exc))
     summary["seconds"] = time.perf_counter() - t0
@@ -64,12 +67,20 @@ def simulate(
     scenario: Path = typer.Argument(..., help="scenario TOML file"),
     out: Path = typer.Option(..., "-o", "--out", help="campaign directory to write"),
     set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE (TOML value), repeatable"),
-    workers: int | None = typer.Option(None, "--workers", help="processes (default: all cores)"),
+    workers: int | None = typer.Option(None, "--workers", min=1,
+                                       help="local processes (default: all cores)"),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="address of a running dask.distributed scheduler to "
+                                              "send the units to; OUT must be on a file system its "
+                                              "workers share"),
 ) -> None:
     """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed)."""
-    summary = _run_simulation(scenario, out, set_, workers)
-    console.print(f"{summary['simulated']} units simulated, {summary['skipped']} reused, "
-                  f"{summary['seconds']:.1f} s; wrote {out / 'measurements.h5'} and "
+    if scheduler is not None and workers is not None:
+        _fail("--scheduler and --workers exclude each other: --scheduler sends the units to an "
+              "existing dask cluster, --workers N runs them in N local processes")
+    summary = _run_simulation(scenario, out, set_, workers, scheduler)
+    console.print(f"{summary['simulated']} units simulated ({summary['executor']}), "
+                  f"{summary['skipped']} reused, {summary['seconds']:.1f} s; wrote {out / 'measurements.h5'} and "
                   f"{out / 'truth.h5'}")
 
 
@@ -266,15 +277,29 @@ def backlash(
                                            help="position axis of the traces: 'command' (the controller's "
                                                 "position_cmd) or 'imu' (strokes from the accelerometer and "
                                                 "the run's routine metadata; Eq. 5)"),
+    workers: int | None = typer.Option(None, "--workers", min=1,
+                                       help="local processes for the sessions (default: all cores; "
+                                            "1 = this process)"),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="address of a running dask.distributed scheduler to "
+                                              "send the sessions to; DIRECTORY must be on a file "
+                                              "system its workers share"),
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
     A bad run (missing, cut short, non-finite channel) is skipped with a warning recorded in the
-    JSON, or with --strict ends the command with exit code 2 naming session, run and channel."""
+    JSON, or with --strict ends the command with exit code 2 naming session, run and channel.
+    The sessions' error motions are computed in parallel (local processes, or a Dask cluster with
+    --scheduler); the results are those of one process."""
     import math
 
     from analysis.dataset import DatasetError
     from analysis.phase2.workflow import run
+    from twin.harness.executors import ExecutorError, mapper
+
+    if scheduler is not None and workers is not None:
+        _fail("--scheduler and --workers exclude each other: --scheduler sends the sessions to an "
+              "existing dask cluster, --workers N runs them in N local processes")
 
     out = out or directory / "backlash"
     try:
@@ -287,8 +312,9 @@ def backlash(
         if position_reference not in ("command", "imu"):
             _fail(f"--position-reference {position_reference!r}: expected 'command' or 'imu'")
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
-                 baseline_sessions=baseline_sessions, position_reference=position_reference)
-    except (DatasetError, FileNotFoundError, OSError) as exc:
+                 baseline_sessions=baseline_sessions, position_reference=position_reference,
+                 map_sessions=mapper(workers, scheduler=scheduler, prefix="session"))
+    except (DatasetError, FileNotFoundError, OSError, ExecutorError) as exc:
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated
         _fail(f"{directory}: {exc}")

@@ -346,8 +346,24 @@ def estimator_for(m, **params) -> BacklashEstimator:
     return BacklashEstimator(**params)
 
 
+def session_error_motions_task(path: str, session: str, on_bad_run: str,
+                               error_motion_kw: dict) -> tuple[SessionErrorMotions | None, str]:
+    """The error motions of one session read from the ``measurements.h5`` at ``path``: the piece
+    of :func:`campaign_backlash` a worker process runs (picklable arguments, opens the file
+    itself). Returns ``(error motions, "")``, or ``(None, message)`` when the session cannot be
+    used (the :class:`analysis.dataset.DatasetError` it raised)."""
+    from analysis.dataset import DatasetError, open_measurements
+    from analysis.phase2.error_motions import session_error_motions
+
+    with open_measurements(path) as m:
+        try:
+            return session_error_motions(m, session, on_bad_run=on_bad_run, **error_motion_kw), ""
+        except DatasetError as exc:
+            return None, str(exc)
+
+
 def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimator | None = None,
-                      progress=None, baseline_sessions: int = 1,
+                      progress=None, baseline_sessions: int = 1, map_sessions=None,
                       **error_motion_kw) -> CampaignBacklash:
     """Error motions (:func:`analysis.phase2.error_motions.session_error_motions`) and backlash
     estimates for every Phase II session of an open ``measurements.h5``.
@@ -360,26 +376,43 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
             description (``travel_mm``, ``lead_mm``) when present.
         progress: optional callable(done, total, session).
         baseline_sessions: leading sessions that define zero change (:func:`rezero_on_baseline`).
+        map_sessions: optional ``map_sessions(fn, args) -> [fn(*a) for a in args]`` (in order)
+            that runs :func:`session_error_motions_task` for the sessions elsewhere (processes,
+            a cluster: the caller's executor); None computes them here, one after the other.
+            The results are the same either way.
     Raises:
         DatasetError: a bad run with ``on_bad_run="raise"``, no Phase II session, or no usable
             run in any session.
     """
     from analysis.dataset import DatasetError
-    from analysis.phase2.error_motions import session_error_motions
 
     names = m.phase2_sessions()
     if not names:
         raise DatasetError(f"{m.label}: /phase2 has no session; expected at least two sessions")
     if estimator is None:
         estimator = estimator_for(m)
+    if map_sessions is None:
+        from analysis.phase2.error_motions import session_error_motions
+
+        def outcome(name):
+            try:
+                return session_error_motions(m, name, on_bad_run=on_bad_run, **error_motion_kw), ""
+            except DatasetError as exc:
+                if on_bad_run == "raise":
+                    raise
+                return None, str(exc)
+
+        outcomes = (outcome(name) for name in names)
+    else:
+        outcomes = map_sessions(session_error_motions_task,
+                                [(str(m.path.resolve()), name, on_bad_run, error_motion_kw)
+                                 for name in names])
     ems, skipped_runs, skipped_sessions = [], [], []
-    for i, name in enumerate(names):
-        try:
-            em = session_error_motions(m, name, on_bad_run=on_bad_run, **error_motion_kw)
-        except DatasetError as exc:
+    for i, (name, (em, why)) in enumerate(zip(names, outcomes, strict=True)):
+        if em is None:
             if on_bad_run == "raise":
-                raise
-            skipped_sessions.append((name, str(exc)))
+                raise DatasetError(why)
+            skipped_sessions.append((name, why))
         else:
             ems.append(em)
             skipped_runs.extend((name, run, why) for run, why in em.skipped)

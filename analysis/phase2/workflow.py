@@ -56,7 +56,7 @@ class BacklashRun:
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
         plots: bool = True, process_noise: float | str = 1e-23,
         baseline_sessions: int = 1, estimator: BacklashEstimator | None = None,
-        position_reference: str = "command") -> BacklashRun:
+        position_reference: str = "command", map_sessions=None) -> BacklashRun:
     """Estimate the change of backlash of every Phase II session of ``directory``.
 
     Args:
@@ -73,6 +73,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         position_reference: "command" (the controller's ``position_cmd``) or "imu" (the
             IMU-based position: strokes from the accelerometer and the run's routine metadata;
             ``position_cmd`` is not read). Recorded in ``parameters.position_reference``.
+        map_sessions: runs the sessions' error motions elsewhere (the caller's executor; see
+            :func:`analysis.phase2.backlash.campaign_backlash`); None: here, one by one.
 
     Raises:
         DatasetError, FileNotFoundError, OSError: unreadable input (names file, key, channel).
@@ -88,7 +90,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
             estimator = estimator_for(m, stationary="E_XX")  # Eq. 5
         result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
                                    baseline_sessions=baseline_sessions, estimator=estimator,
-                                   position_reference=position_reference)
+                                   position_reference=position_reference,
+                                   map_sessions=map_sessions)
         dial = m.dial_indicator()
     ses = result.sessions
     hours = [s.hours for s in ses]
