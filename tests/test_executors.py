@@ -1,5 +1,5 @@
 """One executor choice for `twin simulate`, `twin backlash` and `twin sweep`
-(twin/harness/executors.py): units of a campaign sent to a real Dask scheduler, and the sessions
+(twin/executors.py): units of a campaign sent to a real Dask scheduler, and the sessions
 of `twin backlash` run on local processes or on that scheduler, give exactly what one process
 gives."""
 
@@ -15,7 +15,7 @@ from conftest import REPO, run_twin
 
 from analysis.phase2.workflow import run as backlash_run
 from twin.campaign import simulate_campaign
-from twin.harness.executors import mapper
+from twin.executors import mapper
 from twin.scenario import load
 
 # backlash-steps cut to three sessions (0, 2 and 20 µm) of two short runs at 100 mm/s.

@@ -463,14 +463,14 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
         workers: local processes (default: all local cores; 1 runs in this process).
         on_progress: called as (done, total, unit name) after each unit.
         scheduler: address of a running Dask scheduler to send the units to instead
-            (:mod:`twin.harness.executors`); its workers must see ``out_dir`` at the same path.
+            (:mod:`twin.executors`); its workers must see ``out_dir`` at the same path.
     Returns:
         {"units": n, "simulated": n_new, "skipped": n_existing, "executor": where they ran}.
 
     Raises:
-        twin.harness.executors.ExecutorError: no scheduler answers at ``scheduler``.
+        twin.executors.ExecutorError: no scheduler answers at ``scheduler``.
     """
-    from twin.harness.executors import make_executor
+    from twin.executors import make_executor
 
     out = Path(out_dir).resolve()  # the workers (possibly elsewhere) get absolute paths
     out.mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ def _fail(message: str, code: int = 2) -> None:
 def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None,
                     scheduler: str | None = None) -> dict:
     from twin.campaign import CampaignDirectoryError, plan, simulate_campaign
-    from twin.harness.executors import ExecutorError
+    from twin.executors import ExecutorError
 
     try:
         s = load(scenario, overrides)
@@ -295,7 +295,7 @@ def backlash(
 
     from analysis.dataset import DatasetError
     from analysis.phase2.workflow import run
-    from twin.harness.executors import ExecutorError, mapper
+    from twin.executors import ExecutorError, mapper
 
     if scheduler is not None and workers is not None:
         _fail("--scheduler and --workers exclude each other: --scheduler sends the sessions to an "

@@ -5,8 +5,8 @@ from __future__ import annotations
 import os
 import time
 
-from twin.harness.executors import Executor, ExecutorError
-from twin.harness.executors import make_executor as shared_executor
+from twin.executors import Executor, ExecutorError
+from twin.executors import make_executor as shared_executor
 from twin.harness.sweep.schema import SweepError
 from twin.scenario import from_dict
 
@@ -35,12 +35,12 @@ def run_task(scenario: dict, point_dir: str, reference_dir: str | None) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------
-# Executors: the shared ones of twin.harness.executors
+# Executors: the shared ones of twin.executors
 
 
 def make_executor(workers: int | None = None, scheduler: str | None = None) -> Executor:
     """Default: all local cores (processes); ``workers=N``: a Dask LocalCluster of N worker
-    processes; ``scheduler``: an existing Dask cluster (:func:`twin.harness.executors.make_executor`).
+    processes; ``scheduler``: an existing Dask cluster (:func:`twin.executors.make_executor`).
 
     Raises:
         SweepError: no scheduler answers at ``scheduler``.
