@@ -19,6 +19,7 @@ from analysis.files import write_json
 from analysis.injected import injected_change_um
 from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash, estimator_for
 from analysis.phase2.error_motion_file import write_error_motions
+from analysis.phase2.error_motions import resolve_position_reference
 from analysis.phase2.figures import write_figures
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis, savgol_trend
 
@@ -56,7 +57,7 @@ class BacklashRun:
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
         plots: bool = True, process_noise: float | str = 1e-23,
         baseline_sessions: int = 1, estimator: BacklashEstimator | None = None,
-        position_reference: str = "command") -> BacklashRun:
+        position_reference: str = "auto") -> BacklashRun:
     """Estimate the change of backlash of every Phase II session of ``directory``.
 
     Args:
@@ -70,7 +71,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         estimator: an unfitted backlash estimator (default :class:`BacklashEstimator()`, the
             paper's method; on the IMU axis with ``stationary="E_XX"``, Eq. 5); its class is
             recorded in ``parameters.estimator``.
-        position_reference: "command" (the controller's ``position_cmd``) or "imu" (the
+        position_reference: "auto" (default: "command" when the runs record ``position_cmd``, else
+            "imu"), "command" (the controller's ``position_cmd``) or "imu" (the
             IMU-based position: strokes from the accelerometer and the run's routine metadata;
             ``position_cmd`` is not read). Recorded in ``parameters.position_reference``.
 
@@ -81,9 +83,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     directory = Path(directory)
     out = Path(out) if out is not None else directory / "backlash"
     with open_measurements(directory / "measurements.h5") as m:
-        if position_reference not in POSITION_REFERENCES:
-            raise ValueError(f"position reference {position_reference!r}: expected one of "
-                             f"{', '.join(POSITION_REFERENCES)}")
+        position_reference = resolve_position_reference(m, position_reference)
         if estimator is None and position_reference == "imu":
             estimator = estimator_for(m, stationary="E_XX")  # Eq. 5
         result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
