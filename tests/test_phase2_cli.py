@@ -196,7 +196,7 @@ def test_truth_holds_the_rest_to_rest_travels(small):
         b = {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
     s0, s1 = sorted(st, key=b.get)
     for s, d in st.items():
-        assert d["speed_m_s"].tolist() == [0.02, -0.02]
+        assert np.allclose(d["speed_m_s"], [0.02, -0.02], rtol=1e-9)
         assert np.allclose(d["screw_m"], d["command_m"], atol=1e-7)
         assert np.allclose(np.abs(d["command_m"]), 0.45, atol=1e-9)
     assert abs(st[s0]["carriage_m"][0] + st[s0]["carriage_m"][1]) < 1e-7
