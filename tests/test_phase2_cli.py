@@ -171,6 +171,8 @@ def test_a_stand_alone_imu_recording_is_analysed_on_the_imu_axis(small, tmp_path
     assert auto["parameters"]["position_reference"] == "imu"
     assert [s["delta_backlash_um_shift"] for s in auto["sessions"]] == \
         [s["delta_backlash_um_shift"] for s in imu["sessions"]]
+    # Eq. 5 on the IMU axis, 2 runs at 20 mm/s: the same 4 µm as the command axis on this campaign
+    assert auto["sessions"][-1]["delta_backlash_um_shift"] == pytest.approx(20.0, abs=4.0)
     r = run_twin("backlash", imu_only, "--position-reference", "command", "--strict", "--no-plots", check=False)
     msg = " ".join(r.stderr.split())
     assert r.returncode == 2 and "Traceback" not in r.stderr
@@ -195,7 +197,7 @@ def test_truth_holds_the_rest_to_rest_travels(small):
         st = {s: t.strokes(s) for s in t.sessions()}
         b = {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
     s0, s1 = sorted(st, key=b.get)
-    for s, d in st.items():
+    for d in st.values():
         assert np.allclose(d["speed_m_s"], [0.02, -0.02], rtol=1e-9)
         assert np.allclose(d["screw_m"], d["command_m"], atol=1e-7)
         assert np.allclose(np.abs(d["command_m"]), 0.45, atol=1e-9)
