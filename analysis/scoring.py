@@ -5,8 +5,8 @@
 ``twin demo`` and every point of ``twin sweep``:
 
 - ``DIR/phase1/detection.json`` and ``detection_details.json`` (``twin detect``): per method the
-  detection hour, the delay from the injected onset, false alarms on the healthy post-baseline
-  samples (:func:`analysis.phase1.scoring.score_method`), and the same over threshold factors
+  detection hour (the first alarm after the injected onset, :mod:`analysis.phase1.scoring`), the
+  delay from the onset, false alarms on the healthy post-baseline samples (:func:`analysis.phase1.scoring.score_method`), and the same over threshold factors
   (the limit times 0.25 … 4) for detection-rate against false-alarm curves;
 - ``DIR/backlash/backlash.json`` and ``error_motions.h5`` (``twin backlash``): per session the
   estimated change of backlash against the injected one (both relative to the mean of the
@@ -83,8 +83,7 @@ def score_phase1(directory: Path, onset_hours: float | None) -> dict | None:
             sf = score_method(hours, scores, thr, n_base, onset_hours, consecutive)
             roc["false_alarm_rate"].append(sf.false_alarms / sf.healthy_test_samples
                                            if sf.healthy_test_samples else None)
-            roc["detected"].append(sf.detection_hours is not None and
-                                   (onset_hours is None or sf.detection_hours > onset_hours))
+            roc["detected"].append(sf.detection_hours is not None)  # after the onset by definition
             roc["delay_hours"].append(sf.delay_hours)
         rec["roc"] = roc
         methods[name] = rec

@@ -79,7 +79,7 @@ REFERENCE_SMALL = ["phase1.captures_per_sample=2", "phase1.capture_s=4.0",
 
 def _score_tables(doc: dict) -> list[Table]:
     """The summary tables of a score.json object (shared by ``twin score`` and ``twin demo``)."""
-    from analysis.phase1.pipeline import PAPER_NAMES
+    from analysis.registry import label
 
     def fmt(v, f="{:g}"):
         return "-" if v is None else f.format(v)
@@ -93,7 +93,7 @@ def _score_tables(doc: dict) -> list[Table]:
         for col in ("method", "detection h", "delay h", "delay samples", "false alarms / healthy"):
             t.add_column(col)
         for name, r in p1["methods"].items():
-            t.add_row(PAPER_NAMES.get(name, name), fmt(r["detection_hours"]), fmt(r["delay_hours"]),
+            t.add_row(r.get("label") or label("detectors", name), fmt(r["detection_hours"]), fmt(r["delay_hours"]),
                       fmt(r["delay_samples"]), f"{r['false_alarms']} / {r['healthy_test_samples']}")
         tables.append(t)
     p2 = doc.get("phase2")
@@ -219,16 +219,16 @@ def detect(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
     reference: Path = typer.Option(..., "--reference", help="reference data set directory (Fisher selection)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
-    method: list[str] = typer.Option([], "--method", help="method(s) to run (default: all six)"),
+    method: list[str] = typer.Option([], "--method", help="detector(s) to run: a registered name or "
+                                     "module:Class, repeatable (default: every registered detector)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
 ) -> None:
     """Phase I incipient-fault detection (paper section IV): writes OUT/detection.json and OUT/detection.png."""
     from analysis.phase1.detect import run
-    from analysis.phase1.pipeline import METHODS, PAPER_NAMES
 
     out = out or directory / "phase1"
     try:
-        details = run(directory, reference, out, method or METHODS, consecutive)
+        details = run(directory, reference, out, method or None, consecutive)
     except (ValueError, FileNotFoundError) as exc:  # DatasetError, ExtractionError, DetectError
         _fail(f"{exc} (anything computed before the error is in {out})")
     onset = details["onset_hours"]
@@ -237,10 +237,10 @@ def detect(
                         f"{'none' if onset is None else f'{onset:g} h'}")
     for col in ("method", "limit", "detect h", "delay h", "delay n", "FA/healthy", "FA base"):
         table.add_column(col)
-    for name, r in details["methods"].items():
+    for r in details["methods"].values():
         def fmt(v, f="{:g}"):
             return "-" if v is None else f.format(v)
-        table.add_row(PAPER_NAMES[name], f"{r['threshold']:.4g}", fmt(r["detection_hours"]),
+        table.add_row(r["label"], f"{r['threshold']:.4g}", fmt(r["detection_hours"]),
                       fmt(r["delay_hours"]), fmt(r["delay_samples"]),
                       f"{r['false_alarms']} / {r['healthy_test_samples']}", str(r["baseline_alarms"]))
     Console(width=max(100, Console().width)).print(table)

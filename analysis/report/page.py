@@ -370,6 +370,8 @@ def render(directory: str | Path, out: str | Path | None = None) -> Report:
     out.mkdir(parents=True, exist_ok=True)
     figs = Figures(d, out)
     names = _method_names()
+    for k, v in ((inp.detection or {}).get("methods") or {}).items():
+        names.setdefault(k, v.get("label") or k)  # a module:Class detector names itself
     missing = [p for p, ok in (("Phase I", inp.detection is not None),
                                ("Phase II", inp.backlash is not None)) if not ok]
     notes = list(inp.notes)
