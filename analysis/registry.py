@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import Any
 
-__all__ = ["KINDS", "Entry", "RegistryError", "create", "default", "entries", "get", "label",
+__all__ = ["KINDS", "Entry", "RegistryError", "create", "default", "entries", "entry_of", "get", "label",
            "names", "register", "style"]
 
 #: kind -> (entry-point group, modules holding the in-tree registrations, what it is called).
@@ -209,6 +209,16 @@ def create(kind: str, spec: str, **params) -> Any:
                             f"expected parameters of {getattr(e.factory, '__qualname__', e.factory)}"
                             f"{inspect.signature(e.factory)}")
     return e.factory(**params)
+
+
+def entry_of(kind: str, obj: Any) -> Entry:
+    """The entry of an instance (by its class): the registered one, else one named by the class
+    (or its ``name`` attribute)."""
+    cls = type(obj)
+    for e in entries(kind).values():
+        if e.factory is cls:
+            return e
+    return _from_path(kind, f"{cls.__module__}:{cls.__qualname__}")
 
 
 def label(kind: str, name: str) -> str:
