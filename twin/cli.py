@@ -389,6 +389,10 @@ def sweep(
                                                  "OUT must be on a file system its workers share"),
     workers: int | None = typer.Option(None, "--workers", min=1,
                                           help="run on a dask LocalCluster of N worker processes"),
+    methods: str | None = typer.Option(None, "--methods",
+                                       help="Phase I methods of the per-point summary, comma-separated, "
+                                            "or 'all' (default: the sweep's [analysis] methods, else "
+                                            "the default detector)"),
 ) -> None:
     """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
     OUT/results.csv and plots. Default executor: all local cores (processes). Resumes if interrupted."""
@@ -437,7 +441,19 @@ def sweep(
     import pandas as pd
 
     df = pd.read_parquet(out / "results.parquet")
-    header, rows = summary(plan, df)
+    from analysis import registry
+    from twin.harness.sweep.results import phase1_methods
+
+    if methods == "all":
+        shown = phase1_methods(df)
+    elif methods:
+        shown = [m.strip() for m in methods.split(",") if m.strip()]
+    else:
+        shown = [registry.get("detectors", m).name for m in plan.methods or []] or None
+    try:
+        header, rows = summary(plan, df, shown)
+    except ValueError as exc:
+        _fail(str(exc))
     table = Table(title=f"sweep {plan.name}: mean ± sd over seeds ({len(df)} rows)")
     for col in header:
         table.add_column(col)
