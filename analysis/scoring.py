@@ -74,7 +74,7 @@ def score_phase1(directory: Path, onset_hours: float | None) -> dict | None:
         hours, scores = np.asarray(r["hours"], float), np.asarray(r["scores"], float)
         n_samples = len(hours)
         s = score_method(hours, scores, r["threshold"], n_base, onset_hours, consecutive)
-        rec = asdict(s)
+        rec = {"label": r.get("label") or name, **asdict(s)}
         rec["threshold"] = float(r["threshold"])
         rec["false_alarm_rate"] = (s.false_alarms / s.healthy_test_samples
                                    if s.healthy_test_samples else None)
