@@ -47,7 +47,7 @@ KINDS: dict[str, tuple[str, tuple[str, ...], str]] = {
 }
 
 #: Colours and markers left for methods that do not choose one (the built-ins use tab10's first six).
-_PALETTE = ("tab:pink", "tab:olive", "tab:cyan", "tab:gray", "black", "gold", "navy", "teal",
+_PALETTE = ("tab:pink", "tab:olive", "tab:cyan", "magenta", "indigo", "gold", "navy", "teal",
             "crimson", "darkorange")
 _MARKERS = ("X", "*", "h", "p", "<", ">", "8", "d")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]*$")

@@ -33,7 +33,7 @@ def plot_fig6(path: Path, hours: np.ndarray, results: dict[str, dict], n_baselin
         s = np.asarray(results[name]["scores"], dtype=float)
         thr = results[name]["threshold"]
         color, marker = style("detectors", name)
-        ax.plot(hours[:n_baseline], s[:n_baseline], marker=marker, ls="-", ms=3, color="0.6",
+        ax.plot(hours[:n_baseline], s[:n_baseline], marker=marker, ls="-", ms=3, color="0.75",
                 label="baseline")
         ax.plot(hours[n_baseline - 1:], s[n_baseline - 1:], marker=marker, ls="-", ms=3, color=color,
                 label="test")
