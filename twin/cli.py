@@ -295,8 +295,9 @@ def backlash(
                                           help="leading sessions known to share the initial backlash; "
                                                "the estimates are re-zeroed on their mean (1 = the paper's "
                                                "single reference)"),
-    position_reference: str = typer.Option("command", "--position-reference",
-                                           help="position axis of the traces: 'command' (the controller's "
+    position_reference: str = typer.Option("auto", "--position-reference",
+                                           help="position axis of the traces: 'auto' (command if the runs "
+                                                "record position_cmd, else imu), 'command' (the controller's "
                                                 "position_cmd) or 'imu' (strokes from the accelerometer and "
                                                 "the run's routine metadata; Eq. 5)"),
     estimator: str | None = typer.Option(None, "--estimator",
@@ -330,8 +331,8 @@ def backlash(
     except ValueError:
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
     try:
-        if position_reference not in ("command", "imu"):
-            _fail(f"--position-reference {position_reference!r}: expected 'command' or 'imu'")
+        if position_reference not in ("auto", "command", "imu"):
+            _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
                  baseline_sessions=baseline_sessions, position_reference=position_reference,
                  estimator=estimator, params=params)

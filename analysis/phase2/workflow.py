@@ -26,6 +26,7 @@ from analysis.phase2.backlash import (
     primary_m,
 )
 from analysis.phase2.error_motion_file import write_error_motions
+from analysis.phase2.error_motions import resolve_position_reference
 from analysis.phase2.figures import write_figures
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis, savgol_trend
 
@@ -70,7 +71,7 @@ def estimator_dir(out: str | Path, name: str) -> Path:
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
         plots: bool = True, process_noise: float | str = 1e-23,
         baseline_sessions: int = 1, estimator: BacklashEstimator | str | None = None,
-        position_reference: str = "command", params: dict | None = None) -> BacklashRun:
+        position_reference: str = "auto", params: dict | None = None) -> BacklashRun:
     """Estimate the change of backlash of every Phase II session of ``directory``.
 
     Args:
@@ -87,7 +88,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
             ``stationary="E_XX"``, Eq. 5); its registered name and label are recorded in
             ``estimator`` and its class in ``parameters.estimator``.
         params: constructor parameters of a named ``estimator``.
-        position_reference: "command" (the controller's ``position_cmd``) or "imu" (the
+        position_reference: "auto" (default: "command" when the runs record ``position_cmd``, else
+            "imu"), "command" (the controller's ``position_cmd``) or "imu" (the
             IMU-based position: strokes from the accelerometer and the run's routine metadata;
             ``position_cmd`` is not read). Recorded in ``parameters.position_reference``.
 
@@ -98,9 +100,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     directory = Path(directory)
     out = Path(out) if out is not None else directory / "backlash"
     with open_measurements(directory / "measurements.h5") as m:
-        if position_reference not in POSITION_REFERENCES:
-            raise ValueError(f"position reference {position_reference!r}: expected one of "
-                             f"{', '.join(POSITION_REFERENCES)}")
+        position_reference = resolve_position_reference(m, position_reference)
         if estimator is None and position_reference == "imu":
             estimator = estimator_for(m, stationary="E_XX", **(params or {}))  # Eq. 5
         elif estimator is None or isinstance(estimator, str):
