@@ -195,7 +195,7 @@ def test_truth_holds_the_rest_to_rest_travels(small):
         st = {s: t.strokes(s) for s in t.sessions()}
         b = {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
     s0, s1 = sorted(st, key=b.get)
-    for s, d in st.items():
+    for d in st.values():
         assert d["speed_m_s"].tolist() == [0.02, -0.02]
         assert np.allclose(d["screw_m"], d["command_m"], atol=1e-7)
         assert np.allclose(np.abs(d["command_m"]), 0.45, atol=1e-9)
