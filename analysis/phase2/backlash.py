@@ -336,13 +336,18 @@ def rezero_on_baseline(sessions: list, k: int) -> tuple[list, tuple[float, float
 
 
 def estimator_for(m, **params) -> BacklashEstimator:
-    """The paper's estimator for the axis of an open ``measurements.h5``: stroke L and lead p from
-    its ``axis`` description (``travel_mm``, ``lead_mm``) where given; ``params``: further
-    :class:`BacklashEstimator` parameters (e.g. ``stationary="E_XX"``)."""
-    axis = m.axis() or {}
-    for key, name in (("travel_mm", "travel_m"), ("lead_mm", "lead_m")):
-        if isinstance(axis.get(key), (int, float)):
-            params.setdefault(name, float(axis[key]) * 1e-3)
+    """The paper's estimator for the axis of an open ``measurements.h5``: travel L and lead p of
+    Eq. 9 from its axis contract (``/@axis.travel_mm``, ``/@axis.lead_mm``, required: a missing
+    one raises :class:`analysis.dataset.axis.MissingAxisKey` naming it); ``params``: further
+    :class:`BacklashEstimator` parameters (e.g. ``stationary="E_XX"``), which take precedence."""
+    from analysis.dataset.axis import axis_of
+
+    axis = axis_of(m)
+    need = "the Phase II backlash estimate (Eq. 9: travel L and lead p)"
+    if "travel_m" not in params:
+        params["travel_m"] = axis.require("travel_mm", need) * 1e-3
+    if "lead_m" not in params:
+        params["lead_m"] = axis.require("lead_mm", need) * 1e-3
     return BacklashEstimator(**params)
 
 
@@ -356,8 +361,8 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
         m: :class:`analysis.dataset.Measurements`.
         on_bad_run: "skip" (a bad run is left out and reported) or "raise" (the first bad run
             raises :class:`analysis.dataset.DatasetError` naming session, run and channel).
-        estimator: default ``BacklashEstimator`` with L and p from the file's ``axis``
-            description (``travel_mm``, ``lead_mm``) when present.
+        estimator: default :func:`estimator_for` ``m`` (L and p from the axis contract's
+            ``travel_mm`` and ``lead_mm``, required).
         progress: optional callable(done, total, session).
         baseline_sessions: leading sessions that define zero change (:func:`rezero_on_baseline`).
     Raises:
