@@ -157,7 +157,7 @@ def _convert(src: Path, phase: str, p: PhaseSpec, axis: AxisDescription, hours_o
         for c in cols:
             bad = np.flatnonzero(~np.isfinite(c.values))
             if bad.size:
-                raise ImportSpecError(f"{src}: channel {c.name!r}, {c.at(int(bad[0]))}: {c.values[bad[0]]!r} "
+                raise ImportSpecError(f"{src}: channel {c.name!r}, {c.at(int(bad[0]))}: {float(c.values[bad[0]])!r} "
                                       f"({bad.size} non-finite value(s) in all); expected finite samples")
             if c.values.size == 0:
                 raise ImportSpecError(f"{src}: channel {c.name!r} is empty; expected samples")
