@@ -416,7 +416,35 @@ def check(
             console.print("no errors, no warnings")
     if rep.errors:
         raise typer.Exit(1)
-# --- end of import, check ----------------------------------------------------------------------
+scenario_app = typer.Typer(no_args_is_help=True, help="Scenarios: write one that describes a recording.")
+app.add_typer(scenario_app, name="scenario")
+
+
+@scenario_app.command("init")
+def scenario_init(
+    directory: Path = typer.Argument(..., help="campaign directory or measurements.h5 of the recording"),
+    out: Path = typer.Option(..., "-o", "--out", help="scenario file to write (TOML)"),
+    name: str | None = typer.Option(None, "--name", help="scenario name (default: the directory's name)"),
+) -> None:
+    """A scenario whose layout matches the recording (samples, captures, sessions, runs, hours, rates)
+    and whose routine is measured from it (stroke, speeds, acceleration, dwell), the axis values from
+    its /@axis and a comment on every value that is a twin default. Then:
+    twin diagnose DIRECTORY --scenario OUT."""
+    from analysis.dataset import DatasetError
+    from twin.scenario_init import write_scenario
+
+    if out.exists() and out.is_dir():
+        _fail(f"-o {out}: is a directory; expected a scenario file path (e.g. {out / 'axis.toml'})")
+    try:
+        notes = write_scenario(directory, out, name)
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    except ScenarioError as exc:
+        _fail(f"the scenario measured from {directory} is outside the twin's ranges: {exc}")
+    for n in notes:
+        console.print(f"note: {n}", style="yellow", markup=False, highlight=False)
+    console.print(f"wrote {out}; next: twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
+# --- end of import, check, scenario init -------------------------------------------------------
 
 
 # --- twin sweep (helper: sweep) ----------------------------------------------------------------
