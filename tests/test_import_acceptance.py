@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "scenarios" / "foreign-axis.toml"
 DOC = ROOT / "docs" / "import.md"
 SMALL = ("phase2.session_hours=[100.0, 400.0]", "phase2.runs_per_session=2", "phase1.captures_per_sample=2",
-         "phase1.sample_interval_hours=200.0", "phase1.capture_s=1.0")
+         "phase1.sample_interval_hours=200.0")
 
 
 def doc_spec() -> str:
@@ -96,7 +96,7 @@ def _acceptance(tmp: Path, overrides: tuple[str, ...], wrong_lead: bool) -> dict
 
 
 def test_foreign_recording_small(tmp_path):
-    """Two sessions (0 and 10 µm), two runs each, two Phase I samples of two 1-s captures; the
+    """Two sessions (0 and 10 µm), two runs each, two Phase I samples of two 2-s captures; the
     scenario that ``scenario init`` wrote has the recording's layout (the check ``twin diagnose``
     makes before anything else: it simulates the scenario once and compares)."""
     from twin.harness.gap_runner import check_layout
