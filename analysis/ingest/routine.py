@@ -64,7 +64,7 @@ def motion_profile(v: np.ndarray, fs_hz: float, smooth_s: float = 0.0) -> dict:
         out["accel_mm_s2"] = float(f"{np.median(accels):.3g}")
     if strokes:
         out["stroke_mm"] = float(f"{np.median(strokes):.4g}")
-    still = [(b - a) / fs_hz for a, b in _segments(~moving)[1:-1]]
+    still = [(b - a) / fs_hz for a, b in _segments(~moving) if a > 0 and b < len(v)]
     if still:
         out["dwell_s"] = float(f"{np.median(still):.3g}")
     return out

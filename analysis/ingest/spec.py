@@ -183,6 +183,8 @@ def load_spec(path: str | Path) -> tuple[ImportSpec, Path]:
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "not a key of the import spec (docs/import.md)"
+        if err["type"] == "missing":
+            raise ImportSpecError(f"{path}: {loc} is missing (docs/import.md)") from None
         if loc:
             raise ImportSpecError(f"{path}: {loc} = {value!r}: {msg}") from None
         raise ImportSpecError(f"{path}: {msg}") from None
