@@ -286,3 +286,10 @@ def test_check_finds_injected_problems(clean, tmp_path, edit, level, where, what
     assert [f.level for f in hits] == [level], rep.findings
     r = run_twin("check", tmp_path, check=False)
     assert r.returncode == (1 if level == "error" else 0) and "Traceback" not in r.stderr
+
+
+def test_scenario_init_refusals(tmp_path, clean):
+    r = run_twin("scenario", "init", tmp_path / "nowhere", "-o", tmp_path / "s.toml", check=False)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "measurements.h5" in r.stderr
+    r = run_twin("scenario", "init", clean.parent, "-o", tmp_path, check=False)
+    assert r.returncode == 2 and "is a directory; expected a scenario file path" in " ".join(r.stderr.split())

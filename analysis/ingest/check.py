@@ -122,7 +122,7 @@ def check_recording(path: str | os.PathLike) -> CheckReport:
 
     Raises DatasetError / FileNotFoundError only when the file cannot be opened at all."""
     path = Path(path)
-    if path.is_dir():
+    if path.is_dir() or path.suffix != ".h5":
         path = path / "measurements.h5"
     rep = CheckReport(str(path))
     with open_measurements(path) as m:

@@ -77,7 +77,7 @@ def _spacing(hours: list[float]) -> float | None:
 def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3) -> dict:
     """Layout and routines of ``path`` (campaign directory or ``measurements.h5``); see the module."""
     path = Path(path)
-    if path.is_dir():
+    if path.is_dir() or path.suffix != ".h5":
         path = path / "measurements.h5"
     out: dict = {"file": str(path)}
     with open_measurements(path) as m:
