@@ -440,7 +440,7 @@ def scenario_init(
     except (DatasetError, FileNotFoundError, OSError) as exc:
         _fail(str(exc))
     except ScenarioError as exc:
-        _fail(f"the scenario measured from {directory} is outside the twin's ranges: {exc}")
+        _fail(f"the scenario measured from {directory} cannot be written: {exc}")
     for n in notes:
         console.print(f"note: {n}", style="yellow", markup=False, highlight=False)
     console.print(f"wrote {out}; next: twin diagnose {directory} --scenario {out}", markup=False, highlight=False)

@@ -18,7 +18,7 @@ from typing import Any
 
 from analysis.files import write_text
 from analysis.ingest.routine import measure_recording
-from twin.scenario import AxisConfig, Phase1Config, Phase2Config, SensorsConfig, load
+from twin.scenario import AxisConfig, Phase1Config, Phase2Config, ScenarioError, SensorsConfig, load
 
 MEASURED, AXIS, DEFAULT = "measured", "axis description", "twin default"
 
@@ -119,10 +119,18 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
         if pr is not None and pr.start_mm is not None and pr.end_mm is not None:
             ph1.add("start_mm", pr.start_mm, AXIS)
             ph1.add("end_mm", pr.end_mm, AXIS)
-        elif stroke is not None and stroke < travel:
+        elif stroke is not None:
+            if stroke >= travel:
+                raise ScenarioError(
+                    f"{meas['file']}: the Phase I stroke measured from the motor speed through /@axis.lead_mm "
+                    f"= {axis.lead_mm:g} mm is {stroke:g} mm, not within the travel /@axis.travel_mm = "
+                    f"{travel:g} mm; expected a stroke shorter than the travel (is the lead right?)")
             start = round((travel - stroke) / 2, 3)
             ph1.add("start_mm", start, MEASURED, "stroke measured; its place assumed centred in the travel")
             ph1.add("end_mm", round(start + stroke, 3), MEASURED, "stroke measured")
+        elif d1.end_mm > travel:
+            ph1.add("start_mm", round(0.25 * travel, 3), DEFAULT, "a half-travel stroke, centred")
+            ph1.add("end_mm", round(0.75 * travel, 3), DEFAULT, "a half-travel stroke, centred")
         if "dwell_s" in r1:
             ph1.add("dwell_s", r1["dwell_s"], MEASURED)
         n = p1["samples"]
