@@ -153,7 +153,7 @@ def test_round_trip(campaign):
         assert f["phase1/c000000/speed"].dtype == np.float32
         assert f["phase1/c000000/acc2"].dtype == np.float64
         assert f["phase1/c000000/acc1"].attrs["unit"] == "m/s^2"
-        assert f.attrs["format_version"] == 1
+        assert f.attrs["format_version"] == 2
 
     with open_truth(tpath) as t:
         assert t.onset_hours == 250.0
@@ -282,9 +282,9 @@ def test_wrong_format(campaign):
 
 def test_unsupported_version(campaign):
     mpath, _ = campaign
-    _edit(mpath, lambda f: f.attrs.__setitem__("format_version", 2))
+    _edit(mpath, lambda f: f.attrs.__setitem__("format_version", 3))
     assert _error(mpath) == (
-        f"{mpath}: /@format_version is 2; this reader supports format_version 1 (a newer ballscrew-twin may read it)"
+        f"{mpath}: /@format_version is 3; this reader supports format_version 1, 2 (a newer ballscrew-twin may read it)"
     )
 
 

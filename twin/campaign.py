@@ -42,6 +42,7 @@ from twin.simulate import (
     phase2_measure,
     phase2_trajectory,
     run_many,
+    stroke_travels,
     true_error_motions,
 )
 
@@ -282,6 +283,8 @@ def _store_phase2(s: Scenario, sim: Simulator, store: PartStore, unit: Unit, con
             dattrs[f"r{r:04d}/{key}"] = {"fs_hz": m[f"{key}_fs_hz"]}
     x, e = true_error_motions(sim.world, s.phase2, cond)
     datasets["truth/x_m"], datasets["truth/E"] = x, e
+    for key, arr in stroke_travels(sim.world, traj).items():
+        datasets[f"truth/stroke_{key}"] = arr
     store.write("phase2", unit.name,
                 attrs={"hours": unit.hours, "backlash_um": cond.mech.backlash * 1e6,
                        "origin_offset_m": cond.origin_offset, "preload_N": cond.mech.preload,
@@ -416,7 +419,8 @@ def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
     def sessions():
         for u in by_kind["phase2"]:
             attrs, data, _ = store.read("phase2", u.name)
-            yield u.name, attrs, data["truth/x_m"], data["truth/E"]
+            strokes = {k[len("truth/stroke_"):]: v for k, v in data.items() if k.startswith("truth/stroke_")}
+            yield u.name, attrs, data["truth/x_m"], data["truth/E"], strokes
 
     ds.assemble_truth(out_dir / "truth.h5", s.to_json(), onset_hours(s), _timeline(s, units),
                       sessions(), effects={})

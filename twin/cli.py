@@ -77,9 +77,27 @@ REFERENCE_SMALL = ["phase1.captures_per_sample=2", "phase1.capture_s=4.0",
                    "phase1.sample_interval_hours=20"]
 
 
+def _parse_params(items: list[str]) -> dict:
+    """--set-param KEY=VALUE items as a dict; VALUE is a TOML value, else taken as a string."""
+    import tomllib
+
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip().isidentifier():
+            _fail(f"--set-param {item!r}: expected KEY=VALUE with KEY a parameter name")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = value
+        if isinstance(out[key.strip()], list):
+            out[key.strip()] = tuple(out[key.strip()])
+    return out
+
+
 def _score_tables(doc: dict) -> list[Table]:
     """The summary tables of a score.json object (shared by ``twin score`` and ``twin demo``)."""
-    from analysis.phase1.pipeline import PAPER_NAMES
+    from analysis.registry import label
 
     def fmt(v, f="{:g}"):
         return "-" if v is None else f.format(v)
@@ -93,12 +111,26 @@ def _score_tables(doc: dict) -> list[Table]:
         for col in ("method", "detection h", "delay h", "delay samples", "false alarms / healthy"):
             t.add_column(col)
         for name, r in p1["methods"].items():
-            t.add_row(PAPER_NAMES.get(name, name), fmt(r["detection_hours"]), fmt(r["delay_hours"]),
+            t.add_row(r.get("label") or label("detectors", name), fmt(r["detection_hours"]), fmt(r["delay_hours"]),
                       fmt(r["delay_samples"]), f"{r['false_alarms']} / {r['healthy_test_samples']}")
         tables.append(t)
     p2 = doc.get("phase2")
+    ests = doc.get("phase2_estimators") or {}
+    if len(ests) > 1:
+        t = Table(title="Phase II: every backlash estimator found, side by side (µm against the "
+                        "injected change; h for the 10 µm crossing)")
+        for col in ("estimator", "sessions", "RMS error µm", "largest µm", "bias µm",
+                    "vs lost motion µm", "prognosis error h"):
+            t.add_column(col)
+        for name, r in ests.items():
+            t.add_row(f"{r.get('label') or name} [{name}]", str(r["n_sessions"]),
+                      fmt(r["rms_error_um"], "{:.2f}"), fmt(r["max_abs_error_um"], "{:.2f}"),
+                      fmt(r["bias_um"], "{:+.2f}"), fmt(r.get("rms_error_vs_lost_motion_um"), "{:.2f}"),
+                      fmt((r.get("prognosis") or {}).get("error_hours"), "{:+.0f}"))
+        tables.append(t)
     if p2:
-        t = Table(title=f"Phase II: change of backlash against the injected one (RMS error "
+        t = Table(title=f"Phase II ({p2.get('label') or p2.get('estimator') or 'shift'}): change of "
+                        f"backlash against the injected one (RMS error "
                         f"{fmt(p2['rms_error_um'], '{:.2f}')} µm, largest "
                         f"{fmt(p2['max_abs_error_um'], '{:.2f}')} µm)")
         for col in ("session", "hours", "injected Δ µm", "estimated Δ µm", "error µm",
@@ -133,8 +165,9 @@ def score(
 ) -> None:
     """Score both phases against DIRECTORY/truth.h5: prints the tables and writes DIRECTORY/score.json.
 
-    Reads DIRECTORY/phase1/detection.json (twin detect) and DIRECTORY/backlash/backlash.json
-    (twin backlash); either may be missing, not both."""
+    Reads DIRECTORY/phase1/detection.json (twin detect), DIRECTORY/backlash/backlash.json
+    (twin backlash) and DIRECTORY/backlash/*/backlash.json (twin backlash --estimator NAME);
+    either phase may be missing, not both. Every estimator found is scored side by side."""
     from analysis.dataset import DatasetError
     from analysis.scoring import ScoreError, write_score
     from analysis.scoring import score as score_dir
@@ -219,16 +252,16 @@ def detect(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
     reference: Path = typer.Option(..., "--reference", help="reference data set directory (Fisher selection)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
-    method: list[str] = typer.Option([], "--method", help="method(s) to run (default: all six)"),
+    method: list[str] = typer.Option([], "--method", help="detector(s) to run: a registered name or "
+                                     "module:Class, repeatable (default: every registered detector)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
 ) -> None:
     """Phase I incipient-fault detection (paper section IV): writes OUT/detection.json and OUT/detection.png."""
     from analysis.phase1.detect import run
-    from analysis.phase1.pipeline import METHODS, PAPER_NAMES
 
     out = out or directory / "phase1"
     try:
-        details = run(directory, reference, out, method or METHODS, consecutive)
+        details = run(directory, reference, out, method or None, consecutive)
     except (ValueError, FileNotFoundError) as exc:  # DatasetError, ExtractionError, DetectError
         _fail(f"{exc} (anything computed before the error is in {out})")
     onset = details["onset_hours"]
@@ -237,10 +270,10 @@ def detect(
                         f"{'none' if onset is None else f'{onset:g} h'}")
     for col in ("method", "limit", "detect h", "delay h", "delay n", "FA/healthy", "FA base"):
         table.add_column(col)
-    for name, r in details["methods"].items():
+    for r in details["methods"].values():
         def fmt(v, f="{:g}"):
             return "-" if v is None else f.format(v)
-        table.add_row(PAPER_NAMES[name], f"{r['threshold']:.4g}", fmt(r["detection_hours"]),
+        table.add_row(r["label"], f"{r['threshold']:.4g}", fmt(r["detection_hours"]),
                       fmt(r["delay_hours"]), fmt(r["delay_samples"]),
                       f"{r['false_alarms']} / {r['healthy_test_samples']}", str(r["baseline_alarms"]))
     Console(width=max(100, Console().width)).print(table)
@@ -262,10 +295,17 @@ def backlash(
                                           help="leading sessions known to share the initial backlash; "
                                                "the estimates are re-zeroed on their mean (1 = the paper's "
                                                "single reference)"),
-    position_reference: str = typer.Option("command", "--position-reference",
-                                           help="position axis of the traces: 'command' (the controller's "
+    position_reference: str = typer.Option("auto", "--position-reference",
+                                           help="position axis of the traces: 'auto' (command if the runs "
+                                                "record position_cmd, else imu), 'command' (the controller's "
                                                 "position_cmd) or 'imu' (strokes from the accelerometer and "
                                                 "the run's routine metadata; Eq. 5)"),
+    estimator: str | None = typer.Option(None, "--estimator",
+                                         help="backlash estimator: a registered name or module:Class "
+                                              "(default: the paper's, 'shift'); other than the default "
+                                              "it writes to OUT/NAME/"),
+    set_param: list[str] = typer.Option([], "--set-param",
+                                        help="estimator parameter KEY=VALUE (TOML value), repeatable"),
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
@@ -273,10 +313,17 @@ def backlash(
     JSON, or with --strict ends the command with exit code 2 naming session, run and channel."""
     import math
 
+    from analysis import registry
     from analysis.dataset import DatasetError
-    from analysis.phase2.workflow import run
+    from analysis.phase2.workflow import estimator_dir, run
 
-    out = out or directory / "backlash"
+    try:
+        entry = (registry.get("backlash_estimators", estimator) if estimator
+                 else registry.default("backlash_estimators"))
+    except registry.RegistryError as exc:
+        _fail(f"--estimator: {exc}")
+    params = _parse_params(set_param)
+    out = estimator_dir(out or directory / "backlash", entry.name)
     try:
         q = process_noise if process_noise == "ml" else float(process_noise)
         if q != "ml" and not (math.isfinite(q) and q >= 0):
@@ -284,10 +331,11 @@ def backlash(
     except ValueError:
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
     try:
-        if position_reference not in ("command", "imu"):
-            _fail(f"--position-reference {position_reference!r}: expected 'command' or 'imu'")
+        if position_reference not in ("auto", "command", "imu"):
+            _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
-                 baseline_sessions=baseline_sessions, position_reference=position_reference)
+                 baseline_sessions=baseline_sessions, position_reference=position_reference,
+                 estimator=estimator, params=params)
     except (DatasetError, FileNotFoundError, OSError) as exc:
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated
@@ -309,7 +357,8 @@ def backlash(
 
     ref = (f"session {ses[0].session}" if result.baseline_sessions == 1 else
            f"the mean of sessions {ses[0].session}-{ses[result.baseline_sessions - 1].session}")
-    table = Table(title=f"Phase II backlash change vs {ref} ({len(ses)} sessions)")
+    table = Table(title=f"Phase II backlash change vs {ref} ({len(ses)} sessions), estimator "
+                        f"{br.doc['estimator']['name']} ({br.doc['estimator']['label']})")
     for col in ("session", "hours", "Δb shifts µm", "Δb pitch µm", "smoothed µm", "dial Δ µm",
                 "pitch mm", "γ max"):
         table.add_column(col)
@@ -457,6 +506,10 @@ def sweep(
                                                  "OUT must be on a file system its workers share"),
     workers: int | None = typer.Option(None, "--workers", min=1,
                                           help="run on a dask LocalCluster of N worker processes"),
+    methods: str | None = typer.Option(None, "--methods",
+                                       help="Phase I methods of the per-point summary, comma-separated, "
+                                            "or 'all' (default: the sweep's [analysis] methods, else "
+                                            "the default detector)"),
 ) -> None:
     """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
     OUT/results.csv and plots. Default executor: all local cores (processes). Resumes if interrupted."""
@@ -505,7 +558,19 @@ def sweep(
     import pandas as pd
 
     df = pd.read_parquet(out / "results.parquet")
-    header, rows = summary(plan, df)
+    from analysis import registry
+    from twin.harness.sweep.results import phase1_methods
+
+    if methods == "all":
+        shown = phase1_methods(df)
+    elif methods:
+        shown = [m.strip() for m in methods.split(",") if m.strip()]
+    else:
+        shown = [registry.get("detectors", m).name for m in plan.methods or []] or None
+    try:
+        header, rows = summary(plan, df, shown)
+    except ValueError as exc:
+        _fail(str(exc))
     table = Table(title=f"sweep {plan.name}: mean ± sd over seeds ({len(df)} rows)")
     for col in header:
         table.add_column(col)

@@ -507,6 +507,47 @@ def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -
             "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
 
 
+def stroke_travels(world: World, traj: Trajectory, rest_fraction: float = 0.5) -> dict[str, np.ndarray]:
+    """The true rest-to-rest travels of one run, per move in time order: what the paper's Eq. 9
+    assumes (a carriage that travels L − b between rests when it stops on the driving flank).
+
+    A rest is a standstill of the command; its position is the mean over the last
+    ``rest_fraction`` of the standstill (the carriage has stopped ringing). Returns (moves,) arrays:
+    ``speed_m_s`` (signed commanded speed of the move), ``carriage_m`` (the carriage's travel,
+    signed, m), ``screw_m`` (the screw's, its angle times lead/2π, signed, m), ``command_m`` (the
+    commanded travel, signed, m).
+    """
+    t, v = traj.cmd.t, traj.cmd.v
+    moving = np.abs(v) > 1e-12
+    edges = np.flatnonzero(np.diff(moving.astype(np.int8)))  # last index before each change
+    starts, stops = list(edges[moving[edges + 1]] + 1), list(edges[~moving[edges + 1]] + 1)
+    rests = []  # (i0, i1) index ranges of the standstills between moves
+    bounds = [0, *stops]
+    ends = [*starts, t.size]
+    for a, b in zip(bounds, ends, strict=False):
+        if b > a:
+            rests.append((a + int((1.0 - rest_fraction) * (b - a)), b))
+    x = traj.x
+    screw = traj.qpos[:, traj.index.screw] * world.axis.screw.radius_per_rad
+    sim_t = traj.t
+
+    def at(sig, ab):
+        i0, i1 = (int(np.searchsorted(sim_t, t[k])) for k in (ab[0], ab[1] - 1))
+        return float(np.mean(sig[i0:i1 + 1]))
+
+    out = {"speed_m_s": [], "carriage_m": [], "screw_m": [], "command_m": []}
+    for k, i in enumerate(starts):
+        if k + 1 >= len(rests):
+            break
+        r0, r1 = rests[k], rests[k + 1]
+        j = i + int(np.argmax(np.abs(v[i:r1[0]])))
+        out["speed_m_s"].append(float(v[j]))
+        out["carriage_m"].append(at(x, r1) - at(x, r0))
+        out["screw_m"].append(at(screw, r1) - at(screw, r0))
+        out["command_m"].append(at(traj.cmd.x, r1) - at(traj.cmd.x, r0))
+    return {k: np.asarray(a) for k, a in out.items()}
+
+
 def true_error_motions(world: World, cfg, cond: Condition, dx: float = 0.05e-3
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Kinematic truth of a session: grid x_m (n,) of true carriage positions over the stroke

@@ -24,6 +24,7 @@ import numpy as np
 
 from analysis.dataset import DatasetError, assemble_measurements
 from analysis.dataset.axis import AxisDescription
+from analysis.dataset.schema import ROUTINE_ATTRS
 from analysis.files import atomic_write, write_json
 from analysis.ingest.readers import Channel, read_channels
 from analysis.ingest.spec import ImportSpec, ImportSpecError, PhaseSpec, load_spec
@@ -270,12 +271,16 @@ def run_import(spec_path: str | os.PathLike, *, output: str | os.PathLike | None
             _, arrays = _load_part(part)
             yield name, {"hours": m["hours"], "sample": sample, "fs_hz": m["fs_hz"]["speed"]}, arrays
 
+    # every run carries the routine of the axis description (what the IMU-axis analyses read)
+    routine = axis.phase2_routine.model_dump(exclude_none=True) if axis.phase2_routine is not None else {}
+    run_attrs = {k: v for k, v in routine.items() if k in ("speeds_mm_s", *ROUTINE_ATTRS)}
+
     def phase2():
         for j, (hours, _, runs) in enumerate(sessions):
             def run_iter(runs=runs):
                 for k, (m, part) in enumerate(runs):
                     _, arrays = _load_part(part)
-                    yield f"r{k:04d}", {}, arrays, {ch: {"fs_hz": fs} for ch, fs in m["fs_hz"].items()}
+                    yield f"r{k:04d}", dict(run_attrs), arrays, {ch: {"fs_hz": fs} for ch, fs in m["fs_hz"].items()}
             yield f"s{j:04d}", {"hours": hours}, run_iter()
 
     dial = _dial(spec_dir, spec) if spec.dial else None

@@ -60,9 +60,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from analysis.params import InheritedParams
 from analysis.phase2.shifts import THRESHOLD, ShiftResult, shift_between
 from analysis.phase2.traces import DOFS, DirectionalTraces, SessionErrorMotions
 from analysis.phase2.winfilt import CUTOFF_WAVELENGTH_M, winfilt
+from analysis.registry import register
 
 SIGMA = 4
 """Weighting exponent σ of Eqs. 6 and 8 (paper section V)."""
@@ -140,8 +142,15 @@ def weighted_sum(values, gammas, sigma: int = SIGMA) -> float:
     return float(np.sum(w[ok] * v[ok]) / np.sum(w[ok]))
 
 
-class BacklashEstimator(BaseEstimator):
+@register("backlash_estimators", "shift", label="Signal shifts (Eq. 6)", color="tab:blue",
+          marker="o", default=True)
+class BacklashEstimator(InheritedParams, BaseEstimator):
     """Change of backlash relative to a reference session (scikit-learn style).
+
+    Registered as the backlash estimator ``shift`` (the default of ``twin backlash``).
+    ``primary_estimate`` ("shift" or "pitch") names the estimate that is *the* estimate of the
+    class: the Kalman trend, the prognosis and the score use it. ``get_params`` keeps the
+    parameters of this class in a subclass whose ``__init__`` forwards ``**kwargs``.
 
     ``fit(reference)`` takes the first session (a :class:`SessionErrorMotions`, whose ``slow``
     traces are used, or :class:`DirectionalTraces`); ``estimate(session)`` returns a
@@ -166,6 +175,8 @@ class BacklashEstimator(BaseEstimator):
         stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
         travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).
     """
+
+    primary_estimate = "shift"
 
     def __init__(self, *, cutoff_wavelength_m: float = CUTOFF_WAVELENGTH_M,
                  window_definition: str = "iso50", threshold: float = THRESHOLD,
@@ -274,6 +285,24 @@ class BacklashEstimator(BaseEstimator):
                          for e in (self.estimate(x) for x in X)]).reshape(-1, 2)
 
 
+@register("backlash_estimators", "pitch", label="Perceived pitch (Eq. 9)", color="tab:orange",
+          marker="s")
+class PitchBacklash(BacklashEstimator):
+    """The same estimates as :class:`BacklashEstimator`, with the perceived pitch (Eqs. 8–9) as
+    the primary estimate (trend, prognosis, score). Registered as ``pitch``."""
+
+    primary_estimate = "pitch"
+
+
+def primary_m(s: SessionBacklash, estimator) -> float:
+    """The estimator's primary change of backlash of session ``s`` (m): by shifts or by pitch."""
+    which = getattr(estimator, "primary_estimate", "shift")
+    if which not in ("shift", "pitch"):
+        raise ValueError(f"{type(estimator).__qualname__}.primary_estimate = {which!r}; "
+                         "expected 'shift' or 'pitch'")
+    return s.delta_backlash_shift_m if which == "shift" else s.delta_backlash_pitch_m
+
+
 @dataclass
 class CampaignBacklash:
     """Backlash estimates of every session of a campaign against its first usable session.
@@ -335,20 +364,24 @@ def rezero_on_baseline(sessions: list, k: int) -> tuple[list, tuple[float, float
     return out, (off_shift, off_pitch)
 
 
-def estimator_for(m, **params) -> BacklashEstimator:
-    """The paper's estimator for the axis of an open ``measurements.h5``: travel L and lead p of
-    Eq. 9 from its axis contract (``/@axis.travel_mm``, ``/@axis.lead_mm``, required: a missing
-    one raises :class:`analysis.dataset.axis.MissingAxisKey` naming it); ``params``: further
-    :class:`BacklashEstimator` parameters (e.g. ``stationary="E_XX"``), which take precedence."""
+def estimator_for(m, spec: str | None = None, **params) -> BacklashEstimator:
+    """A backlash estimator for the axis of an open ``measurements.h5``: when the estimator takes
+    them, travel L and lead p of Eq. 9 from the axis contract (``/@axis.travel_mm``,
+    ``/@axis.lead_mm``, required: a missing one raises
+    :class:`analysis.dataset.axis.MissingAxisKey` naming it); ``spec``: a registered backlash
+    estimator or ``module:Class`` (default: the registered default, the paper's); ``params``:
+    further parameters (e.g. ``stationary="E_XX"``), which take precedence."""
+    from analysis import registry
     from analysis.dataset.axis import axis_of
 
+    kind = "backlash_estimators"
+    entry = registry.get(kind, spec) if spec else registry.default(kind)
     axis = axis_of(m)
     need = "the Phase II backlash estimate (Eq. 9: travel L and lead p)"
-    if "travel_m" not in params:
-        params["travel_m"] = axis.require("travel_mm", need) * 1e-3
-    if "lead_m" not in params:
-        params["lead_m"] = axis.require("lead_mm", need) * 1e-3
-    return BacklashEstimator(**params)
+    for key, name in (("travel_mm", "travel_m"), ("lead_mm", "lead_m")):
+        if name not in params and registry.accepts(entry.factory, name):
+            params[name] = axis.require(key, need) * 1e-3
+    return registry.create(kind, spec or entry.name, **params)
 
 
 def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimator | None = None,

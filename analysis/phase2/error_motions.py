@@ -49,7 +49,7 @@ from analysis.phase2.imu_runs import (
 from analysis.phase2.strokes import imu_segments
 from analysis.phase2.traces import DirectionalTraces, SessionErrorMotions
 
-__all__ = ["SensorModel", "sensor_model", "session_error_motions"]
+__all__ = ["SensorModel", "resolve_position_reference", "sensor_model", "session_error_motions"]
 
 MICRO_G = 9.80665e-6  # m/s² per µg
 #: Zero-phase low-pass before gridding: cutoff as a fraction of each sensor's bandwidth, at most
@@ -74,6 +74,21 @@ PRIORS = (fusion.Prior(20e-6), fusion.Prior(5e-6), fusion.Prior(5e-6),
 
 #: The position axes a session's traces can be functions of.
 POSITION_REFERENCES = ("command", "imu")
+
+
+def resolve_position_reference(m: Measurements, position_reference: str) -> str:
+    """``"auto"`` becomes "command" when the first Phase II run records ``position_cmd`` and "imu"
+    when it does not (a stand-alone IMU, format_version 2); other values are checked and returned."""
+    if position_reference == "auto":
+        sessions = m.phase2_sessions()
+        runs = m.phase2_runs(sessions[0]) if sessions else []
+        if not runs:
+            return "command"
+        return "command" if "position_cmd" in m.phase2_channels(sessions[0], runs[0]) else "imu"
+    if position_reference not in POSITION_REFERENCES:
+        raise ValueError(f"position_reference is {position_reference!r}; expected 'auto' or one of "
+                         f"{', '.join(POSITION_REFERENCES)}")
+    return position_reference
 
 
 @dataclass(frozen=True)
@@ -144,6 +159,10 @@ def _prepare_run(m: Measurements, session: str, run: str, expected: tuple[float,
         routine, speeds = run_routine(m, r)
         seg = imu_segments(r.imu_acc[:, 0], r.imu_acc_fs_hz, speeds, routine,
                            (sm or SensorModel()).acc_bandwidth_hz, label=f"{where}, channel imu_acc")
+    elif r.position_cmd is None:
+        raise BadRunError(f"{where}, channel position_cmd: absent (a recording of a stand-alone IMU); "
+                          "expected the controller's position for the command position reference, or "
+                          "analyse with the IMU-based one (--position-reference imu)")
     else:
         seg = segment_run(r.position_cmd, r.position_cmd_fs_hz)
     if expected is None:
@@ -298,7 +317,7 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                           pool_wavelength_m: float | None = 0.05,
                           sensors: SensorModel | None = None,
                           runs: Sequence[str] | None = None,
-                          position_reference: str = "command") -> SessionErrorMotions:
+                          position_reference: str = "auto") -> SessionErrorMotions:
     """Error motions of one Phase II session, averaged over its runs.
 
     Args:
@@ -322,7 +341,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
         sensors: IMU figures; default :func:`sensor_model` of ``m``.
         runs: the run names to use (default all runs of the session); an unknown name raises
             :class:`analysis.dataset.DatasetError` naming it.
-        position_reference: "command": positions are the controller's ``position_cmd``;
+        position_reference: "auto" (default): "command" if the runs record ``position_cmd``, else
+            "imu". "command": positions are the controller's ``position_cmd``;
             "imu": the IMU-based position, strokes found from the accelerometer and placed on the
             routine's nominal trapezoid (the run's metadata; ``position_cmd`` is not read).
 
@@ -332,9 +352,7 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
     """
     if on_bad_run not in ("raise", "skip"):
         raise ValueError(f"on_bad_run is {on_bad_run!r}; expected 'raise' or 'skip'")
-    if position_reference not in POSITION_REFERENCES:
-        raise ValueError(f"position_reference is {position_reference!r}; expected one of "
-                         f"{', '.join(POSITION_REFERENCES)}")
+    position_reference = resolve_position_reference(m, position_reference)
     if not (dx_m > 0 and slow_dx_m > 0):
         raise ValueError(f"grid steps must be > 0 m, got dx_m={dx_m!r}, slow_dx_m={slow_dx_m!r}")
     sm = sensors or sensor_model(m)

@@ -14,8 +14,10 @@ from twin.scenario import from_dict
 # Work done on a worker
 
 
-def run_task(scenario: dict, point_dir: str, reference_dir: str | None) -> dict:
+def run_task(scenario: dict, point_dir: str, reference_dir: str | None,
+             analysis: dict | None = None) -> dict:
     """Simulate, analyse and score one point in this process with one BLAS thread.
+    ``analysis``: {"methods", "estimators"} of the sweep's ``[analysis]`` (None: the defaults).
 
     Returns ``{"score": score.json object or None, "simulated_units", "reused_units",
     "skipped", "seconds", "host", "pid"}``."""
@@ -28,7 +30,7 @@ def run_task(scenario: dict, point_dir: str, reference_dir: str | None) -> dict:
     t0 = time.perf_counter()
     s = from_dict(scenario)
     with threadpool_limits(1):
-        r = run_point(s, point_dir, reference_dir)
+        r = run_point(s, point_dir, reference_dir, **(analysis or {}))
     r["seconds"] = time.perf_counter() - t0
     r["host"], r["pid"] = socket.gethostname(), os.getpid()
     return r
