@@ -293,3 +293,21 @@ def test_scenario_init_refusals(tmp_path, clean):
     assert r.returncode == 2 and "Traceback" not in r.stderr and "measurements.h5" in r.stderr
     r = run_twin("scenario", "init", clean.parent, "-o", tmp_path, check=False)
     assert r.returncode == 2 and "is a directory; expected a scenario file path" in " ".join(r.stderr.split())
+
+
+def test_a_stand_alone_imu_imports_without_position_and_carries_the_routine(tmp_path):
+    """No position channel (format_version 2): the runs are written without ``position_cmd`` and
+    carry the axis description's routine as run attributes, which the IMU-axis analyses read."""
+    _write_lab(tmp_path, "csv")
+    p = _spec(tmp_path, "csv")
+    text = p.read_text().replace('position_cmd = { channel = "pos", unit = "mm" }\n', "")
+    text = text.replace("travel_mm = 300.0\n", "travel_mm = 300.0\n[axis.phase2_routine]\nspeeds_mm_s = [100.0]\n"
+                        "accel_mm_s2 = 5000.0\nstart_mm = 0.0\nend_mm = 200.0\ndwell_s = 1.0\n")
+    p.write_text(text)
+    run_import(p)
+    with open_measurements(tmp_path / "out" / "measurements.h5") as m:
+        m.validate()
+        r = m.phase2("s0000", "r0000")
+        assert r.position_cmd is None
+        assert r.speeds_mm_s == (100.0,)
+        assert r.routine == {"accel_mm_s2": 5000.0, "start_mm": 0.0, "end_mm": 200.0, "dwell_s": 1.0}
