@@ -136,6 +136,9 @@ def test_imu_position_reference_is_recorded_and_needs_the_routine(small, tmp_pat
     shutil.copy(small / "measurements.h5", broken / "measurements.h5")
     with h5py.File(broken / "measurements.h5", "r+") as f:
         del f["phase2/s0001/r0000"].attrs["accel_mm_s2"]
+        axis = json.loads(f.attrs["axis"])
+        del axis["phase2_routine"]["accel_mm_s2"]  # the axis contract's routine is the fallback
+        f.attrs["axis"] = json.dumps(axis)
     r = run_twin("backlash", broken, "--position-reference", "imu", "--strict", "--no-plots", check=False)
     msg = " ".join(r.stderr.split())
     assert r.returncode == 2 and "Traceback" not in r.stderr
@@ -205,3 +208,24 @@ def test_truth_holds_the_rest_to_rest_travels(small):
     change_um = (st[s1]["carriage_m"][0] - st[s0]["carriage_m"][0]) * 1e6
     print(f"\n[strokes] forward travel change with {b[s1]:g} µm of backlash: {change_um:+.2f} µm")
     assert 5.0 < change_um < 25.0
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda a: a.pop("lead_mm"), "/@axis.lead_mm is missing; the Phase II backlash estimate (Eq. 9: travel L "
+                                 "and lead p) needs it"),
+    (lambda a: a.update(lead_mm="x"), "/@axis.lead_mm is 'x'; expected input should be a valid number"),
+    (lambda a: a.update(lead_m=0.005), "key 'lead_m' is not part of the axis contract: write 'lead_mm'"),
+])
+def test_axis_contract_refusals_exit_2_naming_the_key(small, tmp_path, edit, message):
+    """The axis contract (issue 14): a key the analysis needs and the file lacks, a wrongly typed
+    one, or one spelt with another unit exits 2 naming it; no silent fallback on the twin's lead."""
+    broken = tmp_path / "axis"
+    broken.mkdir()
+    shutil.copy(small / "measurements.h5", broken / "measurements.h5")
+    with h5py.File(broken / "measurements.h5", "r+") as f:
+        axis = json.loads(f.attrs["axis"])
+        edit(axis)
+        f.attrs["axis"] = json.dumps(axis)
+    r = run_twin("backlash", broken, "--no-plots", check=False)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert message in " ".join(r.stderr.split())

@@ -406,6 +406,122 @@ def backlash(
 # --- end of Phase II backlash ----------------------------------------------------------------
 
 
+# --- bringing a real axis's recordings in: import, check (issue 14) ---------------------------
+@app.command("import")
+def import_(
+    spec: Path = typer.Argument(..., help="import spec (TOML; docs/import.md)"),
+    out: Path | None = typer.Option(None, "-o", "--out", help="campaign directory (default: the spec's output)"),
+) -> None:
+    """Convert a laboratory's files (CSV, MATLAB .mat, NI TDMS, ASAM MDF) into a campaign's
+    measurements.h5 as the import spec maps them: channels, units (g, mV, rpm, deg/s, mm, ...),
+    rates, hours and the axis description. Resumes: files converted before are not read again."""
+    from analysis.dataset import DatasetError
+    from analysis.ingest import ImportSpecError, run_import
+
+    t0 = time.perf_counter()
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=False) as progress:
+        task = progress.add_task("importing", total=None)
+
+        def on_progress(done: int, total: int, name: str, reused: bool) -> None:
+            progress.update(task, completed=done, total=total,
+                            description=f"{'kept' if reused else 'read'} {name}")
+
+        try:
+            s = run_import(spec, output=out, progress=on_progress)
+        except (ImportSpecError, DatasetError) as exc:
+            progress.stop()
+            _fail(str(exc))
+    hours = "-" if s.hours is None else f"{s.hours[0]:g}–{s.hours[1]:g} h"
+    console.print(f"imported {s.captures} Phase I captures, {s.sessions} Phase II sessions ({s.runs} runs), "
+                  f"{hours}: {s.converted} files read, {s.reused} kept from before, "
+                  f"{time.perf_counter() - t0:.1f} s", markup=False, highlight=False)
+    console.print(f"wrote {s.output / 'measurements.h5'} and {s.output / 'import.json'}; next: "
+                  f"twin check {s.output}", markup=False, highlight=False)
+
+
+@app.command()
+def check(
+    directory: Path = typer.Argument(..., help="campaign directory or measurements.h5"),
+    as_json: bool = typer.Option(False, "--json", help="print the report as JSON on stdout"),
+) -> None:
+    """What a recording holds (captures, sessions, runs, rates, durations, hours) and what is wrong
+    or suspicious in it (NaN, flat lines, clipping, dropouts, hours going back, differing rates, an
+    IMU that does not see gravity). Exit 1 if there is an error, 0 otherwise."""
+    import json as _json
+
+    from analysis.dataset import DatasetError
+    from analysis.ingest.check import check_recording
+
+    try:
+        rep = check_recording(directory)
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    if as_json:
+        print(_json.dumps(rep.to_json(), indent=2))
+    else:
+        s = rep.summary
+        table = Table(title=f"{rep.file}")
+        table.add_column("what")
+        table.add_column("value")
+        p1, p2 = s["phase1"], s["phase2"]
+
+        def span(v, unit):
+            return "-" if not v else (f"{v[0]:g} {unit}" if v[0] == v[1] else f"{v[0]:g}–{v[1]:g} {unit}")
+
+        table.add_row("Phase I", f"{p1['captures']} captures in {p1['samples']} samples, "
+                                 f"{', '.join(f'{f:g}' for f in p1['fs_hz']) or '-'} Hz, {span(p1['capture_s'], 's')}")
+        rates = "; ".join(f"{k} {', '.join(f'{f:.6g}' for f in v)} Hz" for k, v in p2["fs_hz"].items() if v)
+        table.add_row("Phase II", f"{p2['sessions']} sessions, {p2['runs']} runs, {span(p2['run_s'], 's')}; {rates}")
+        table.add_row("hours", span(s["hours"], "h"))
+        table.add_row("dial readings", str(s["dial_readings"]))
+        ax = s.get("axis") or {}
+        table.add_row("axis", ", ".join(f"{k} {ax[k]}" for k in ("name", "lead_mm", "travel_mm") if k in ax) or "-")
+        Console(width=max(100, Console().width)).print(table)
+        if rep.findings:
+            ft = Table(title=f"{len(rep.errors)} errors, {len(rep.findings) - len(rep.errors)} warnings")
+            for col in ("level", "where", "what"):
+                ft.add_column(col)
+            for f in rep.findings[:200]:
+                ft.add_row(f.level, f.where, f.what, style="red" if f.level == "error" else "yellow")
+            Console(width=max(100, Console().width)).print(ft)
+            if len(rep.findings) > 200:
+                console.print(f"... and {len(rep.findings) - 200} more (--json lists all)")
+        else:
+            console.print("no errors, no warnings")
+    if rep.errors:
+        raise typer.Exit(1)
+scenario_app = typer.Typer(no_args_is_help=True, help="Scenarios: write one that describes a recording.")
+app.add_typer(scenario_app, name="scenario")
+
+
+@scenario_app.command("init")
+def scenario_init(
+    directory: Path = typer.Argument(..., help="campaign directory or measurements.h5 of the recording"),
+    out: Path = typer.Option(..., "-o", "--out", help="scenario file to write (TOML)"),
+    name: str | None = typer.Option(None, "--name", help="scenario name (default: the directory's name)"),
+) -> None:
+    """A scenario whose layout matches the recording (samples, captures, sessions, runs, hours, rates)
+    and whose routine is measured from it (stroke, speeds, acceleration, dwell), the axis values from
+    its /@axis and a comment on every value that is a twin default. Then:
+    twin diagnose DIRECTORY --scenario OUT."""
+    from analysis.dataset import DatasetError
+    from twin.scenario_init import write_scenario
+
+    if out.exists() and out.is_dir():
+        _fail(f"-o {out}: is a directory; expected a scenario file path (e.g. {out / 'axis.toml'})")
+    try:
+        notes = write_scenario(directory, out, name)
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    except ScenarioError as exc:
+        _fail(f"the scenario measured from {directory} cannot be written: {exc}")
+    for n in notes:
+        console.print(f"note: {n}", style="yellow", markup=False, highlight=False)
+    console.print(f"wrote {out}; next: twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
+# --- end of import, check, scenario init -------------------------------------------------------
+
+
 # --- twin sweep (helper: sweep) ----------------------------------------------------------------
 @app.command()
 def sweep(

@@ -266,7 +266,9 @@ class Measurements(_Reader):
 
     def validate(self) -> None:
         """Read and validate everything (e.g. after converting real recordings)."""
-        self.axis()
+        from analysis.dataset.axis import axis_of
+
+        axis_of(self)
         for c in self.phase1_captures():
             self.phase1(c)
         for s in self.phase2_sessions():

@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 
 from analysis.dataset.attrs import _dumps, write_attrs
+from analysis.dataset.axis import AxisDescription
 from analysis.dataset.leak_guard import _scan_truth_mentions
 from analysis.dataset.schema import (
     DIAL_UNITS,
@@ -109,7 +110,8 @@ def assemble_measurements(
     Parameters
     ----------
     path : target file, usually ``<campaign>/measurements.h5``.
-    axis : nominal testbed description (JSON-serialisable dict), stored as JSON in ``/@axis``.
+    axis : nominal testbed description, validated by the axis contract
+        (:class:`~analysis.dataset.axis.AxisDescription`) and stored as JSON in ``/@axis``.
     phase1 : iterable of ``(capture_name, attrs, datasets)``; ``attrs`` holds ``hours`` (float,
         operating hours), ``sample`` (int, Phase I sample index), ``fs_hz`` (float) and optionally
         more scalars; ``datasets`` holds ``speed`` (n,) rad/s, ``torque`` (n,) N*m, ``acc1`` and
@@ -130,7 +132,7 @@ def assemble_measurements(
     """
     path = Path(path)
     label = str(path)
-    axis_json = _dumps("axis", dict(axis), allow_nan=False)
+    axis_json = _dumps("axis", AxisDescription.from_dict(dict(axis), label).to_dict(), allow_nan=False)
 
     def write(f: h5py.File) -> None:
         f.attrs["format"] = MEASUREMENTS_FORMAT

@@ -365,18 +365,22 @@ def rezero_on_baseline(sessions: list, k: int) -> tuple[list, tuple[float, float
 
 
 def estimator_for(m, spec: str | None = None, **params) -> BacklashEstimator:
-    """A backlash estimator for the axis of an open ``measurements.h5``: stroke L and lead p from
-    its ``axis`` description (``travel_mm``, ``lead_mm``) where given and the estimator takes
-    them; ``spec``: a registered backlash estimator or ``module:Class`` (default: the registered
-    default, the paper's); ``params``: further parameters (e.g. ``stationary="E_XX"``)."""
+    """A backlash estimator for the axis of an open ``measurements.h5``: when the estimator takes
+    them, travel L and lead p of Eq. 9 from the axis contract (``/@axis.travel_mm``,
+    ``/@axis.lead_mm``, required: a missing one raises
+    :class:`analysis.dataset.axis.MissingAxisKey` naming it); ``spec``: a registered backlash
+    estimator or ``module:Class`` (default: the registered default, the paper's); ``params``:
+    further parameters (e.g. ``stationary="E_XX"``), which take precedence."""
     from analysis import registry
+    from analysis.dataset.axis import axis_of
 
     kind = "backlash_estimators"
     entry = registry.get(kind, spec) if spec else registry.default(kind)
-    axis = m.axis() or {}
+    axis = axis_of(m)
+    need = "the Phase II backlash estimate (Eq. 9: travel L and lead p)"
     for key, name in (("travel_mm", "travel_m"), ("lead_mm", "lead_m")):
-        if isinstance(axis.get(key), (int, float)) and registry.accepts(entry.factory, name):
-            params.setdefault(name, float(axis[key]) * 1e-3)
+        if name not in params and registry.accepts(entry.factory, name):
+            params[name] = axis.require(key, need) * 1e-3
     return registry.create(kind, spec or entry.name, **params)
 
 
@@ -406,8 +410,8 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
         m: :class:`analysis.dataset.Measurements`.
         on_bad_run: "skip" (a bad run is left out and reported) or "raise" (the first bad run
             raises :class:`analysis.dataset.DatasetError` naming session, run and channel).
-        estimator: default ``BacklashEstimator`` with L and p from the file's ``axis``
-            description (``travel_mm``, ``lead_mm``) when present.
+        estimator: default :func:`estimator_for` ``m`` (L and p from the axis contract's
+            ``travel_mm`` and ``lead_mm``, required).
         progress: optional callable(done, total, session).
         baseline_sessions: leading sessions that define zero change (:func:`rezero_on_baseline`).
         map_sessions: optional ``map_sessions(fn, args) -> [fn(*a) for a in args]`` (in order)

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.dataset import DatasetError, Measurements
+from analysis.dataset.axis import run_routine
 from analysis.phase2 import fusion
 from analysis.phase2.imu_runs import (
     BadRunError,
@@ -108,29 +109,19 @@ class SensorModel:
 
 
 def sensor_model(m: Measurements) -> SensorModel:
-    """The IMU figures from the file's ``axis`` description (``sensors.imu_accelerometer`` /
+    """The IMU figures from the file's axis contract (``sensors.imu_accelerometer`` /
     ``imu_gyroscope``: ``bandwidth_hz``, ``noise_ug_per_rthz`` / ``noise_urad_s_per_rthz``), the
-    paper's figures (section III) where absent or zero. Delays follow from the bandwidths."""
+    paper's figures (section III) where absent. Delays follow from the bandwidths."""
+    from analysis.dataset.axis import axis_of
+
     d = SensorModel()
-    try:
-        sensors = m.axis().get("sensors", {}) or {}
-    except DatasetError:
-        sensors = {}
-    acc = sensors.get("imu_accelerometer", {}) or {}
-    gyro = sensors.get("imu_gyroscope", {}) or {}
-
-    def pos(x, default):
-        try:
-            x = float(x)
-        except (TypeError, ValueError):
-            return default
-        return x if math.isfinite(x) and x > 0 else default
-
-    abw = pos(acc.get("bandwidth_hz"), d.acc_bandwidth_hz)
-    gbw = pos(gyro.get("bandwidth_hz"), d.gyro_bandwidth_hz)
+    axis = axis_of(m)
+    abw = axis.get("sensors.imu_accelerometer.bandwidth_hz", d.acc_bandwidth_hz)
+    gbw = axis.get("sensors.imu_gyroscope.bandwidth_hz", d.gyro_bandwidth_hz)
+    acc_noise = axis.get("sensors.imu_accelerometer.noise_ug_per_rthz", 0.0) or d.acc_noise / MICRO_G
+    gyro_noise = axis.get("sensors.imu_gyroscope.noise_urad_s_per_rthz", 0.0) or d.gyro_noise * 1e6
     return SensorModel(
-        acc_noise=pos(acc.get("noise_ug_per_rthz"), 7.0) * MICRO_G,
-        gyro_noise=pos(gyro.get("noise_urad_s_per_rthz"), 35.0) * 1e-6,
+        acc_noise=acc_noise * MICRO_G, gyro_noise=gyro_noise * 1e-6,
         acc_bandwidth_hz=abw, gyro_bandwidth_hz=gbw,
         acc_delay_s=butterworth2_delay_s(abw), gyro_delay_s=butterworth2_delay_s(gbw))
 
@@ -165,7 +156,8 @@ def _prepare_run(m: Measurements, session: str, run: str, expected: tuple[float,
     r = load_run(m, session, run)
     where = f"{m.label}: session {session}, run {run}"
     if position_reference == "imu":
-        seg = imu_segments(r.imu_acc[:, 0], r.imu_acc_fs_hz, r.speeds_mm_s or (), r.routine,
+        routine, speeds = run_routine(m, r)
+        seg = imu_segments(r.imu_acc[:, 0], r.imu_acc_fs_hz, speeds, routine,
                            (sm or SensorModel()).acc_bandwidth_hz, label=f"{where}, channel imu_acc")
     elif r.position_cmd is None:
         raise BadRunError(f"{where}, channel position_cmd: absent (a recording of a stand-alone IMU); "
