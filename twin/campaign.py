@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -426,6 +427,42 @@ class CampaignDirectoryError(ValueError):
     """The output directory holds the parts of a different scenario."""
 
 
+class CampaignInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`simulate_campaign`: the queued units were cancelled and the running
+    ones stopped; ``done`` of ``total`` units are stored as parts (a rerun resumes from them),
+    ``cancelled`` were not started or were stopped unfinished."""
+
+    def __init__(self, done: int, total: int, cancelled: int):
+        super().__init__(f"interrupted: {done} of {total} units finished")
+        self.done, self.total, self.cancelled = done, total, cancelled
+
+
+def _ignore_sigint() -> None:
+    """Worker initializer: Ctrl-C is the parent's to handle (it stops the workers), so a worker
+    neither dies with a traceback nor reports a half-done unit as an error."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stored(store: PartStore, units: list[Unit]) -> int:
+    """How many of ``units`` are stored as parts (part files appear complete, by atomic rename)."""
+    names = {kind: set(store.names(kind)) for kind in {u.kind for u in units}}
+    return sum(u.name in names[u.kind] for u in units)
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued work of ``pool`` and end its worker processes now (a unit is written
+    atomically, so a worker stopped mid-unit leaves at most a temporary file that the next run
+    deletes)."""
+    # The executor has no public way to stop running calls; its worker processes are in
+    # _processes (which shutdown() forgets, so they are taken first).
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        proc.kill()
+    for proc in procs:
+        proc.join(timeout=1.0)
+
+
 def _claim(out: Path, s: Scenario) -> None:
     """Record the scenario in ``out/.parts/scenario.json``; refuse to mix with another one.
 
@@ -466,6 +503,9 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
         on_progress: called as (done, total, unit name) after each unit.
     Returns:
         {"units": n, "simulated": n_new, "skipped": n_existing}.
+    Raises:
+        CampaignInterrupted: on Ctrl-C (KeyboardInterrupt), after cancelling the queued units and
+            stopping the worker processes; the finished units stay stored.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -480,21 +520,33 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     workers = workers or os.cpu_count() or 1
     payload = s.to_json()
     if workers == 1 or len(todo) <= 1:
-        for u in todo:
-            run_unit(payload, u, str(out))
-            done += 1
-            if on_progress:
-                on_progress(done, len(units), u.name)
+        try:
+            for u in todo:
+                run_unit(payload, u, str(out))
+                done += 1
+                if on_progress:
+                    on_progress(done, len(units), u.name)
+        except KeyboardInterrupt:
+            kept = _stored(store, units)
+            raise CampaignInterrupted(kept, len(units), len(units) - kept) from None
     else:
         # Phase II sessions first: they are the longest units.
         todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
+                                   initializer=_ignore_sigint)
+        try:
             futures = [pool.submit(run_unit, payload, u, str(out)) for u in todo]
             for fut in as_completed(futures):
                 name = fut.result()
                 done += 1
                 if on_progress:
                     on_progress(done, len(units), name)
+        except KeyboardInterrupt:
+            _stop_pool(pool)
+            kept = _stored(store, units)
+            raise CampaignInterrupted(kept, len(units), len(units) - kept) from None
+        finally:
+            pool.shutdown(wait=True)
     assemble(s, out, units)
     return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo)}
 
