@@ -339,10 +339,16 @@ def estimator_for(m, **params) -> BacklashEstimator:
     """The paper's estimator for the axis of an open ``measurements.h5``: stroke L and lead p from
     its ``axis`` description (``travel_mm``, ``lead_mm``) where given; ``params``: further
     :class:`BacklashEstimator` parameters (e.g. ``stationary="E_XX"``)."""
+    from analysis.dataset import DatasetError
+
     axis = m.axis() or {}
     for key, name in (("travel_mm", "travel_m"), ("lead_mm", "lead_m")):
-        if isinstance(axis.get(key), (int, float)):
-            params.setdefault(name, float(axis[key]) * 1e-3)
+        if key not in axis:
+            continue
+        v = axis[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+            raise DatasetError(f"{m.label}: /@axis {key} is {v!r}; expected a finite number of mm > 0")
+        params.setdefault(name, float(v) * 1e-3)
     return BacklashEstimator(**params)
 
 
