@@ -5,10 +5,13 @@
 ``twin demo`` and every point of ``twin sweep``:
 
 - ``DIR/phase1/detection.json`` and ``detection_details.json`` (``twin detect``): per method the
-  detection hour, the delay from the injected onset, false alarms on the healthy post-baseline
-  samples (:func:`analysis.phase1.scoring.score_method`), and the same over threshold factors
-  (the limit times 0.25 … 4) for detection-rate against false-alarm curves;
-- ``DIR/backlash/backlash.json`` and ``error_motions.h5`` (``twin backlash``): per session the
+  detection hour (the first alarm after the injected onset, :mod:`analysis.phase1.scoring`), the
+  delay from the onset, false alarms on the healthy post-baseline samples
+  (:func:`analysis.phase1.scoring.score_method`), and the same over threshold factors (the limit
+  times 0.25 … 4) for detection-rate against false-alarm curves;
+- ``DIR/backlash/backlash.json`` (the default estimator, ``twin backlash``) and
+  ``DIR/backlash/<estimator>/backlash.json`` (``twin backlash --estimator NAME``), each with its
+  ``error_motions.h5``: per estimator and session the
   estimated change of backlash against the injected one (both relative to the mean of the
   baseline sessions), their RMS, largest and mean error; the same against the injected change of
   *lost motion* (clearance plus the elastic deflection 2·F/K of the nut under the rail friction F
@@ -38,7 +41,8 @@ from analysis.phase1.scoring import score_method
 from analysis.phase2.error_motion_file import read_error_motions
 from analysis.phase2.fusion import remove_unobservable
 
-__all__ = ["ScoreError", "THRESHOLD_FACTORS", "flat", "score", "write_score"]
+__all__ = ["ESTIMATOR_SCORES", "ScoreError", "THRESHOLD_FACTORS", "backlash_results", "flat", "score",
+           "write_score"]
 
 THRESHOLD_FACTORS = tuple(float(f) for f in np.round(np.logspace(-2, 2, 17, base=2), 6))
 LIMIT_UM = 10.0
@@ -70,7 +74,7 @@ def score_phase1(directory: Path, onset_hours: float | None) -> dict | None:
         hours, scores = np.asarray(r["hours"], float), np.asarray(r["scores"], float)
         n_samples = len(hours)
         s = score_method(hours, scores, r["threshold"], n_base, onset_hours, consecutive)
-        rec = asdict(s)
+        rec = {"label": r.get("label") or name, **asdict(s)}
         rec["threshold"] = float(r["threshold"])
         rec["false_alarm_rate"] = (s.false_alarms / s.healthy_test_samples
                                    if s.healthy_test_samples else None)
@@ -83,8 +87,7 @@ def score_phase1(directory: Path, onset_hours: float | None) -> dict | None:
             sf = score_method(hours, scores, thr, n_base, onset_hours, consecutive)
             roc["false_alarm_rate"].append(sf.false_alarms / sf.healthy_test_samples
                                            if sf.healthy_test_samples else None)
-            roc["detected"].append(sf.detection_hours is not None and
-                                   (onset_hours is None or sf.detection_hours > onset_hours))
+            roc["detected"].append(sf.detection_hours is not None)  # after the onset by definition
             roc["delay_hours"].append(sf.delay_hours)
         rec["roc"] = roc
         methods[name] = rec
@@ -136,9 +139,28 @@ def _elastic_um(scenario: dict, tl: dict, hours: list[float]) -> np.ndarray | No
     return 2.0 * float(friction) / k * 1e6
 
 
-def score_phase2(directory: Path, truth) -> dict | None:
-    """Phase II scores from ``DIR/backlash``; None if ``backlash.json`` is absent."""
-    doc = read_json(directory / "backlash" / "backlash.json", "the Phase II backlash results of `twin backlash`",
+def backlash_results(directory: Path) -> dict[str, Path]:
+    """{estimator name: its directory} of every ``backlash.json`` under ``DIR/backlash``: the
+    default estimator's in ``DIR/backlash`` itself, the others' in ``DIR/backlash/<name>``
+    (the name is the one recorded in the file, else the directory's)."""
+    found: dict[str, Path] = {}
+    base = Path(directory) / "backlash"
+    for d in [base, *sorted(p for p in base.glob("*") if p.is_dir())]:
+        path = d / "backlash.json"
+        if not path.is_file():
+            continue
+        doc = read_json(path, "the Phase II backlash results of `twin backlash`", error=ScoreError)
+        name = (doc.get("estimator") or {}).get("name") or (d.name if d != base else "shift")
+        found.setdefault(name, d)
+    return found
+
+
+def score_phase2(directory: Path, truth, backlash_dir: Path | None = None) -> dict | None:
+    """Phase II scores from ``backlash_dir`` (default ``DIR/backlash``); None if its
+    ``backlash.json`` is absent. The estimate scored is each session's ``delta_backlash_um``
+    (the estimator's primary estimate), else ``delta_backlash_um_shift`` (older files)."""
+    bdir = Path(backlash_dir) if backlash_dir is not None else directory / "backlash"
+    doc = read_json(bdir / "backlash.json", "the Phase II backlash results of `twin backlash`",
                     error=ScoreError, missing_ok=True)
     if doc is None or not doc.get("sessions"):
         return None
@@ -147,7 +169,7 @@ def score_phase2(directory: Path, truth) -> dict | None:
     try:
         injected = injected_backlash_um(truth, names)
     except DatasetError as exc:
-        raise ScoreError(f"{directory / 'backlash' / 'backlash.json'} names sessions truth.h5 "
+        raise ScoreError(f"{bdir / 'backlash.json'} names sessions truth.h5 "
                          f"cannot give the backlash of: {exc}") from None
     ref = float(np.mean(injected[:k]))
     tl = truth.timeline()
@@ -155,7 +177,8 @@ def score_phase2(directory: Path, truth) -> dict | None:
     lost = None if elastic is None else np.asarray(injected) + elastic
     rows, err, perr, lerr = [], [], [], []
     for i, (rec, b) in enumerate(zip(doc["sessions"], injected, strict=True)):
-        est, pit = _none(rec.get("delta_backlash_um_shift")), _none(rec.get("delta_backlash_um_pitch"))
+        est = _none(rec.get("delta_backlash_um", rec.get("delta_backlash_um_shift")))
+        pit = _none(rec.get("delta_backlash_um_pitch"))
         row = {"session": rec["session"], "hours": rec["hours"], "injected_delta_um": b - ref,
                "estimated_delta_um": est, "error_um": None if est is None else est - (b - ref),
                "pitch_estimated_delta_um": pit,
@@ -177,7 +200,9 @@ def score_phase2(directory: Path, truth) -> dict | None:
     true_cross = _crossing(tl["hours"], tl["backlash_um"] - ref, LIMIT_UM)
     prog = doc.get("prognosis") or {}
     pred = _none(prog.get("crossing_hours"))
+    est_doc = doc.get("estimator") or {}
     return {
+        "estimator": est_doc.get("name") or "shift", "label": est_doc.get("label") or "shift",
         "baseline_sessions": k, "n_sessions": len(rows), "sessions": rows,
         "rms_error_um": float(np.sqrt(np.mean(err_a ** 2))) if len(err) else None,
         "max_abs_error_um": float(np.max(np.abs(err_a))) if len(err) else None,
@@ -187,7 +212,7 @@ def score_phase2(directory: Path, truth) -> dict | None:
         "prognosis": {"limit_um": LIMIT_UM, "predicted_crossing_hours": pred,
                       "true_crossing_hours": true_cross,
                       "error_hours": None if pred is None or true_cross is None else pred - true_cross},
-        "error_motions": _error_motion_errors(directory / "backlash" / "error_motions.h5", truth),
+        "error_motions": _error_motion_errors(bdir / "error_motions.h5", truth),
         "skipped_runs": len(doc.get("skipped_runs", [])),
     }
 
@@ -207,12 +232,19 @@ def score(directory: str | Path) -> dict:
     with open_truth(truth_path) as t:
         scen = t.scenario()
         p1 = score_phase1(directory, t.onset_hours)
-        p2 = score_phase2(directory, t)
+        estimators = {}
+        for name, bdir in backlash_results(directory).items():
+            r = score_phase2(directory, t, bdir)
+            if r is not None:
+                estimators[name] = r
+    p2 = next(iter(estimators.values()), None)  # the default estimator's, else the first found
     if p1 is None and p2 is None:
         raise ScoreError(f"{directory}: found neither phase1/detection.json (twin detect) nor "
                          "backlash/backlash.json (twin backlash); run the analyses first")
     return {"directory": str(directory), "scenario": {"name": scen.get("name"), "seed": scen.get("seed")},
-            "phase1": p1, "phase2": p2}
+            "phase1": p1, "phase2": p2,
+            "phase2_estimators": {k: {key: v for key, v in r.items() if key != "error_motions"}
+                                  for k, r in estimators.items()}}
 
 
 def write_score(directory: str | Path, doc: dict) -> Path:
@@ -220,9 +252,15 @@ def write_score(directory: str | Path, doc: dict) -> Path:
     return write_json(Path(directory) / "score.json", doc)
 
 
+ESTIMATOR_SCORES = ("rms_error_um", "max_abs_error_um", "bias_um", "pitch_rms_error_um",
+                    "rms_error_vs_lost_motion_um")
+
+
 def flat(doc: dict) -> dict[str, float | int | None]:
-    """One row of scalars from a score object: ``phase1.<method>.<score>`` and ``phase2.<score>``
-    (lists, per-session rows and curves left out)."""
+    """One row of scalars from a score object: ``phase1.<method>.<score>``, ``phase2.<score>``
+    (the default estimator) and ``phase2.<estimator>.<score>`` for every estimator scored
+    (:data:`ESTIMATOR_SCORES` and ``prognosis_error_hours``); lists, per-session rows and curves
+    left out."""
     row: dict[str, float | int | None] = {}
     p1 = doc.get("phase1")
     if p1:
@@ -238,6 +276,10 @@ def flat(doc: dict) -> dict[str, float | int | None]:
         for key, v in p2["prognosis"].items():
             if key != "limit_um":
                 row[f"phase2.prognosis.{key}"] = v
+        for name, r in (doc.get("phase2_estimators") or {}).items():
+            for key in ESTIMATOR_SCORES:
+                row[f"phase2.{name}.{key}"] = r.get(key)
+            row[f"phase2.{name}.prognosis_error_hours"] = (r.get("prognosis") or {}).get("error_hours")
         em = p2.get("error_motions") or {}
         for unit in ("rms_um", "rms_urad"):
             for d, v in em.get(unit, {}).items():

@@ -23,7 +23,7 @@ from analysis.dataset import (
 )
 from twin.parts import PartStore
 
-AXIS = {"lead_m": 0.01, "travel_m": 0.45, "load_kg": 100.0, "sensors": ["acc1", "acc2", "imu"]}
+AXIS = {"lead_mm": 10.0, "travel_mm": 450.0, "load_kg": 100.0, "instruments": ["acc1", "acc2", "imu"]}
 N1 = 200  # samples per Phase I capture
 CAPTURES = [f"c{i:06d}" for i in range(4)]
 SESSIONS = ["s0000", "s0001"]
@@ -123,7 +123,7 @@ def campaign(tmp_path):
 def test_round_trip(campaign):
     mpath, tpath = campaign
     with open_measurements(mpath) as m:
-        assert m.axis() == AXIS
+        assert m.axis() == {**AXIS, "axis_version": 1}
         # sorted by (hours, name): capture i has hours 10 * (4 - i)
         assert m.phase1_captures() == CAPTURES[::-1]
         for i, name in enumerate(CAPTURES):
@@ -153,7 +153,7 @@ def test_round_trip(campaign):
         assert f["phase1/c000000/speed"].dtype == np.float32
         assert f["phase1/c000000/acc2"].dtype == np.float64
         assert f["phase1/c000000/acc1"].attrs["unit"] == "m/s^2"
-        assert f.attrs["format_version"] == 1
+        assert f.attrs["format_version"] == 2
 
     with open_truth(tpath) as t:
         assert t.onset_hours == 250.0
@@ -282,9 +282,9 @@ def test_wrong_format(campaign):
 
 def test_unsupported_version(campaign):
     mpath, _ = campaign
-    _edit(mpath, lambda f: f.attrs.__setitem__("format_version", 2))
+    _edit(mpath, lambda f: f.attrs.__setitem__("format_version", 3))
     assert _error(mpath) == (
-        f"{mpath}: /@format_version is 2; this reader supports format_version 1 (a newer ballscrew-twin may read it)"
+        f"{mpath}: /@format_version is 3; this reader supports format_version 1, 2 (a newer ballscrew-twin may read it)"
     )
 
 
@@ -525,7 +525,7 @@ def test_doc_converter_writes_readable_file_and_matlab_style_attrs(tmp_path):
          "position_mm": np.linspace(0, 450, 20), "position_fs_hz": 200.0},
     ]}]
     path = tmp_path / "measurements.h5"
-    write_measurements(path, {"name": "lab axis 2", "lead_m": 0.01}, captures, sessions, dial=([312.0], [12.7]))
+    write_measurements(path, {"name": "lab axis 2", "lead_mm": 10.0}, captures, sessions, dial=([312.0], [12.7]))
 
     # what MATLAB's h5writeatt produces: fixed-length strings, scalars as 1-element doubles
     def matlab_style(f):
@@ -545,5 +545,5 @@ def test_doc_converter_writes_readable_file_and_matlab_style_attrs(tmp_path):
         run = m.phase2("s0000", "r0000")
         np.testing.assert_allclose(run.imu_gyro, np.deg2rad(sessions[0]["runs"][0]["imu_gyro_dps"]))
         assert run.speeds_mm_s is None
-        assert m.axis() == {"name": "lab axis 2", "lead_m": 0.01}
+        assert m.axis() == {"name": "lab axis 2", "lead_mm": 10.0}
     assert truth_mentions(path) == []

@@ -136,9 +136,96 @@ def test_imu_position_reference_is_recorded_and_needs_the_routine(small, tmp_pat
     shutil.copy(small / "measurements.h5", broken / "measurements.h5")
     with h5py.File(broken / "measurements.h5", "r+") as f:
         del f["phase2/s0001/r0000"].attrs["accel_mm_s2"]
+        axis = json.loads(f.attrs["axis"])
+        del axis["phase2_routine"]["accel_mm_s2"]  # the axis contract's routine is the fallback
+        f.attrs["axis"] = json.dumps(axis)
     r = run_twin("backlash", broken, "--position-reference", "imu", "--strict", "--no-plots", check=False)
     msg = " ".join(r.stderr.split())
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "session s0001, run r0000, channel imu_acc: the run's routine metadata lacks accel_mm_s2" in msg
     r = run_twin("backlash", small, "--position-reference", "gps", check=False)
-    assert r.returncode == 2 and "--position-reference 'gps': expected 'command' or 'imu'" in " ".join(r.stderr.split())
+    msg = " ".join(r.stderr.split())
+    assert r.returncode == 2 and "--position-reference 'gps': expected 'auto', 'command' or 'imu'" in msg
+
+
+def test_a_stand_alone_imu_recording_is_analysed_on_the_imu_axis(small, tmp_path):
+    """A recording without ``position_cmd`` (format_version 2: a stand-alone IMU, as the paper
+    records it) validates, and ``twin backlash`` analyses it on the IMU axis by default (written
+    in backlash.json) with the same estimates as ``--position-reference imu`` on the full
+    recording; asking for the command axis skips every run naming the absent channel, and with
+    ``--strict`` exits 2 with that message. A format_version 1 file must still have it."""
+    from analysis.dataset import DatasetError, open_measurements
+
+    imu_only = tmp_path / "imu-only"
+    imu_only.mkdir()
+    shutil.copy(small / "measurements.h5", imu_only / "measurements.h5")
+    with h5py.File(imu_only / "measurements.h5", "r+") as f:
+        for s in f["phase2"]:
+            for r in f["phase2"][s]:
+                del f["phase2"][s][r]["position_cmd"]
+    with open_measurements(imu_only / "measurements.h5") as m:
+        m.validate()
+        assert m.phase2("s0000", "r0000").position_cmd is None
+        assert m.phase2_channels("s0000", "r0000") == ["imu_acc", "imu_gyro"]
+    run_twin("backlash", imu_only, "-o", tmp_path / "auto", "--no-plots")
+    run_twin("backlash", small, "-o", tmp_path / "imu", "--position-reference", "imu", "--no-plots")
+    auto = json.loads((tmp_path / "auto" / "backlash.json").read_text())
+    imu = json.loads((tmp_path / "imu" / "backlash.json").read_text())
+    assert auto["parameters"]["position_reference"] == "imu"
+    assert [s["delta_backlash_um_shift"] for s in auto["sessions"]] == \
+        [s["delta_backlash_um_shift"] for s in imu["sessions"]]
+    # Eq. 5 on the IMU axis, 2 runs at 20 mm/s: the same 4 µm as the command axis on this campaign
+    assert auto["sessions"][-1]["delta_backlash_um_shift"] == pytest.approx(20.0, abs=4.0)
+    r = run_twin("backlash", imu_only, "--position-reference", "command", "--strict", "--no-plots", check=False)
+    msg = " ".join(r.stderr.split())
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert ("session s0000, run r0000, channel position_cmd: absent (a recording of a stand-alone IMU); "
+            "expected the controller's position for the command position reference") in msg
+    with h5py.File(imu_only / "measurements.h5", "r+") as f:
+        f.attrs["format_version"] = 1
+    with open_measurements(imu_only / "measurements.h5") as m, pytest.raises(DatasetError) as e:
+        m.phase2("s0000", "r0000")
+    assert "/phase2/s0000/r0000/position_cmd is missing" in str(e.value)
+
+
+def test_truth_holds_the_rest_to_rest_travels(small):
+    """truth.h5 holds, per session and move, the true rest-to-rest travels (what Eq. 9 assumes
+    to be L − b): the screw follows the command within 0.1 µm (the servo holds it at rest), the
+    carriage travels the same forward and in reverse without backlash (within 0.1 µm), and 20 µm
+    of backlash changes its forward travel by 5–25 µm (measured: the carriage coasts across the
+    gap at the paper's 19.6 m/s², so D is not L − b; docs/error-motions.md)."""
+    from analysis.dataset import open_truth
+
+    with open_truth(small / "truth.h5") as t:
+        st = {s: t.strokes(s) for s in t.sessions()}
+        b = {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
+    s0, s1 = sorted(st, key=b.get)
+    for d in st.values():
+        assert np.allclose(d["speed_m_s"], [0.02, -0.02], rtol=1e-9)
+        assert np.allclose(d["screw_m"], d["command_m"], atol=1e-7)
+        assert np.allclose(np.abs(d["command_m"]), 0.45, atol=1e-9)
+    assert abs(st[s0]["carriage_m"][0] + st[s0]["carriage_m"][1]) < 1e-7
+    change_um = (st[s1]["carriage_m"][0] - st[s0]["carriage_m"][0]) * 1e6
+    print(f"\n[strokes] forward travel change with {b[s1]:g} µm of backlash: {change_um:+.2f} µm")
+    assert 5.0 < change_um < 25.0
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda a: a.pop("lead_mm"), "/@axis.lead_mm is missing; the Phase II backlash estimate (Eq. 9: travel L "
+                                 "and lead p) needs it"),
+    (lambda a: a.update(lead_mm="x"), "/@axis.lead_mm is 'x'; expected input should be a valid number"),
+    (lambda a: a.update(lead_m=0.005), "key 'lead_m' is not part of the axis contract: write 'lead_mm'"),
+])
+def test_axis_contract_refusals_exit_2_naming_the_key(small, tmp_path, edit, message):
+    """The axis contract (issue 14): a key the analysis needs and the file lacks, a wrongly typed
+    one, or one spelt with another unit exits 2 naming it; no silent fallback on the twin's lead."""
+    broken = tmp_path / "axis"
+    broken.mkdir()
+    shutil.copy(small / "measurements.h5", broken / "measurements.h5")
+    with h5py.File(broken / "measurements.h5", "r+") as f:
+        axis = json.loads(f.attrs["axis"])
+        edit(axis)
+        f.attrs["axis"] = json.dumps(axis)
+    r = run_twin("backlash", broken, "--no-plots", check=False)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert message in " ".join(r.stderr.split())

@@ -75,14 +75,16 @@ def test_phase1_detection_and_threshold_curve(scored_dir):
     _write(scored_dir / "phase1" / "detection_details.json", {"n_baseline": 15, "consecutive": 1})
     r = score(scored_dir)["phase1"]["methods"]["pca_t2"]
     assert onset == 172.0
-    # Limit 2: the alarm at 160 h (score 3) is a false alarm and the detection.
-    assert r["detection_hours"] == 160.0 and r["false_alarms"] == 1 and r["healthy_test_samples"] == 3
-    assert r["delay_hours"] == pytest.approx(160.0 - 172.0)
+    # Limit 2: the alarm at 160 h (score 3) is a false alarm; the detection is the first alarm
+    # after the onset (180 h, score 2.5), one definition for the CLI, sweeps, ROC and report.
+    assert r["detection_hours"] == 180.0 and r["false_alarms"] == 1 and r["healthy_test_samples"] == 3
+    assert r["delay_hours"] == pytest.approx(180.0 - 172.0) and r["delay_samples"] == 1
     roc = r["roc"]
     k4 = THRESHOLD_FACTORS.index(2.0)  # limit 4: no false alarm, detects at 190 h (score 5)
     assert roc["false_alarm_rate"][k4] == 0.0 and roc["detected"][k4] and roc["delay_hours"][k4] == 18.0
     k_low = THRESHOLD_FACTORS.index(0.5)  # limit 1: all three healthy samples alarm
-    assert roc["false_alarm_rate"][k_low] == 1.0
+    assert roc["false_alarm_rate"][k_low] == 1.0 and roc["detected"][k_low]  # and still detects
+    assert roc["delay_hours"][k_low] == 8.0
     assert not roc["detected"][-1]  # limit 8: nothing exceeds it
     fa = np.array(roc["false_alarm_rate"])
     assert np.all(np.diff(fa) <= 0)

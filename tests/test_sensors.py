@@ -24,8 +24,11 @@ from twin.sensors.instruments import (
     butterworth_group_delay,
     decimate_to,
     measure_gyroscope,
+    measure_gyroscope_runs,
     measure_imu_accelerometer,
+    measure_imu_accelerometer_runs,
     measure_nut_accelerometer,
+    measure_nut_accelerometer_runs,
     measure_speed,
     measure_torque,
     sensor_group_delay,
@@ -337,6 +340,58 @@ def test_decimate_to_non_integer_ratio_is_accurate(fs_in):
     assert t[-1] <= t_in[-1]
 
 
+@pytest.mark.parametrize("n", [4, 5, 6, 16, 17, 40, 5001])
+def test_cubic_resampling_is_the_not_a_knot_spline(n):
+    """The O(n) spline of decimate_to is scipy's not-a-knot interpolant (make_interp_spline,
+    k=3) to rounding, short records (the end rows of its tridiagonal solve) included."""
+    from scipy import interpolate
+
+    y = np.cumsum(np.random.default_rng(n).standard_normal((n, 3)), axis=0) + 9.8
+    t, out = decimate_to(y, 5_000.0, 1613.0)
+    ref = interpolate.make_interp_spline(np.arange(n, dtype=float), y, k=3, axis=0)(t * 5_000.0)
+    assert np.max(np.abs(out - ref)) <= 1e-13 * np.max(np.abs(y))
+    _, one = decimate_to(y[:, 1], 5_000.0, 1613.0)
+    assert np.array_equal(one, out[:, 1])
+
+
+def test_runs_are_bit_for_bit_the_single_recordings():
+    """The *_runs functions (the runs of a session in blocks, one filter design, one error-model
+    application) give each run exactly what one call per run gives, with the same generators in
+    the same order (accelerometer, then gyroscope, per run)."""
+    n = 4001
+    rng = np.random.default_rng(5)
+    force = _level_at_rest(n, 0.01) + 0.05 * rng.standard_normal((n, 3))
+    rate = 0.01 * rng.standard_normal((n, 3))
+    acc_spec = AnalogAccelerometerSpec(error=ErrorModel(bias=(1e-4, 0, 2e-4),
+                                                       scale_error=(0.01, 0, -0.01)))
+    gyro_spec = DigitalGyroSpec(fs_hz=1000.0, lsb=1e-6)
+    single = []
+    for r in range(5):
+        g = np.random.default_rng([9, r])
+        single.append((measure_imu_accelerometer(force, 5_000.0, acc_spec, g)[1],
+                       measure_gyroscope(rate, 5_000.0, gyro_spec, g)[1]))
+    gens = [np.random.default_rng([9, r]) for r in range(5)]
+    old_block = instruments._BLOCK_BYTES
+    instruments._BLOCK_BYTES = 2 * (n + 100) * 3 * 8  # two runs per block: blocks and a remainder
+    try:
+        _, accs = measure_imu_accelerometer_runs([force] * 5, 5_000.0, acc_spec, gens)
+        _, gyros = measure_gyroscope_runs([rate] * 5, 5_000.0, gyro_spec, gens)
+    finally:
+        instruments._BLOCK_BYTES = old_block
+    for (acc, gyro), a, g in zip(single, accs, gyros, strict=True):
+        assert np.array_equal(acc, a) and np.array_equal(gyro, g)
+    # Phase I: the two nut accelerometers from one generator in one call.
+    nut1, nut2 = force, force[::-1].copy()
+    g = np.random.default_rng(3)
+    one = measure_nut_accelerometer(nut1, FS_SIM, NutAccelerometerSpec(), g)[1]
+    two = measure_nut_accelerometer(nut2, FS_SIM, NutAccelerometerSpec(), g)[1]
+    g = np.random.default_rng(3)
+    _, both = measure_nut_accelerometer_runs([nut1, nut2], FS_SIM, NutAccelerometerSpec(), [g, g])
+    assert np.array_equal(one, both[0]) and np.array_equal(two, both[1])
+    with pytest.raises(ValueError, match="need one generator per recording"):
+        measure_gyroscope_runs([rate] * 2, 5_000.0, gyro_spec, gens[:1])
+
+
 # ---------------------------------------------------------------------------------------------
 # Determinism and purity
 # ---------------------------------------------------------------------------------------------
@@ -372,4 +427,4 @@ def test_module_is_pure_numpy_scipy():
             imported |= {alias.name.split(".")[0] for alias in node.names}
         elif isinstance(node, ast.ImportFrom):
             imported.add((node.module or "").split(".")[0])
-    assert imported <= {"__future__", "math", "dataclasses", "numpy", "scipy"}
+    assert imported <= {"__future__", "functools", "math", "dataclasses", "numpy", "scipy"}

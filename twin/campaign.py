@@ -12,12 +12,8 @@ Resuming: each finished unit is stored as its own part file (atomic rename, see
 from __future__ import annotations
 
 import math
-import os
-import signal
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -40,9 +36,10 @@ from twin.simulate import (
     phase1_measure,
     phase1_profile,
     phase2_command,
-    phase2_measure,
+    phase2_measure_runs,
     phase2_trajectory,
     run_many,
+    stroke_travels,
     true_error_motions,
 )
 
@@ -276,13 +273,15 @@ def _store_phase1(store: PartStore, unit: Unit, sig: dict) -> None:
 def _store_phase2(s: Scenario, sim: Simulator, store: PartStore, unit: Unit, cond: Condition,
                   traj) -> None:
     datasets, dattrs = {}, {}
-    for r in range(s.runs_per_session):
-        m = phase2_measure(sim, traj, rng_for(s.seed, KIND_PHASE2, unit.index, r))
+    rngs = [rng_for(s.seed, KIND_PHASE2, unit.index, r) for r in range(s.runs_per_session)]
+    for r, m in enumerate(phase2_measure_runs(sim, traj, rngs)):
         for key in ("imu_acc", "imu_gyro", "position_cmd"):
             datasets[f"r{r:04d}/{key}"] = m[key]
             dattrs[f"r{r:04d}/{key}"] = {"fs_hz": m[f"{key}_fs_hz"]}
     x, e = true_error_motions(sim.world, s.phase2, cond)
     datasets["truth/x_m"], datasets["truth/E"] = x, e
+    for key, arr in stroke_travels(sim.world, traj).items():
+        datasets[f"truth/stroke_{key}"] = arr
     store.write("phase2", unit.name,
                 attrs={"hours": unit.hours, "backlash_um": cond.mech.backlash * 1e6,
                        "origin_offset_m": cond.origin_offset, "preload_N": cond.mech.preload,
@@ -417,7 +416,8 @@ def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
     def sessions():
         for u in by_kind["phase2"]:
             attrs, data, _ = store.read("phase2", u.name)
-            yield u.name, attrs, data["truth/x_m"], data["truth/E"]
+            strokes = {k[len("truth/stroke_"):]: v for k, v in data.items() if k.startswith("truth/stroke_")}
+            yield u.name, attrs, data["truth/x_m"], data["truth/E"], strokes
 
     ds.assemble_truth(out_dir / "truth.h5", s.to_json(), onset_hours(s), _timeline(s, units),
                       sessions(), effects={})
@@ -437,30 +437,10 @@ class CampaignInterrupted(KeyboardInterrupt):
         self.done, self.total, self.cancelled = done, total, cancelled
 
 
-def _ignore_sigint() -> None:
-    """Worker initializer: Ctrl-C is the parent's to handle (it stops the workers), so a worker
-    neither dies with a traceback nor reports a half-done unit as an error."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def _stored(store: PartStore, units: list[Unit]) -> int:
     """How many of ``units`` are stored as parts (part files appear complete, by atomic rename)."""
     names = {kind: set(store.names(kind)) for kind in {u.kind for u in units}}
     return sum(u.name in names[u.kind] for u in units)
-
-
-def _stop_pool(pool: ProcessPoolExecutor) -> None:
-    """Cancel the queued work of ``pool`` and end its worker processes now (a unit is written
-    atomically, so a worker stopped mid-unit leaves at most a temporary file that the next run
-    deletes)."""
-    # The executor has no public way to stop running calls; its worker processes are in
-    # _processes (which shutdown() forgets, so they are taken first).
-    procs = list((getattr(pool, "_processes", None) or {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in procs:
-        proc.kill()
-    for proc in procs:
-        proc.join(timeout=1.0)
 
 
 def _claim(out: Path, s: Scenario) -> None:
@@ -494,20 +474,27 @@ def _diff_keys(a, b, prefix: str = "") -> list[str]:
 
 
 def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = None,
-                      on_progress: Callable[[int, int, str], None] | None = None) -> dict:
+                      on_progress: Callable[[int, int, str], None] | None = None,
+                      scheduler: str | None = None) -> dict:
     """Simulate every unit of the campaign not yet stored, then assemble the two files.
 
     Args:
         s: the scenario. out_dir: campaign directory (created).
-        workers: processes (default: all local cores; 1 runs in this process).
+        workers: local processes (default: all local cores; 1 runs in this process).
         on_progress: called as (done, total, unit name) after each unit.
+        scheduler: address of a running Dask scheduler to send the units to instead
+            (:mod:`twin.executors`); its workers must see ``out_dir`` at the same path.
     Returns:
-        {"units": n, "simulated": n_new, "skipped": n_existing}.
+        {"units": n, "simulated": n_new, "skipped": n_existing, "executor": where they ran}.
+
     Raises:
+        twin.executors.ExecutorError: no scheduler answers at ``scheduler``.
         CampaignInterrupted: on Ctrl-C (KeyboardInterrupt), after cancelling the queued units and
-            stopping the worker processes; the finished units stay stored.
+            stopping the running ones; the finished units stay stored.
     """
-    out = Path(out_dir)
+    from twin.executors import make_executor
+
+    out = Path(out_dir).resolve()  # the workers (possibly elsewhere) get absolute paths
     out.mkdir(parents=True, exist_ok=True)
     _claim(out, s)
     store = PartStore(out)
@@ -517,38 +504,26 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     done = len(units) - len(todo)
     if on_progress:
         on_progress(done, len(units), "")
-    workers = workers or os.cpu_count() or 1
     payload = s.to_json()
-    if workers == 1 or len(todo) <= 1:
+    # Phase II sessions first: they are the longest units.
+    todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
+    processes = 1 if len(todo) <= 1 and scheduler is None else workers
+    with make_executor(processes, scheduler=scheduler, prefix="unit") as ex:
         try:
-            for u in todo:
-                run_unit(payload, u, str(out))
-                done += 1
-                if on_progress:
-                    on_progress(done, len(units), u.name)
-        except KeyboardInterrupt:
-            kept = _stored(store, units)
-            raise CampaignInterrupted(kept, len(units), len(units) - kept) from None
-    else:
-        # Phase II sessions first: they are the longest units.
-        todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                                   initializer=_ignore_sigint)
-        try:
-            futures = [pool.submit(run_unit, payload, u, str(out)) for u in todo]
-            for fut in as_completed(futures):
+            futures = [ex.submit(run_unit, payload, u, str(out), key=u.name) for u in todo]
+            for fut in ex.completed(futures):
                 name = fut.result()
                 done += 1
                 if on_progress:
                     on_progress(done, len(units), name)
         except KeyboardInterrupt:
-            _stop_pool(pool)
+            ex.interrupt()
             kept = _stored(store, units)
             raise CampaignInterrupted(kept, len(units), len(units) - kept) from None
-        finally:
-            pool.shutdown(wait=True)
+        where = ex.description
     assemble(s, out, units)
-    return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo)}
+    return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo),
+            "executor": where}
 
 
 def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | Path]) -> None:

@@ -80,8 +80,10 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
     """MuJoCo digital twin of a ball-screw linear axis."""
 
 
-def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None) -> dict:
+def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None,
+                    scheduler: str | None = None) -> dict:
     from twin.campaign import CampaignDirectoryError, CampaignInterrupted, plan, simulate_campaign
+    from twin.executors import ExecutorError
 
     try:
         s = load(scenario, overrides)
@@ -102,8 +104,9 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: in
             progress.update(task, completed=done, description=f"simulating {name}")
 
         try:
-            summary = simulate_campaign(s, out, workers=workers, on_progress=on_progress)
-        except CampaignDirectoryError as exc:
+            summary = simulate_campaign(s, out, workers=workers, on_progress=on_progress,
+                                        scheduler=scheduler)
+        except (CampaignDirectoryError, ExecutorError) as exc:
             progress.stop()
             _fail(str(exc))
         except CampaignInterrupted as exc:
@@ -121,14 +124,22 @@ def simulate(
     scenario: Path = typer.Argument(..., help="scenario TOML file, or a shipped scenario's name (quick)"),
     out: Path = typer.Option(..., "-o", "--out", help="campaign directory to write"),
     set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE (TOML value), repeatable"),
-    workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
+    workers: int | None = typer.Option(None, "--workers", min=1,
+                                       help="local processes (default: all cores)"),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="address of a running dask.distributed scheduler to "
+                                              "send the units to; OUT must be on a file system its "
+                                              "workers share"),
 ) -> None:
     """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed).
     SCENARIO is a TOML file or the name of a shipped scenario (quick, demo, paper-rtf, ...)."""
-    _require("simulate", "sim")
-    summary = _run_simulation(scenario, out, set_, workers)
-    console.print(f"{summary['simulated']} units simulated, {summary['skipped']} reused, "
-                  f"{summary['seconds']:.1f} s; wrote {out / 'measurements.h5'} and "
+    _require("simulate", "sim", *(["cluster"] if scheduler is not None else []))
+    if scheduler is not None and workers is not None:
+        _fail("--scheduler and --workers exclude each other: --scheduler sends the units to an "
+              "existing dask cluster, --workers N runs them in N local processes")
+    summary = _run_simulation(scenario, out, set_, workers, scheduler)
+    console.print(f"{summary['simulated']} units simulated ({summary['executor']}), "
+                  f"{summary['skipped']} reused, {summary['seconds']:.1f} s; wrote {out / 'measurements.h5'} and "
                   f"{out / 'truth.h5'}")
 
 
@@ -136,9 +147,27 @@ REFERENCE_SMALL = ["phase1.captures_per_sample=2", "phase1.capture_s=4.0",
                    "phase1.sample_interval_hours=20"]
 
 
+def _parse_params(items: list[str]) -> dict:
+    """--set-param KEY=VALUE items as a dict; VALUE is a TOML value, else taken as a string."""
+    import tomllib
+
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip().isidentifier():
+            _fail(f"--set-param {item!r}: expected KEY=VALUE with KEY a parameter name")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = value
+        if isinstance(out[key.strip()], list):
+            out[key.strip()] = tuple(out[key.strip()])
+    return out
+
+
 def _score_tables(doc: dict) -> list[Table]:
     """The summary tables of a score.json object (shared by ``twin score`` and ``twin demo``)."""
-    from analysis.phase1.pipeline import PAPER_NAMES
+    from analysis.registry import label
 
     def fmt(v, f="{:g}"):
         return "-" if v is None else f.format(v)
@@ -152,12 +181,26 @@ def _score_tables(doc: dict) -> list[Table]:
         for col in ("method", "detection h", "delay h", "delay samples", "false alarms / healthy"):
             t.add_column(col)
         for name, r in p1["methods"].items():
-            t.add_row(PAPER_NAMES.get(name, name), fmt(r["detection_hours"]), fmt(r["delay_hours"]),
+            t.add_row(r.get("label") or label("detectors", name), fmt(r["detection_hours"]), fmt(r["delay_hours"]),
                       fmt(r["delay_samples"]), f"{r['false_alarms']} / {r['healthy_test_samples']}")
         tables.append(t)
     p2 = doc.get("phase2")
+    ests = doc.get("phase2_estimators") or {}
+    if len(ests) > 1:
+        t = Table(title="Phase II: every backlash estimator found, side by side (µm against the "
+                        "injected change; h for the 10 µm crossing)")
+        for col in ("estimator", "sessions", "RMS error µm", "largest µm", "bias µm",
+                    "vs lost motion µm", "prognosis error h"):
+            t.add_column(col)
+        for name, r in ests.items():
+            t.add_row(f"{r.get('label') or name} [{name}]", str(r["n_sessions"]),
+                      fmt(r["rms_error_um"], "{:.2f}"), fmt(r["max_abs_error_um"], "{:.2f}"),
+                      fmt(r["bias_um"], "{:+.2f}"), fmt(r.get("rms_error_vs_lost_motion_um"), "{:.2f}"),
+                      fmt((r.get("prognosis") or {}).get("error_hours"), "{:+.0f}"))
+        tables.append(t)
     if p2:
-        t = Table(title=f"Phase II: change of backlash against the injected one (RMS error "
+        t = Table(title=f"Phase II ({p2.get('label') or p2.get('estimator') or 'shift'}): change of "
+                        f"backlash against the injected one (RMS error "
                         f"{fmt(p2['rms_error_um'], '{:.2f}')} µm, largest "
                         f"{fmt(p2['max_abs_error_um'], '{:.2f}')} µm)")
         for col in ("session", "hours", "injected Δ µm", "estimated Δ µm", "error µm",
@@ -192,8 +235,9 @@ def score(
 ) -> None:
     """Score both phases against DIRECTORY/truth.h5: prints the tables and writes DIRECTORY/score.json.
 
-    Reads DIRECTORY/phase1/detection.json (twin detect) and DIRECTORY/backlash/backlash.json
-    (twin backlash); either may be missing, not both."""
+    Reads DIRECTORY/phase1/detection.json (twin detect), DIRECTORY/backlash/backlash.json
+    (twin backlash) and DIRECTORY/backlash/*/backlash.json (twin backlash --estimator NAME);
+    either phase may be missing, not both. Every estimator found is scored side by side."""
     from analysis.dataset import DatasetError
     from analysis.scoring import ScoreError, write_score
     from analysis.scoring import score as score_dir
@@ -281,12 +325,12 @@ def detect(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
     reference: Path = typer.Option(..., "--reference", help="reference data set directory (Fisher selection)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
-    method: list[str] = typer.Option([], "--method", help="method(s) to run (default: all six)"),
+    method: list[str] = typer.Option([], "--method", help="detector(s) to run: a registered name or "
+                                     "module:Class, repeatable (default: every registered detector)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
 ) -> None:
     """Phase I incipient-fault detection (paper section IV): writes OUT/detection.json and OUT/detection.png."""
     from analysis.phase1.detect import run
-    from analysis.phase1.pipeline import METHODS, PAPER_NAMES
 
     out = out or directory / "phase1"
     for d, what in ((directory, "recording"), (reference, "reference data set")):
@@ -296,7 +340,7 @@ def detect(
     _writable_dir(out)
     existed = out.is_dir() and any(out.iterdir())
     try:
-        details = run(directory, reference, out, method or METHODS, consecutive)
+        details = run(directory, reference, out, method or None, consecutive)
     except (ValueError, FileNotFoundError) as exc:  # DatasetError, ExtractionError, DetectError
         kept = not existed and out.is_dir() and any(out.iterdir())
         _fail(f"{exc}" + (f" (what was computed before the error is in {out})" if kept else ""))
@@ -306,10 +350,10 @@ def detect(
                         f"{'none' if onset is None else f'{onset:g} h'}")
     for col in ("method", "limit", "detect h", "delay h", "delay n", "FA/healthy", "FA base"):
         table.add_column(col)
-    for name, r in details["methods"].items():
+    for r in details["methods"].values():
         def fmt(v, f="{:g}"):
             return "-" if v is None else f.format(v)
-        table.add_row(PAPER_NAMES[name], f"{r['threshold']:.4g}", fmt(r["detection_hours"]),
+        table.add_row(r["label"], f"{r['threshold']:.4g}", fmt(r["detection_hours"]),
                       fmt(r["delay_hours"]), fmt(r["delay_samples"]),
                       f"{r['false_alarms']} / {r['healthy_test_samples']}", str(r["baseline_alarms"]))
     Console(width=max(100, Console().width)).print(table)
@@ -331,21 +375,51 @@ def backlash(
                                           help="leading sessions known to share the initial backlash; "
                                                "the estimates are re-zeroed on their mean (1 = the paper's "
                                                "single reference)"),
-    position_reference: str = typer.Option("command", "--position-reference",
-                                           help="position axis of the traces: 'command' (the controller's "
+    position_reference: str = typer.Option("auto", "--position-reference",
+                                           help="position axis of the traces: 'auto' (command if the runs "
+                                                "record position_cmd, else imu), 'command' (the controller's "
                                                 "position_cmd) or 'imu' (strokes from the accelerometer and "
                                                 "the run's routine metadata; Eq. 5)"),
+    workers: int | None = typer.Option(None, "--workers", min=1,
+                                       help="local processes for the sessions (default: all cores; "
+                                            "1 = this process)"),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="address of a running dask.distributed scheduler to "
+                                              "send the sessions to; DIRECTORY must be on a file "
+                                              "system its workers share"),
+    estimator: str | None = typer.Option(None, "--estimator",
+                                         help="backlash estimator: a registered name or module:Class "
+                                              "(default: the paper's, 'shift'); other than the default "
+                                              "it writes to OUT/NAME/"),
+    set_param: list[str] = typer.Option([], "--set-param",
+                                        help="estimator parameter KEY=VALUE (TOML value), repeatable"),
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
     A bad run (missing, cut short, non-finite channel) is skipped with a warning recorded in the
-    JSON, or with --strict ends the command with exit code 2 naming session, run and channel."""
+    JSON, or with --strict ends the command with exit code 2 naming session, run and channel.
+    The sessions' error motions are computed in parallel (local processes, or a Dask cluster with
+    --scheduler); the results are those of one process."""
     import math
 
+    from analysis import registry
     from analysis.dataset import DatasetError
-    from analysis.phase2.workflow import run
+    from analysis.phase2.workflow import estimator_dir, run
+    from twin.executors import ExecutorError, mapper
 
-    out = out or directory / "backlash"
+    if scheduler is not None:
+        _require("backlash --scheduler", "cluster")
+    if scheduler is not None and workers is not None:
+        _fail("--scheduler and --workers exclude each other: --scheduler sends the sessions to an "
+              "existing dask cluster, --workers N runs them in N local processes")
+
+    try:
+        entry = (registry.get("backlash_estimators", estimator) if estimator
+                 else registry.default("backlash_estimators"))
+    except registry.RegistryError as exc:
+        _fail(f"--estimator: {exc}")
+    params = _parse_params(set_param)
+    out = estimator_dir(out or directory / "backlash", entry.name)
     _writable_dir(out)
     try:
         q = process_noise if process_noise == "ml" else float(process_noise)
@@ -354,11 +428,13 @@ def backlash(
     except ValueError:
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
     try:
-        if position_reference not in ("command", "imu"):
-            _fail(f"--position-reference {position_reference!r}: expected 'command' or 'imu'")
+        if position_reference not in ("auto", "command", "imu"):
+            _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
-                 baseline_sessions=baseline_sessions, position_reference=position_reference)
-    except (DatasetError, FileNotFoundError, OSError) as exc:
+                 baseline_sessions=baseline_sessions, position_reference=position_reference,
+                 estimator=estimator, params=params,
+                 map_sessions=mapper(workers, scheduler=scheduler, prefix="session"))
+    except (DatasetError, FileNotFoundError, OSError, ExecutorError) as exc:
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated
         _fail(f"{directory}: {exc}")
@@ -379,7 +455,8 @@ def backlash(
 
     ref = (f"session {ses[0].session}" if result.baseline_sessions == 1 else
            f"the mean of sessions {ses[0].session}-{ses[result.baseline_sessions - 1].session}")
-    table = Table(title=f"Phase II backlash change vs {ref} ({len(ses)} sessions)")
+    table = Table(title=f"Phase II backlash change vs {ref} ({len(ses)} sessions), estimator "
+                        f"{br.doc['estimator']['name']} ({br.doc['estimator']['label']})")
     for col in ("session", "hours", "Δb shifts µm", "Δb pitch µm", "smoothed µm", "dial Δ µm",
                 "pitch mm", "γ max"):
         table.add_column(col)
@@ -401,6 +478,125 @@ def backlash(
 # --- end of Phase II backlash ----------------------------------------------------------------
 
 
+# --- bringing a real axis's recordings in: import, check (issue 14) ---------------------------
+@app.command("import")
+def import_(
+    spec: Path = typer.Argument(..., help="import spec (TOML; docs/import.md)"),
+    out: Path | None = typer.Option(None, "-o", "--out", help="campaign directory (default: the spec's output)"),
+) -> None:
+    """Convert a laboratory's files (CSV, MATLAB .mat, NI TDMS, ASAM MDF) into a campaign's
+    measurements.h5 as the import spec maps them: channels, units (g, mV, rpm, deg/s, mm, ...),
+    rates, hours and the axis description. Resumes: files converted before are not read again."""
+    from analysis.dataset import DatasetError
+    from analysis.ingest import ImportSpecError, run_import
+
+    if out is not None:
+        _writable_dir(out, "campaign directory")
+
+    t0 = time.perf_counter()
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=console, transient=False) as progress:
+        task = progress.add_task("importing", total=None)
+
+        def on_progress(done: int, total: int, name: str, reused: bool) -> None:
+            progress.update(task, completed=done, total=total,
+                            description=f"{'kept' if reused else 'read'} {name}")
+
+        try:
+            s = run_import(spec, output=out, progress=on_progress)
+        except (ImportSpecError, DatasetError) as exc:
+            progress.stop()
+            _fail(str(exc))
+    hours = "-" if s.hours is None else f"{s.hours[0]:g}–{s.hours[1]:g} h"
+    console.print(f"imported {s.captures} Phase I captures, {s.sessions} Phase II sessions ({s.runs} runs), "
+                  f"{hours}: {s.converted} files read, {s.reused} kept from before, "
+                  f"{time.perf_counter() - t0:.1f} s", markup=False, highlight=False)
+    console.print(f"wrote {s.output / 'measurements.h5'} and {s.output / 'import.json'}; next: "
+                  f"twin check {s.output}", markup=False, highlight=False)
+
+
+@app.command()
+def check(
+    directory: Path = typer.Argument(..., help="campaign directory or measurements.h5"),
+    as_json: bool = typer.Option(False, "--json", help="print the report as JSON on stdout"),
+) -> None:
+    """What a recording holds (captures, sessions, runs, rates, durations, hours) and what is wrong
+    or suspicious in it (NaN, flat lines, clipping, dropouts, hours going back, differing rates, an
+    IMU that does not see gravity). Exit 1 if there is an error, 0 otherwise."""
+    import json as _json
+
+    from analysis.dataset import DatasetError
+    from analysis.ingest.check import check_recording
+
+    try:
+        rep = check_recording(directory)
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    if as_json:
+        print(_json.dumps(rep.to_json(), indent=2))
+    else:
+        s = rep.summary
+        table = Table(title=f"{rep.file}")
+        table.add_column("what")
+        table.add_column("value")
+        p1, p2 = s["phase1"], s["phase2"]
+
+        def span(v, unit):
+            return "-" if not v else (f"{v[0]:g} {unit}" if v[0] == v[1] else f"{v[0]:g}–{v[1]:g} {unit}")
+
+        table.add_row("Phase I", f"{p1['captures']} captures in {p1['samples']} samples, "
+                                 f"{', '.join(f'{f:g}' for f in p1['fs_hz']) or '-'} Hz, {span(p1['capture_s'], 's')}")
+        rates = "; ".join(f"{k} {', '.join(f'{f:.6g}' for f in v)} Hz" for k, v in p2["fs_hz"].items() if v)
+        table.add_row("Phase II", f"{p2['sessions']} sessions, {p2['runs']} runs, {span(p2['run_s'], 's')}; {rates}")
+        table.add_row("hours", span(s["hours"], "h"))
+        table.add_row("dial readings", str(s["dial_readings"]))
+        ax = s.get("axis") or {}
+        table.add_row("axis", ", ".join(f"{k} {ax[k]}" for k in ("name", "lead_mm", "travel_mm") if k in ax) or "-")
+        Console(width=max(100, Console().width)).print(table)
+        if rep.findings:
+            ft = Table(title=f"{len(rep.errors)} errors, {len(rep.findings) - len(rep.errors)} warnings")
+            for col in ("level", "where", "what"):
+                ft.add_column(col)
+            for f in rep.findings[:200]:
+                ft.add_row(f.level, f.where, f.what, style="red" if f.level == "error" else "yellow")
+            Console(width=max(100, Console().width)).print(ft)
+            if len(rep.findings) > 200:
+                console.print(f"... and {len(rep.findings) - 200} more (--json lists all)")
+        else:
+            console.print("no errors, no warnings")
+    if rep.errors:
+        raise typer.Exit(1)
+scenario_app = typer.Typer(no_args_is_help=True, help="Scenarios: write one that describes a recording.")
+app.add_typer(scenario_app, name="scenario")
+
+
+@scenario_app.command("init")
+def scenario_init(
+    directory: Path = typer.Argument(..., help="campaign directory or measurements.h5 of the recording"),
+    out: Path = typer.Option(..., "-o", "--out", help="scenario file to write (TOML)"),
+    name: str | None = typer.Option(None, "--name", help="scenario name (default: the directory's name)"),
+) -> None:
+    """A scenario whose layout matches the recording (samples, captures, sessions, runs, hours, rates)
+    and whose routine is measured from it (stroke, speeds, acceleration, dwell), the axis values from
+    its /@axis and a comment on every value that is a twin default. Then:
+    twin diagnose DIRECTORY --scenario OUT."""
+    from analysis.dataset import DatasetError
+    from twin.scenario_init import write_scenario
+
+    if out.exists() and out.is_dir():
+        _fail(f"-o {out}: is a directory; expected a scenario file path (e.g. {out / 'axis.toml'})")
+    try:
+        notes = write_scenario(directory, out, name)
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    except ScenarioError as exc:
+        _fail(f"the scenario measured from {directory} cannot be written: {exc}")
+    for n in notes:
+        console.print(f"note: {n}", style="yellow", markup=False, highlight=False)
+    console.print(f"wrote {out}; next: twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
+# --- end of import, check, scenario init -------------------------------------------------------
+
+
 # --- twin sweep (helper: sweep) ----------------------------------------------------------------
 @app.command()
 def sweep(
@@ -411,6 +607,10 @@ def sweep(
                                                  "OUT must be on a file system its workers share"),
     workers: int | None = typer.Option(None, "--workers", min=1,
                                           help="run on a dask LocalCluster of N worker processes"),
+    methods: str | None = typer.Option(None, "--methods",
+                                       help="Phase I methods of the per-point summary, comma-separated, "
+                                            "or 'all' (default: the sweep's [analysis] methods, else "
+                                            "the default detector)"),
 ) -> None:
     """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
     OUT/results.csv and plots. Default executor: all local cores (processes). Resumes if interrupted."""
@@ -461,7 +661,19 @@ def sweep(
     import pandas as pd
 
     df = pd.read_parquet(out / "results.parquet")
-    header, rows = summary(plan, df)
+    from analysis import registry
+    from twin.harness.sweep.results import phase1_methods
+
+    if methods == "all":
+        shown = phase1_methods(df)
+    elif methods:
+        shown = [m.strip() for m in methods.split(",") if m.strip()]
+    else:
+        shown = [registry.get("detectors", m).name for m in plan.methods or []] or None
+    try:
+        header, rows = summary(plan, df, shown)
+    except ValueError as exc:
+        _fail(str(exc))
     table = Table(title=f"sweep {plan.name}: mean ± sd over seeds ({len(df)} rows)")
     for col in header:
         table.add_column(col)

@@ -447,8 +447,10 @@ def phase1_measure(sim: Simulator, cfg, traj: Trajectory, rng: np.random.Generat
         up = int(math.ceil(w.nut_acc.fs_hz / fs))
         nut = signal.resample_poly(nut, up, 1, axis=0)
         fs_nut = fs * up
-    _, acc1 = ins.measure_nut_accelerometer(nut[:, :3], fs_nut, w.nut_acc, rng)
-    _, acc2 = ins.measure_nut_accelerometer(nut[:, 3:], fs_nut, w.nut_acc, rng)
+    # Both nut accelerometers in one call; their noise is drawn from ``rng`` in order (acc1's,
+    # then acc2's), as two calls would.
+    _, (acc1, acc2) = ins.measure_nut_accelerometer_runs([nut[:, :3], nut[:, 3:]], fs_nut,
+                                                         w.nut_acc, [rng, rng])
     _, speed = ins.measure_speed(traj.qpos[:, traj.index.screw], fs, w.encoder_counts_per_rev,
                                  w.controller_fs, rng)
     _, torque = ins.measure_torque(traj.sens[:, traj.index.servo_torque], fs, w.torque_noise,
@@ -466,6 +468,7 @@ def phase1_measure(sim: Simulator, cfg, traj: Trajectory, rng: np.random.Generat
 
 
 PHASE2_LEAD_IN = 2.0  # s of standstill before the first move (bias estimation needs it)
+_RUNS_PER_GROUP = 8  # runs whose float64 sensor samples phase2_measure_runs holds at once
 
 
 def phase2_moves(cfg) -> list[Move]:
@@ -495,16 +498,74 @@ def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -
     The runs of a session share the mechanical state, and the simulator is deterministic, so the
     90 runs of a session share one simulated motion and differ by their sensor noise (drawn
     independently per run from ``rng``), exactly as 90 simulations would."""
+    return phase2_measure_runs(sim, traj, [rng])[0]
+
+
+def phase2_measure_runs(sim: Simulator, traj: Trajectory,
+                        rngs: list[np.random.Generator]) -> list[dict]:
+    """:func:`phase2_measure` for the runs of a session at once, run j from ``rngs[j]``: the
+    motion's sensor-frame signals, the filter designs and the spline factorisation are computed
+    once, the noise of each run is drawn from its own generator (accelerometer, then gyroscope,
+    as :func:`phase2_measure`), so every array is bit for bit the one-run result."""
     w = sim.world
     fs = sim.fs
-    _, acc = ins.measure_imu_accelerometer(traj.sens[:, traj.index.imu_acc], fs, w.imu_acc, rng)
-    _, gyro = ins.measure_gyroscope(traj.angular_velocity_imu, fs, w.imu_gyro, rng)
+    force = traj.sens[:, traj.index.imu_acc]
+    rate = traj.angular_velocity_imu
     n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
     t_cmd = np.arange(n_cmd) / w.position_cmd_fs
     pos = np.interp(t_cmd, traj.cmd.t, traj.cmd.x)
-    return {"imu_acc": acc.astype(np.float32), "imu_acc_fs_hz": float(w.imu_acc.fs_hz),
-            "imu_gyro": gyro.astype(np.float32), "imu_gyro_fs_hz": float(w.imu_gyro.fs_hz),
-            "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
+    out = []
+    # Groups of runs, so that only one group's float64 samples are held at a time.
+    for start in range(0, len(rngs), _RUNS_PER_GROUP):
+        group = rngs[start:start + _RUNS_PER_GROUP]
+        _, accs = ins.measure_imu_accelerometer_runs([force] * len(group), fs, w.imu_acc, group)
+        _, gyros = ins.measure_gyroscope_runs([rate] * len(group), fs, w.imu_gyro, group)
+        out += [{"imu_acc": acc.astype(np.float32), "imu_acc_fs_hz": float(w.imu_acc.fs_hz),
+                 "imu_gyro": gyro.astype(np.float32), "imu_gyro_fs_hz": float(w.imu_gyro.fs_hz),
+                 "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
+                for acc, gyro in zip(accs, gyros, strict=True)]
+    return out
+
+
+def stroke_travels(world: World, traj: Trajectory, rest_fraction: float = 0.5) -> dict[str, np.ndarray]:
+    """The true rest-to-rest travels of one run, per move in time order: what the paper's Eq. 9
+    assumes (a carriage that travels L − b between rests when it stops on the driving flank).
+
+    A rest is a standstill of the command; its position is the mean over the last
+    ``rest_fraction`` of the standstill (the carriage has stopped ringing). Returns (moves,) arrays:
+    ``speed_m_s`` (signed commanded speed of the move), ``carriage_m`` (the carriage's travel,
+    signed, m), ``screw_m`` (the screw's, its angle times lead/2π, signed, m), ``command_m`` (the
+    commanded travel, signed, m).
+    """
+    t, v = traj.cmd.t, traj.cmd.v
+    moving = np.abs(v) > 1e-12
+    edges = np.flatnonzero(np.diff(moving.astype(np.int8)))  # last index before each change
+    starts, stops = list(edges[moving[edges + 1]] + 1), list(edges[~moving[edges + 1]] + 1)
+    rests = []  # (i0, i1) index ranges of the standstills between moves
+    bounds = [0, *stops]
+    ends = [*starts, t.size]
+    for a, b in zip(bounds, ends, strict=False):
+        if b > a:
+            rests.append((a + int((1.0 - rest_fraction) * (b - a)), b))
+    x = traj.x
+    screw = traj.qpos[:, traj.index.screw] * world.axis.screw.radius_per_rad
+    sim_t = traj.t
+
+    def at(sig, ab):
+        i0, i1 = (int(np.searchsorted(sim_t, t[k])) for k in (ab[0], ab[1] - 1))
+        return float(np.mean(sig[i0:i1 + 1]))
+
+    out = {"speed_m_s": [], "carriage_m": [], "screw_m": [], "command_m": []}
+    for k, i in enumerate(starts):
+        if k + 1 >= len(rests):
+            break
+        r0, r1 = rests[k], rests[k + 1]
+        j = i + int(np.argmax(np.abs(v[i:r1[0]])))
+        out["speed_m_s"].append(float(v[j]))
+        out["carriage_m"].append(at(x, r1) - at(x, r0))
+        out["screw_m"].append(at(screw, r1) - at(screw, r0))
+        out["command_m"].append(at(traj.cmd.x, r1) - at(traj.cmd.x, r0))
+    return {k: np.asarray(a) for k, a in out.items()}
 
 
 def true_error_motions(world: World, cfg, cond: Condition, dx: float = 0.05e-3

@@ -1,4 +1,4 @@
-"""The versioned on-disk dataset of one campaign (HDF5, ``format_version`` 1).
+"""The versioned on-disk dataset of one campaign (HDF5, ``format_version`` 2; version 1 is read too).
 
 One campaign is one directory holding two files:
 
@@ -34,8 +34,10 @@ from analysis.dataset.schema import (
     DOFS,
     FORMAT_VERSION,
     MEASUREMENTS_FORMAT,
+    OPTIONAL_PHASE2_CHANNELS,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
+    STROKE_TRUTH,
     SUPPORTED_VERSIONS,
     TRUTH_FORMAT,
     TRUTH_KEYS,
@@ -50,6 +52,8 @@ __all__ = [
     "TRUTH_FORMAT",
     "PHASE1_CHANNELS",
     "PHASE2_CHANNELS",
+    "OPTIONAL_PHASE2_CHANNELS",
+    "STROKE_TRUTH",
     "DOFS",
     "TRUTH_KEYS",
     "ALLOWED_TRUTH_MENTIONS",

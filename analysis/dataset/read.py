@@ -14,10 +14,12 @@ from analysis.dataset.attrs import _loads, from_attr
 from analysis.dataset.h5file import _check_format, open_h5
 from analysis.dataset.schema import (
     MEASUREMENTS_FORMAT,
+    OPTIONAL_PHASE2_CHANNELS,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
     PHYSICAL_RANGE,
     SESSION_TRUTH_REQUIRED,
+    STROKE_TRUTH,
     TIMELINE_REQUIRED,
     TRUTH_FORMAT,
     DatasetError,
@@ -64,7 +66,8 @@ class Phase2Run:
     """One Phase II run; arrays float64, each at its own rate, all starting at t = 0.
 
     imu_acc (n, 3) m/s^2 at imu_acc_fs_hz; imu_gyro (m, 3) rad/s at imu_gyro_fs_hz;
-    position_cmd (k,) m at position_cmd_fs_hz; hours: operating hours of the session;
+    position_cmd (k,) m at position_cmd_fs_hz, or None for both when the run has no controller
+    position (format_version 2, a stand-alone IMU); hours: operating hours of the session;
     speeds_mm_s: commanded traverse speeds in mm/s if recorded, else None; routine: the run's
     :data:`~analysis.dataset.schema.ROUTINE_ATTRS` that are recorded (``accel_mm_s2``,
     ``start_mm``, ``end_mm``, ``dwell_s``; floats).
@@ -77,8 +80,8 @@ class Phase2Run:
     imu_acc_fs_hz: float
     imu_gyro: np.ndarray
     imu_gyro_fs_hz: float
-    position_cmd: np.ndarray
-    position_cmd_fs_hz: float
+    position_cmd: np.ndarray | None
+    position_cmd_fs_hz: float | None
     speeds_mm_s: tuple[float, ...] | None = None
     routine: dict[str, float] = field(default_factory=dict)
 
@@ -254,6 +257,13 @@ class Measurements(_Reader):
         self._obj(key, h5py.Group, "a Phase II session group")
         return self._names(key)
 
+    def phase2_channels(self, session: str, run: str) -> list[str]:
+        """Names of the channels a Phase II run records (``position_cmd`` is optional from
+        format_version 2 on)."""
+        rkey = f"/phase2/{session}/{run}"
+        g = self._obj(rkey, h5py.Group, "a Phase II run group")
+        return [ch for ch in PHASE2_CHANNELS if isinstance(g.get(ch), h5py.Dataset)]
+
     def phase2(self, session: str, run: str) -> Phase2Run:
         """One Phase II run, validated (see :class:`Phase2Run`)."""
         hours = self.session_hours(session)
@@ -261,6 +271,9 @@ class Measurements(_Reader):
         g = self._obj(rkey, h5py.Group, "a Phase II run group")
         out: dict[str, Any] = {}
         for ch, (unit, desc, cols) in PHASE2_CHANNELS.items():
+            if ch in OPTIONAL_PHASE2_CHANNELS and self.format_version >= 2 and f"{rkey}/{ch}" not in self._f:
+                out[ch], out[f"{ch}_fs_hz"] = None, None
+                continue
             sym = {"imu_acc": "n", "imu_gyro": "m", "position_cmd": "k"}[ch]
             what = f"a dataset of {desc} in {unit}, shape {_shape_pattern(_dims(cols, sym))}"
             arr, attrs = self._array(f"{rkey}/{ch}", what, _dims(cols, sym), unit)
@@ -296,7 +309,9 @@ class Measurements(_Reader):
 
     def validate(self) -> None:
         """Read and validate everything (e.g. after converting real recordings)."""
-        self.axis()
+        from analysis.dataset.axis import axis_of
+
+        axis_of(self)
         for c in self.phase1_captures():
             self.phase1(c)
         for s in self.phase2_sessions():
@@ -346,6 +361,19 @@ class Truth(_Reader):
     def sessions(self) -> list[str]:
         """Names of the Phase II sessions with true error motions, sorted by (hours, name)."""
         return _sorted_by_hours(self, "/phase2", self._names("/phase2"))
+
+    def strokes(self, name: str) -> dict[str, np.ndarray] | None:
+        """The true rest-to-rest travels of a session's runs per move (see
+        :data:`~analysis.dataset.schema.STROKE_TRUTH`), or None if the file has none."""
+        key = f"/phase2/{name}/strokes"
+        if key not in self._f:
+            return None
+        self._obj(key, h5py.Group, "a group of per-move arrays")
+        out, n = {}, None
+        for k, unit in STROKE_TRUTH.items():
+            out[k], _ = self._array(f"{key}/{k}", "a (moves,) array", ("moves",), unit, n, "len(speed_m_s)")
+            n = len(out[k])
+        return out
 
     def session(self, name: str) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
         """``(x_m (n,) m, E (6, n) m and rad in DOFS order, attrs)`` of a Phase II session."""

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 MEASUREMENTS_FORMAT = "ballscrew-twin/measurements"
 TRUTH_FORMAT = "ballscrew-twin/truth"
-FORMAT_VERSION = 1
-SUPPORTED_VERSIONS = (1,)
+FORMAT_VERSION = 2
+SUPPORTED_VERSIONS = (1, 2)
+"""Version 2 (this writer): ``position_cmd`` became optional (a stand-alone IMU records none).
+Version 1 files are read as before: every channel present."""
 
 #: Phase I channels: name -> (unit, description, columns); columns 1 means shape (n,).
 PHASE1_CHANNELS: dict[str, tuple[str, str, int]] = {
@@ -23,6 +25,10 @@ PHASE2_CHANNELS: dict[str, tuple[str, str, int]] = {
     "imu_gyro": ("rad/s", "IMU rate gyroscope (x, y, z)", 3),
     "position_cmd": ("m", "commanded carriage position", 1),
 }
+#: Phase II channels a run may lack from format_version 2 on: a recording of a stand-alone IMU
+#: (the paper's setup) has no controller position; the analysis then uses the IMU-based
+#: position (``twin backlash --position-reference imu``).
+OPTIONAL_PHASE2_CHANNELS = ("position_cmd",)
 DIAL_UNITS = {"hours": "h", "backlash_um": "um"}
 #: Largest magnitude a channel can physically hold (its unit as above): well beyond what the
 #: paper's sensors and drive can output (section III: accelerometers of ±50 g and less, a MEMS
@@ -53,6 +59,10 @@ DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
 DOF_UNITS = ("m", "m", "m", "rad", "rad", "rad")
 TIMELINE_REQUIRED = ("hours", "preload_N", "backlash_um")
 SESSION_TRUTH_REQUIRED = ("hours", "backlash_um", "origin_offset_m")
+#: ``truth.h5`` ``/phase2/<session>/strokes/<name>`` (format_version 2, optional): per move of a run
+#: in time order, name -> unit. The signed commanded speed, and the signed rest-to-rest travels of
+#: the carriage (D of the paper's Eq. 9), of the screw (its angle times lead/2π) and of the command.
+STROKE_TRUTH = {"speed_m_s": "m/s", "carriage_m": "m", "screw_m": "m", "command_m": "m"}
 
 #: Words that only the simulator may know. No group, dataset or attribute name of
 #: ``measurements.h5``, nor any string attribute value (the ``axis`` JSON included), may mention

@@ -12,6 +12,7 @@ import h5py
 import numpy as np
 
 from analysis.dataset.attrs import _dumps, write_attrs
+from analysis.dataset.axis import AxisDescription
 from analysis.dataset.leak_guard import _scan_truth_mentions
 from analysis.dataset.schema import (
     DIAL_UNITS,
@@ -19,10 +20,12 @@ from analysis.dataset.schema import (
     DOFS,
     FORMAT_VERSION,
     MEASUREMENTS_FORMAT,
+    OPTIONAL_PHASE2_CHANNELS,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
     PHYSICAL_RANGE,
     SESSION_TRUTH_REQUIRED,
+    STROKE_TRUTH,
     TIMELINE_REQUIRED,
     TRUTH_FORMAT,
     DatasetError,
@@ -80,6 +83,7 @@ def _channels(
     gkey: str,
     datasets: Mapping[str, Any],
     spec: Mapping[str, tuple[str, str, int]],
+    optional: tuple[str, ...] = (),
 ) -> dict[str, np.ndarray]:
     unknown = sorted(set(datasets) - set(spec))
     if unknown:
@@ -90,6 +94,8 @@ def _channels(
     out = {}
     for ch, (unit, desc, _) in spec.items():
         if ch not in datasets:
+            if ch in optional:
+                continue
             raise DatasetError(f"{label}: {gkey}/{ch} is missing; expected {desc} in {unit}")
         arr = np.asarray(datasets[ch])
         check_dtype(label, f"{gkey}/{ch}", arr.dtype)
@@ -105,12 +111,13 @@ def assemble_measurements(
     phase2: Iterable[tuple[str, Mapping[str, Any], Iterable[tuple]]] = (),
     dial: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
-    """Write ``measurements.h5`` (format_version 1) atomically: to ``path + ".tmp"``, then replace.
+    """Write ``measurements.h5`` (format_version 2) atomically: to ``path + ".tmp"``, then replace.
 
     Parameters
     ----------
     path : target file, usually ``<campaign>/measurements.h5``.
-    axis : nominal testbed description (JSON-serialisable dict), stored as JSON in ``/@axis``.
+    axis : nominal testbed description, validated by the axis contract
+        (:class:`~analysis.dataset.axis.AxisDescription`) and stored as JSON in ``/@axis``.
     phase1 : iterable of ``(capture_name, attrs, datasets)``; ``attrs`` holds ``hours`` (float,
         operating hours), ``sample`` (int, Phase I sample index), ``fs_hz`` (float) and optionally
         more scalars; ``datasets`` holds ``speed`` (n,) rad/s, ``torque`` (n,) N*m, ``acc1`` and
@@ -131,7 +138,7 @@ def assemble_measurements(
     """
     path = Path(path)
     label = str(path)
-    axis_json = _dumps("axis", dict(axis), allow_nan=False)
+    axis_json = _dumps("axis", AxisDescription.from_dict(dict(axis), label).to_dict(), allow_nan=False)
 
     def write(f: h5py.File) -> None:
         f.attrs["format"] = MEASUREMENTS_FORMAT
@@ -164,10 +171,12 @@ def assemble_measurements(
             for rname, rattrs, datasets, dattrs in runs:
                 rkey = f"{skey}/{rname}"
                 _check_new(label, rkey, gs, rname, "run")
-                arrays = _channels(label, rkey, datasets, PHASE2_CHANNELS)
+                arrays = _channels(label, rkey, datasets, PHASE2_CHANNELS, OPTIONAL_PHASE2_CHANNELS)
                 dattrs = dattrs or {}
                 chattrs = {}
                 for ch, (unit, _, cols) in PHASE2_CHANNELS.items():
+                    if ch not in arrays:
+                        continue
                     a = dict(dattrs.get(ch, {}))
                     sym = {"imu_acc": "n", "imu_gyro": "m", "position_cmd": "k"}[ch]
                     _check_shape(label, f"{rkey}/{ch}", arrays[ch].shape, _dims(cols, sym))
@@ -185,7 +194,7 @@ def assemble_measurements(
                 rattrs.update(_routine(label, rkey, rattrs))
                 gr = gs.create_group(rname)
                 write_attrs(gr, rattrs)
-                for ch in PHASE2_CHANNELS:
+                for ch in arrays:
                     _put(label, f"{rkey}/{ch}", gr, ch, arrays[ch], chattrs[ch])
         if dial is not None:
             hours, backlash = (np.asarray(a) for a in dial)
@@ -221,7 +230,7 @@ def assemble_truth(
     sessions: Iterable[tuple[str, Mapping[str, Any], np.ndarray, np.ndarray]] = (),
     effects: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write ``truth.h5`` (format_version 1) atomically: to ``path + ".tmp"``, then replace.
+    """Write ``truth.h5`` (format_version 2) atomically: to ``path + ".tmp"``, then replace.
 
     Parameters
     ----------
@@ -231,10 +240,12 @@ def assemble_truth(
     timeline : 1-D arrays of equal length (t,): ``hours`` (h), ``preload_N`` (N), ``backlash_um``
         (um), plus any others (e.g. ``axial_stiffness_N_per_m``, ``drag_torque_Nm``,
         ``temperature_rise_K``); a ``unit`` attribute is inferred from the name's unit suffix.
-    sessions : iterable of ``(session_name, attrs, x_m, E)``: ``attrs`` holds ``hours``,
+    sessions : iterable of ``(session_name, attrs, x_m, E[, strokes])``: ``attrs`` holds ``hours``,
         ``backlash_um``, ``origin_offset_m`` and optionally more scalars; ``x_m`` (n,) true
         carriage positions in m; ``E`` (6, n) true error motions E_XX, E_YX, E_ZX (m),
-        E_AX, E_BX, E_CX (rad).
+        E_AX, E_BX, E_CX (rad); ``strokes`` (optional) maps each of
+        :data:`~analysis.dataset.schema.STROKE_TRUTH` to a (moves,) array: the true rest-to-rest
+        travels of the session's runs, per move in time order (the runs share one motion).
     effects : effect parameters (JSON-serialisable dict), stored as JSON in ``/effects@json``.
     """
     path = Path(path)
@@ -267,7 +278,7 @@ def assemble_truth(
             unit = _unit_of(key)
             _put(label, f"/timeline/{key}", gt, key, arr, {"unit": unit} if unit else {})
         gp = f.create_group("phase2")
-        for name, attrs, x_m, E in sessions:
+        for name, attrs, x_m, E, *rest in sessions:
             skey = f"/phase2/{name}"
             _check_new(label, skey, gp, name, "session")
             attrs = dict(attrs)
@@ -282,6 +293,21 @@ def assemble_truth(
             write_attrs(g, attrs)
             _put(label, f"{skey}/x_m", g, "x_m", x_m, {"unit": "m"})
             _put(label, f"{skey}/E", g, "E", E, {"dofs": list(DOFS), "units": list(DOF_UNITS)})
+            strokes = dict(rest[0]) if rest and rest[0] else {}
+            if strokes:
+                gs = g.create_group("strokes")
+                m_ = None
+                for k in STROKE_TRUTH:
+                    if k not in strokes:
+                        raise DatasetError(f"{label}: {skey}/strokes/{k} is missing; expected a (moves,) array")
+                for k, arr in strokes.items():
+                    if k not in STROKE_TRUTH:
+                        raise DatasetError(f"{label}: {skey}/strokes/{k} is not a stroke truth array; "
+                                           f"expected only {', '.join(STROKE_TRUTH)}")
+                    arr = np.asarray(arr)
+                    check_dtype(label, f"{skey}/strokes/{k}", arr.dtype)
+                    m_ = _check_shape(label, f"{skey}/strokes/{k}", arr.shape, ("moves",), m_, "len(speed_m_s)")
+                    _put(label, f"{skey}/strokes/{k}", gs, k, arr, {"unit": STROKE_TRUTH[k]})
         ge = f.create_group("effects")
         ge.attrs["json"] = effects_json
 

@@ -43,8 +43,10 @@ def describe(path: str | Path) -> dict:
                 except DatasetError as e:
                     out["problems"].append(str(e))
                     continue
-                runs.append([r, {"imu_acc": run.imu_acc_fs_hz, "imu_gyro": run.imu_gyro_fs_hz,
-                                 "position_cmd": run.position_cmd_fs_hz}])
+                rates = {"imu_acc": run.imu_acc_fs_hz, "imu_gyro": run.imu_gyro_fs_hz}
+                if run.position_cmd is not None:
+                    rates["position_cmd"] = run.position_cmd_fs_hz
+                runs.append([r, rates])
             out["phase2"].append([s, runs])
     return out
 

@@ -37,8 +37,9 @@ from scipy import signal
 
 from analysis.dataset import DOFS, DatasetError, Measurements, open_measurements
 from analysis.phase1.features import FEATURE_NAMES, sample_features, summarise_capture, transient_templates
-from analysis.phase2.error_motions import session_error_motions
+from analysis.phase2.error_motions import sensor_model, session_error_motions
 from analysis.phase2.imu_runs import segment_run
+from analysis.phase2.strokes import imu_run_segments
 
 PARTS = ("cal", "heldout")
 PHASE1_CHANNELS = ("speed", "torque", "acc1_x", "acc1_y", "acc1_z", "acc2_x", "acc2_y", "acc2_z")
@@ -218,12 +219,15 @@ def _phase1(m: Measurements, part: str, b: _Builder) -> None:
 # Phase II
 
 
-def _phase2_run_stats(run) -> tuple[dict, np.ndarray]:
+def _phase2_run_stats(run, acc_bandwidth_hz: float = 300.0) -> tuple[dict, np.ndarray]:
     """Band powers per speed {speed_mm_s: (6, nb)} (acc x y z, gyro x y z) and the (6·4 + 6,)
     phase statistics (log RMS per channel and phase, then the dwell mean per channel)."""
-    seg = segment_run(run.position_cmd, run.position_cmd_fs_hz)
-    pos_t = np.arange(run.position_cmd.size) / run.position_cmd_fs_hz
-    v = np.gradient(run.position_cmd, pos_t)
+    if run.position_cmd is not None:
+        seg = segment_run(run.position_cmd, run.position_cmd_fs_hz)
+        pos_t = np.arange(run.position_cmd.size) / run.position_cmd_fs_hz
+        v = np.abs(np.gradient(run.position_cmd, pos_t)) > 1e-9
+    else:  # a stand-alone IMU: strokes from the accelerometer and the routine metadata
+        seg, moves = imu_run_segments(run, acc_bandwidth_hz, label=f"session {run.session}, run {run.run}, imu_acc")
     bands: list[dict[float, np.ndarray]] = []
     phase_stats, levels = [], []
     for arr, fs in ((run.imu_acc, run.imu_acc_fs_hz), (run.imu_gyro, run.imu_gyro_fs_hz)):
@@ -237,7 +241,12 @@ def _phase2_run_stats(run) -> tuple[dict, np.ndarray]:
                 per_speed.setdefault(round(mo.speed_m_s * 1e3, 1), []).append(
                     _band_powers(arr[sel], fs, PHASE2_BANDS_HZ, 256))
         bands.append({k: np.mean(p, axis=0) for k, p in per_speed.items()})
-        moving = np.interp(t, pos_t, (np.abs(v) > 1e-9).astype(float)) > 0.5
+        if run.position_cmd is not None:
+            moving = np.interp(t, pos_t, v.astype(float)) > 0.5
+        else:
+            moving = np.zeros(t.size, bool)
+            for t0, t1 in moves:
+                moving |= (t >= t0) & (t < t1)
         still = np.zeros(t.size, bool)
         for t0, t1 in seg.still:
             still |= (t >= t0) & (t <= t1)
@@ -308,7 +317,8 @@ def _phase2(m: Measurements, part: str, b: _Builder) -> None:
                 f"{m.label}: Phase II session {s} has {len(m.phase2_runs(s))} run(s); the "
                 "diagnosis needs at least 2 per session (even ones to fit, odd ones held out)")
         hours = m.session_hours(s)
-        stats = [_phase2_run_stats(m.phase2(s, r)) for r in runs]
+        acc_bw = sensor_model(m).acc_bandwidth_hz
+        stats = [_phase2_run_stats(m.phase2(s, r), acc_bw) for r in runs]
         speeds = sorted(stats[0][0])
         for sp in speeds:
             p = np.mean([st[0][sp] for st in stats if sp in st[0]], axis=0)  # (6, nb)

@@ -20,16 +20,20 @@ from sklearn.neural_network import MLPRegressor
 
 from analysis.phase1 import limits
 from analysis.phase1.detectors import PhaseIDetector
+from analysis.registry import register
 
 __all__ = ["TorqueAutoencoder"]
 
 
+@register("detectors", "autoencoder", label="Autoencoder", color="tab:brown", marker="P")
 class TorqueAutoencoder(PhaseIDetector):
     """Autoencoder novelty detector; same contract as :class:`~analysis.phase1.detectors.PhaseIDetector`.
 
     X: (N, m) torque windows (N*m), one row per sample. Fitted: ``mlp_``, ``mean_`` (m,),
     ``scale_`` (float), ``threshold_``.
     """
+
+    phase1_input = "torque_windows"
 
     def __init__(self, hidden_units: int = 10, alpha: float = 1.0, max_iter: int = 3000,
                  random_state: int = 0):

@@ -1,5 +1,5 @@
 """The ``twin detect`` workflow: reference features -> Fisher selection -> campaign features ->
-six detectors -> scores against the injected onset -> files in OUT.
+the registered detectors -> scores against the injected onset -> files in OUT.
 
 Files written to OUT, each as soon as it is computed (so a failure later loses nothing before it):
 
@@ -7,7 +7,7 @@ Files written to OUT, each as soon as it is computed (so a failure later loses n
 - ``features.csv``: the campaign's raw features (or ``features.partial.csv`` with the complete
   samples before a capture that cannot be read; the error is then raised);
 - ``detection.json`` (schema of issue 3), ``detection_details.json`` (scores against the onset,
-  parameters), ``detection.png`` (six panels like the paper's Fig. 6).
+  parameters), ``detection.png`` (one panel per detector like the paper's Fig. 6).
 
 The detectors see ``measurements.h5`` only; ``truth.h5`` of the campaign is read for scoring
 (``onset_hours``) and ``truth.h5`` of the reference for its condition labels.
@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis import registry
 from analysis.dataset import open_measurements, open_truth
 from analysis.files import write_json
 from analysis.phase1 import pipeline
@@ -53,20 +54,27 @@ def _extract_to_csv(measurements: Path, stem: Path):
     return table
 
 
-def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pipeline.METHODS,
+def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] | None = None,
         consecutive: int = 1, n_baseline: int = pipeline.N_BASELINE, fraction: float = 0.9,
         random_state: int = 0) -> dict:
     """Run the workflow; returns the details dict (also written as ``detection_details.json``).
+
+    ``methods``: registered detector names or ``module:Class`` (:mod:`analysis.registry`);
+    default every registered detector, in registration order.
 
     Raises :class:`DetectError`, :class:`analysis.dataset.DatasetError` or
     :class:`analysis.phase1.pipeline.ExtractionError` (all ``ValueError``) on bad input.
     """
     campaign, reference, out = Path(campaign), Path(reference), Path(out)
-    unknown = [m for m in methods if m not in pipeline.METHODS]
-    if unknown:
-        raise DetectError(f"--method {', '.join(unknown)} is unknown; expected one of "
-                          f"{', '.join(pipeline.METHODS)}")
-    methods = [m for m in pipeline.METHODS if m in methods]
+    try:
+        specs = list(registry.names("detectors")) if not methods else list(methods)
+        entries = [registry.get("detectors", m) for m in specs]
+    except registry.RegistryError as exc:
+        raise DetectError(f"--method: {exc}") from None
+    seen: dict[str, str] = {}
+    for spec, e in zip(specs, entries, strict=True):
+        seen.setdefault(e.name, spec)
+    methods = list(seen.values())
     _require(campaign / "measurements.h5", "the campaign's measurements.h5")
     _require(reference / "measurements.h5", "the reference data set's measurements.h5")
     _require(reference / "truth.h5", "the reference data set's truth.h5 (its condition labels)")
@@ -113,13 +121,13 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] = pip
         "campaign": str(campaign), "reference": str(reference), "onset_hours": onset,
         "n_samples": len(table.hours), "n_baseline": n_baseline, "consecutive": consecutive,
         "selected_features": selection["selected"],
-        "methods": {m: {**asdict(scores[m]), "threshold": results[m]["threshold"],
+        "methods": {m: {"label": results[m]["label"], **asdict(scores[m]),
+                        "threshold": results[m]["threshold"],
                         "n_components": getattr(results[m]["detector"], "n_components_", None)}
                     for m in results},
     }
     write_json(out / "detection_details.json", details)
-    plot_fig6(out / "detection.png", table.hours, results, pipeline.PAPER_NAMES, n_baseline,
-                     onset, detections)
+    plot_fig6(out / "detection.png", table.hours, results, n_baseline, onset, detections)
     return details
 
 
@@ -128,11 +136,12 @@ def _num(x: float | None) -> float | None:
 
 
 def detection_json(hours: np.ndarray, results: dict[str, dict], detections: dict[str, float | None]) -> dict:
-    """The ``detection.json`` object: ``{"methods": {NAME: {"detection_hours": float or null,
-    "threshold": float, "scores": [...], "hours": [...]}}}``, scores oriented so that above the
+    """The ``detection.json`` object: ``{"methods": {NAME: {"label": str, "detection_hours": float
+    or null, "threshold": float, "scores": [...], "hours": [...]}}}``, scores oriented so that above the
     threshold is an alarm (selected features, delays and false alarms go to
     ``detection_details.json``). results: {name: {"scores" (n,), "threshold"}}."""
     return {"methods": {
-        name: {"detection_hours": _num(detections[name]), "threshold": float(r["threshold"]),
+        name: {"label": r.get("label", name), "detection_hours": _num(detections[name]),
+               "threshold": float(r["threshold"]),
                "scores": [float(v) for v in r["scores"]], "hours": [float(h) for h in hours]}
         for name, r in results.items()}}

@@ -28,15 +28,24 @@ from sklearn.mixture import GaussianMixture
 from sklearn.svm import OneClassSVM
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from analysis.params import InheritedParams
 from analysis.phase1 import limits
+from analysis.registry import register
 
 __all__ = ["GMMMD", "OCSVM", "PCAT2", "SOMMQE", "IForest", "PhaseIDetector"]
 
 
-class PhaseIDetector(BaseEstimator):
-    """Base class: validation, moving average, ``predict`` (1 alarm / 0 normal)."""
+class PhaseIDetector(InheritedParams, BaseEstimator):
+    """Base class: validation, moving average, ``predict`` (1 alarm / 0 normal).
+
+    ``phase1_input``: what the pipeline feeds ``fit`` and ``decision_function``: "features"
+    (the baseline-standardised, Fisher-selected features) or "torque_windows" (the averaged
+    torque windows of the autoencoder). ``get_params`` includes the parameters of parent classes
+    when a subclass's ``__init__`` forwards ``**kwargs`` (:class:`analysis.params.InheritedParams`).
+    """
 
     _min_samples = 2
+    phase1_input = "features"
 
     def fit(self, X, y=None):
         X = validate_data(self, X, dtype=np.float64)
@@ -80,6 +89,7 @@ def _pca(X: np.ndarray, variance: float) -> PCA:
     return PCA(n_components=a, svd_solver="full").fit(X)
 
 
+@register("detectors", "pca_t2", label="PCA-T²", color="tab:blue", marker="o", default=True)
 class PCAT2(PhaseIDetector):
     """PCA with Hotelling's T^2 (paper section IV, Eq. 2; NIST/SEMATECH e-Handbook §6.5.4.3).
 
@@ -109,6 +119,7 @@ class PCAT2(PhaseIDetector):
         return np.sum(t ** 2 / lam, axis=1)
 
 
+@register("detectors", "gmm_md", label="GMM-MD", color="tab:orange", marker="s")
 class GMMMD(PhaseIDetector):
     """One-component Gaussian mixture on the PCs, Mahalanobis distance, beta limit (paper (i)).
 
@@ -146,6 +157,7 @@ class GMMMD(PhaseIDetector):
         return np.einsum("ij,jk,ik->i", d, self.gmm_.precisions_[0], d)
 
 
+@register("detectors", "som_mqe", label="SOM-MQE", color="tab:green", marker="^")
 class SOMMQE(PhaseIDetector):
     """Self-organising map, minimum quantisation error, three-sigma limit (paper (ii)).
 
@@ -179,6 +191,7 @@ class SOMMQE(PhaseIDetector):
         return d.min(axis=1)
 
 
+@register("detectors", "iforest", label="Isolation Forest", color="tab:red", marker="D")
 class IForest(PhaseIDetector):
     """Isolation Forest with the 0.5 anomaly-score threshold (paper (iii); Liu et al. 2008).
 
@@ -201,6 +214,7 @@ class IForest(PhaseIDetector):
         return -self.forest_.score_samples(X)
 
 
+@register("detectors", "ocsvm", label="One-class SVM", color="tab:purple", marker="v")
 class OCSVM(PhaseIDetector):
     """One-class SVM with a linear kernel, threshold 0, moving average of 4 (paper (iv)).
 

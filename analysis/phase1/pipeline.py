@@ -20,9 +20,8 @@ import h5py
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from analysis import registry
 from analysis.dataset import DatasetError, open_measurements, open_truth
-from analysis.phase1.autoencoder import TorqueAutoencoder
-from analysis.phase1.detectors import GMMMD, OCSVM, PCAT2, SOMMQE, IForest
 from analysis.phase1.features import (
     FEATURE_NAMES,
     CaptureSummary,
@@ -35,9 +34,7 @@ from analysis.phase1.selection import fisher_scores, select_cumulative
 from analysis.phase1.standardise import BaselineScaler
 
 __all__ = [
-    "METHODS",
     "N_BASELINE",
-    "PAPER_NAMES",
     "ExtractionError",
     "FeatureTable",
     "extract",
@@ -47,10 +44,6 @@ __all__ = [
     "select_features",
 ]
 
-#: Method names of the CLI and ``detection.json``, in the order of the paper's Fig. 6.
-METHODS = ("pca_t2", "gmm_md", "som_mqe", "iforest", "ocsvm", "autoencoder")
-PAPER_NAMES = {"pca_t2": "PCA-T²", "gmm_md": "GMM-MD", "som_mqe": "SOM-MQE",
-               "iforest": "Isolation Forest", "ocsvm": "One-class SVM", "autoencoder": "Autoencoder"}
 N_BASELINE = 15  # paper: "The first fifteen samples ... are used as baseline data"
 
 
@@ -180,32 +173,27 @@ def select_features(X: np.ndarray, labels: np.ndarray, fraction: float = 0.9) ->
     return scores, select_cumulative(scores, fraction)
 
 
-def make_detector(name: str, random_state: int = 0):
-    """A fresh detector with the paper's settings; ``name`` one of :data:`METHODS`."""
-    if name == "pca_t2":
-        return PCAT2()
-    if name == "gmm_md":
-        return GMMMD(random_state=random_state)
-    if name == "som_mqe":
-        return SOMMQE(random_state=random_state)
-    if name == "iforest":
-        return IForest(random_state=random_state)
-    if name == "ocsvm":
-        return OCSVM()
-    if name == "autoencoder":
-        return TorqueAutoencoder(random_state=random_state)
-    raise ValueError(f"method {name!r} is unknown; expected one of {', '.join(METHODS)}")
+def make_detector(name: str, random_state: int = 0, **params):
+    """A fresh detector: ``name`` a registered detector (:mod:`analysis.registry`, the paper's
+    settings for the six built-ins) or ``module:Class``; ``random_state`` is passed if the
+    detector takes one; ``params`` are further constructor parameters."""
+    if registry.accepts(registry.get("detectors", name).factory, "random_state"):
+        params.setdefault("random_state", random_state)
+    return registry.create("detectors", name, **params)
 
 
-def run_detectors(table: FeatureTable, selected: Sequence[int], methods: Sequence[str] = METHODS,
+def run_detectors(table: FeatureTable, selected: Sequence[int], methods: Sequence[str] | None = None,
                   n_baseline: int = N_BASELINE, random_state: int = 0) -> dict[str, dict]:
     """Fit every method on the first ``n_baseline`` samples and score all samples.
 
     Features are standardised with the baseline mean and standard deviation; NaN features (a
     sample without a transient of one direction) are set to the baseline mean (0). The
-    autoencoder uses ``table.ae`` instead of the features. Returns {method: {"scores" (n,),
-    "threshold", "detector"}}.
+    detectors whose ``phase1_input`` is "torque_windows" (the autoencoder) get ``table.ae``
+    instead of the features. ``methods``: registered names or ``module:Class`` (default: every
+    registered detector). Returns {name: {"scores" (n,), "threshold", "detector", "label"}}, keyed
+    by the registered name (the class name for ``module:Class``).
     """
+    methods = registry.names("detectors") if methods is None else methods
     n = len(table.hours)
     if n <= n_baseline:
         raise ValueError(f"{table.source}: {n} Phase I samples; expected more than the "
@@ -216,8 +204,10 @@ def run_detectors(table: FeatureTable, selected: Sequence[int], methods: Sequenc
     Z = np.nan_to_num(Z, nan=0.0)[:, list(selected)]
     out = {}
     with threadpool_limits(1):  # tiny matrices: BLAS threads only contend
-        for name in methods:
-            out[name] = _fit_score(name, table, Z, n_baseline, random_state)
+        for spec in methods:
+            entry = registry.get("detectors", spec)
+            out[entry.name] = {**_fit_score(spec, table, Z, n_baseline, random_state),
+                               "label": entry.label}
     return out
 
 
@@ -225,12 +215,12 @@ def _fit_score(name: str, table: FeatureTable, Z: np.ndarray, n_baseline: int, r
     """Fit one detector on the baseline rows and score every row."""
     det = make_detector(name, random_state)
     data = Z
-    if name == "autoencoder":
+    if getattr(det, "phase1_input", "features") == "torque_windows":
         data = table.ae
         if data.shape[1] == 0 or np.isnan(data).any():
             bad = int(np.flatnonzero(np.isnan(data).any(axis=1))[0]) if data.shape[1] else 0
             raise ValueError(f"{table.source}: Phase I sample {int(table.samples[bad])} has no "
-                             "complete acceleration window of torque; the autoencoder needs one")
+                             f"complete acceleration window of torque; {name} needs one")
     det.fit(data[:n_baseline])
     return {"scores": det.decision_function(data), "threshold": float(det.threshold_),
             "detector": det}

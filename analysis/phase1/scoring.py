@@ -1,10 +1,12 @@
 """Scoring of Phase I detection against the injected fault onset (``twin score`` in docs/usage.md).
 
-Alarms are counted on the samples after the baseline only (the baseline is what the detector was
-fitted on). The detection hour is the hour of the first alarm after the baseline, or, with
-``consecutive`` = k > 1, the hour of the first alarm of the first run of k consecutive alarms.
-Delay = detection hour - onset hours. False alarms: alarms on post-baseline samples at or before
-the onset; baseline alarms are reported separately.
+One definition of "detected", used by ``twin detect``, ``score.json``, the sweep tables, the ROC
+curves and the report: the detection is the **first alarm after the injected onset** (with
+``consecutive`` = k > 1, the first alarm of the first run of k consecutive alarms that starts
+after the onset), never on a baseline sample (the baseline is what the detector was fitted on).
+Alarms on post-baseline samples at or before the onset are **false alarms**; baseline alarms are
+reported separately. Without an onset (a real machine) the detection is the first alarm after
+the baseline. Delay = detection hour - onset hours (> 0 by construction).
 """
 
 from __future__ import annotations
@@ -48,7 +50,11 @@ def score_method(hours: np.ndarray, scores: np.ndarray, threshold: float, n_base
     """Score one method. hours (n,) h, scores (n,), alarm where score > threshold."""
     hours = np.asarray(hours, dtype=float)
     alarm = np.asarray(scores) > threshold
-    i = detection_index(alarm, n_baseline, consecutive)
+    start = n_baseline
+    if onset_hours is not None:
+        after = np.flatnonzero(hours > onset_hours)
+        start = max(start, int(after[0]) if after.size else len(hours))
+    i = detection_index(alarm, start, consecutive)
     det = float(hours[i]) if i is not None else None
     test = np.arange(len(hours)) >= n_baseline
     if onset_hours is None:

@@ -60,9 +60,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from analysis.params import InheritedParams
 from analysis.phase2.shifts import THRESHOLD, ShiftResult, shift_between
 from analysis.phase2.traces import DOFS, DirectionalTraces, SessionErrorMotions
 from analysis.phase2.winfilt import CUTOFF_WAVELENGTH_M, winfilt
+from analysis.registry import register
 
 SIGMA = 4
 """Weighting exponent σ of Eqs. 6 and 8 (paper section V)."""
@@ -140,8 +142,15 @@ def weighted_sum(values, gammas, sigma: int = SIGMA) -> float:
     return float(np.sum(w[ok] * v[ok]) / np.sum(w[ok]))
 
 
-class BacklashEstimator(BaseEstimator):
+@register("backlash_estimators", "shift", label="Signal shifts (Eq. 6)", color="tab:blue",
+          marker="o", default=True)
+class BacklashEstimator(InheritedParams, BaseEstimator):
     """Change of backlash relative to a reference session (scikit-learn style).
+
+    Registered as the backlash estimator ``shift`` (the default of ``twin backlash``).
+    ``primary_estimate`` ("shift" or "pitch") names the estimate that is *the* estimate of the
+    class: the Kalman trend, the prognosis and the score use it. ``get_params`` keeps the
+    parameters of this class in a subclass whose ``__init__`` forwards ``**kwargs``.
 
     ``fit(reference)`` takes the first session (a :class:`SessionErrorMotions`, whose ``slow``
     traces are used, or :class:`DirectionalTraces`); ``estimate(session)`` returns a
@@ -166,6 +175,8 @@ class BacklashEstimator(BaseEstimator):
         stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
         travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).
     """
+
+    primary_estimate = "shift"
 
     def __init__(self, *, cutoff_wavelength_m: float = CUTOFF_WAVELENGTH_M,
                  window_definition: str = "iso50", threshold: float = THRESHOLD,
@@ -274,6 +285,24 @@ class BacklashEstimator(BaseEstimator):
                          for e in (self.estimate(x) for x in X)]).reshape(-1, 2)
 
 
+@register("backlash_estimators", "pitch", label="Perceived pitch (Eq. 9)", color="tab:orange",
+          marker="s")
+class PitchBacklash(BacklashEstimator):
+    """The same estimates as :class:`BacklashEstimator`, with the perceived pitch (Eqs. 8–9) as
+    the primary estimate (trend, prognosis, score). Registered as ``pitch``."""
+
+    primary_estimate = "pitch"
+
+
+def primary_m(s: SessionBacklash, estimator) -> float:
+    """The estimator's primary change of backlash of session ``s`` (m): by shifts or by pitch."""
+    which = getattr(estimator, "primary_estimate", "shift")
+    if which not in ("shift", "pitch"):
+        raise ValueError(f"{type(estimator).__qualname__}.primary_estimate = {which!r}; "
+                         "expected 'shift' or 'pitch'")
+    return s.delta_backlash_shift_m if which == "shift" else s.delta_backlash_pitch_m
+
+
 @dataclass
 class CampaignBacklash:
     """Backlash estimates of every session of a campaign against its first usable session.
@@ -335,25 +364,44 @@ def rezero_on_baseline(sessions: list, k: int) -> tuple[list, tuple[float, float
     return out, (off_shift, off_pitch)
 
 
-def estimator_for(m, **params) -> BacklashEstimator:
-    """The paper's estimator for the axis of an open ``measurements.h5``: stroke L and lead p from
-    its ``axis`` description (``travel_mm``, ``lead_mm``) where given; ``params``: further
-    :class:`BacklashEstimator` parameters (e.g. ``stationary="E_XX"``)."""
-    from analysis.dataset import DatasetError
+def estimator_for(m, spec: str | None = None, **params) -> BacklashEstimator:
+    """A backlash estimator for the axis of an open ``measurements.h5``: when the estimator takes
+    them, travel L and lead p of Eq. 9 from the axis contract (``/@axis.travel_mm``,
+    ``/@axis.lead_mm``, required: a missing one raises
+    :class:`analysis.dataset.axis.MissingAxisKey` naming it); ``spec``: a registered backlash
+    estimator or ``module:Class`` (default: the registered default, the paper's); ``params``:
+    further parameters (e.g. ``stationary="E_XX"``), which take precedence."""
+    from analysis import registry
+    from analysis.dataset.axis import axis_of
 
-    axis = m.axis() or {}
+    kind = "backlash_estimators"
+    entry = registry.get(kind, spec) if spec else registry.default(kind)
+    axis = axis_of(m)
+    need = "the Phase II backlash estimate (Eq. 9: travel L and lead p)"
     for key, name in (("travel_mm", "travel_m"), ("lead_mm", "lead_m")):
-        if key not in axis:
-            continue
-        v = axis[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-            raise DatasetError(f"{m.label}: /@axis {key} is {v!r}; expected a finite number of mm > 0")
-        params.setdefault(name, float(v) * 1e-3)
-    return BacklashEstimator(**params)
+        if name not in params and registry.accepts(entry.factory, name):
+            params[name] = axis.require(key, need) * 1e-3
+    return registry.create(kind, spec or entry.name, **params)
+
+
+def session_error_motions_task(path: str, session: str, on_bad_run: str,
+                               error_motion_kw: dict) -> tuple[SessionErrorMotions | None, str]:
+    """The error motions of one session read from the ``measurements.h5`` at ``path``: the piece
+    of :func:`campaign_backlash` a worker process runs (picklable arguments, opens the file
+    itself). Returns ``(error motions, "")``, or ``(None, message)`` when the session cannot be
+    used (the :class:`analysis.dataset.DatasetError` it raised)."""
+    from analysis.dataset import DatasetError, open_measurements
+    from analysis.phase2.error_motions import session_error_motions
+
+    with open_measurements(path) as m:
+        try:
+            return session_error_motions(m, session, on_bad_run=on_bad_run, **error_motion_kw), ""
+        except DatasetError as exc:
+            return None, str(exc)
 
 
 def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimator | None = None,
-                      progress=None, baseline_sessions: int = 1,
+                      progress=None, baseline_sessions: int = 1, map_sessions=None,
                       **error_motion_kw) -> CampaignBacklash:
     """Error motions (:func:`analysis.phase2.error_motions.session_error_motions`) and backlash
     estimates for every Phase II session of an open ``measurements.h5``.
@@ -362,30 +410,47 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
         m: :class:`analysis.dataset.Measurements`.
         on_bad_run: "skip" (a bad run is left out and reported) or "raise" (the first bad run
             raises :class:`analysis.dataset.DatasetError` naming session, run and channel).
-        estimator: default ``BacklashEstimator`` with L and p from the file's ``axis``
-            description (``travel_mm``, ``lead_mm``) when present.
+        estimator: default :func:`estimator_for` ``m`` (L and p from the axis contract's
+            ``travel_mm`` and ``lead_mm``, required).
         progress: optional callable(done, total, session).
         baseline_sessions: leading sessions that define zero change (:func:`rezero_on_baseline`).
+        map_sessions: optional ``map_sessions(fn, args) -> [fn(*a) for a in args]`` (in order)
+            that runs :func:`session_error_motions_task` for the sessions elsewhere (processes,
+            a cluster: the caller's executor); None computes them here, one after the other.
+            The results are the same either way.
     Raises:
         DatasetError: a bad run with ``on_bad_run="raise"``, no Phase II session, or no usable
             run in any session.
     """
     from analysis.dataset import DatasetError
-    from analysis.phase2.error_motions import session_error_motions
 
     names = m.phase2_sessions()
     if not names:
         raise DatasetError(f"{m.label}: /phase2 has no session; expected at least two sessions")
     if estimator is None:
         estimator = estimator_for(m)
+    if map_sessions is None:
+        from analysis.phase2.error_motions import session_error_motions
+
+        def outcome(name):
+            try:
+                return session_error_motions(m, name, on_bad_run=on_bad_run, **error_motion_kw), ""
+            except DatasetError as exc:
+                if on_bad_run == "raise":
+                    raise
+                return None, str(exc)
+
+        outcomes = (outcome(name) for name in names)
+    else:
+        outcomes = map_sessions(session_error_motions_task,
+                                [(str(m.path.resolve()), name, on_bad_run, error_motion_kw)
+                                 for name in names])
     ems, skipped_runs, skipped_sessions = [], [], []
-    for i, name in enumerate(names):
-        try:
-            em = session_error_motions(m, name, on_bad_run=on_bad_run, **error_motion_kw)
-        except DatasetError as exc:
+    for i, (name, (em, why)) in enumerate(zip(names, outcomes, strict=True)):
+        if em is None:
             if on_bad_run == "raise":
-                raise
-            skipped_sessions.append((name, str(exc)))
+                raise DatasetError(why)
+            skipped_sessions.append((name, why))
         else:
             ems.append(em)
             skipped_runs.extend((name, run, why) for run, why in em.skipped)

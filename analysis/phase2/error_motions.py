@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis.dataset import DatasetError, Measurements
+from analysis.dataset.axis import run_routine
 from analysis.phase2 import fusion
 from analysis.phase2.imu_runs import (
     BadRunError,
@@ -48,7 +49,7 @@ from analysis.phase2.imu_runs import (
 from analysis.phase2.strokes import imu_segments
 from analysis.phase2.traces import DirectionalTraces, SessionErrorMotions
 
-__all__ = ["SensorModel", "sensor_model", "session_error_motions"]
+__all__ = ["SensorModel", "resolve_position_reference", "sensor_model", "session_error_motions"]
 
 MICRO_G = 9.80665e-6  # m/s² per µg
 #: Zero-phase low-pass before gridding: cutoff as a fraction of each sensor's bandwidth, at most
@@ -75,6 +76,21 @@ PRIORS = (fusion.Prior(20e-6), fusion.Prior(5e-6), fusion.Prior(5e-6),
 POSITION_REFERENCES = ("command", "imu")
 
 
+def resolve_position_reference(m: Measurements, position_reference: str) -> str:
+    """``"auto"`` becomes "command" when the first Phase II run records ``position_cmd`` and "imu"
+    when it does not (a stand-alone IMU, format_version 2); other values are checked and returned."""
+    if position_reference == "auto":
+        sessions = m.phase2_sessions()
+        runs = m.phase2_runs(sessions[0]) if sessions else []
+        if not runs:
+            return "command"
+        return "command" if "position_cmd" in m.phase2_channels(sessions[0], runs[0]) else "imu"
+    if position_reference not in POSITION_REFERENCES:
+        raise ValueError(f"position_reference is {position_reference!r}; expected 'auto' or one of "
+                         f"{', '.join(POSITION_REFERENCES)}")
+    return position_reference
+
+
 @dataclass(frozen=True)
 class SensorModel:
     """What the estimator assumes about the IMU (datasheet figures, SI).
@@ -93,29 +109,19 @@ class SensorModel:
 
 
 def sensor_model(m: Measurements) -> SensorModel:
-    """The IMU figures from the file's ``axis`` description (``sensors.imu_accelerometer`` /
+    """The IMU figures from the file's axis contract (``sensors.imu_accelerometer`` /
     ``imu_gyroscope``: ``bandwidth_hz``, ``noise_ug_per_rthz`` / ``noise_urad_s_per_rthz``), the
-    paper's figures (section III) where absent or zero. Delays follow from the bandwidths."""
+    paper's figures (section III) where absent. Delays follow from the bandwidths."""
+    from analysis.dataset.axis import axis_of
+
     d = SensorModel()
-    try:
-        sensors = m.axis().get("sensors", {}) or {}
-    except DatasetError:
-        sensors = {}
-    acc = sensors.get("imu_accelerometer", {}) or {}
-    gyro = sensors.get("imu_gyroscope", {}) or {}
-
-    def pos(x, default):
-        try:
-            x = float(x)
-        except (TypeError, ValueError):
-            return default
-        return x if math.isfinite(x) and x > 0 else default
-
-    abw = pos(acc.get("bandwidth_hz"), d.acc_bandwidth_hz)
-    gbw = pos(gyro.get("bandwidth_hz"), d.gyro_bandwidth_hz)
+    axis = axis_of(m)
+    abw = axis.get("sensors.imu_accelerometer.bandwidth_hz", d.acc_bandwidth_hz)
+    gbw = axis.get("sensors.imu_gyroscope.bandwidth_hz", d.gyro_bandwidth_hz)
+    acc_noise = axis.get("sensors.imu_accelerometer.noise_ug_per_rthz", 0.0) or d.acc_noise / MICRO_G
+    gyro_noise = axis.get("sensors.imu_gyroscope.noise_urad_s_per_rthz", 0.0) or d.gyro_noise * 1e6
     return SensorModel(
-        acc_noise=pos(acc.get("noise_ug_per_rthz"), 7.0) * MICRO_G,
-        gyro_noise=pos(gyro.get("noise_urad_s_per_rthz"), 35.0) * 1e-6,
+        acc_noise=acc_noise * MICRO_G, gyro_noise=gyro_noise * 1e-6,
         acc_bandwidth_hz=abw, gyro_bandwidth_hz=gbw,
         acc_delay_s=butterworth2_delay_s(abw), gyro_delay_s=butterworth2_delay_s(gbw))
 
@@ -150,8 +156,13 @@ def _prepare_run(m: Measurements, session: str, run: str, expected: tuple[float,
     r = load_run(m, session, run)
     where = f"{m.label}: session {session}, run {run}"
     if position_reference == "imu":
-        seg = imu_segments(r.imu_acc[:, 0], r.imu_acc_fs_hz, r.speeds_mm_s or (), r.routine,
+        routine, speeds = run_routine(m, r)
+        seg = imu_segments(r.imu_acc[:, 0], r.imu_acc_fs_hz, speeds, routine,
                            (sm or SensorModel()).acc_bandwidth_hz, label=f"{where}, channel imu_acc")
+    elif r.position_cmd is None:
+        raise BadRunError(f"{where}, channel position_cmd: absent (a recording of a stand-alone IMU); "
+                          "expected the controller's position for the command position reference, or "
+                          "analyse with the IMU-based one (--position-reference imu)")
     else:
         seg = segment_run(r.position_cmd, r.position_cmd_fs_hz)
     if expected is None:
@@ -306,7 +317,7 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                           pool_wavelength_m: float | None = 0.05,
                           sensors: SensorModel | None = None,
                           runs: Sequence[str] | None = None,
-                          position_reference: str = "command") -> SessionErrorMotions:
+                          position_reference: str = "auto") -> SessionErrorMotions:
     """Error motions of one Phase II session, averaged over its runs.
 
     Args:
@@ -330,7 +341,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
         sensors: IMU figures; default :func:`sensor_model` of ``m``.
         runs: the run names to use (default all runs of the session); an unknown name raises
             :class:`analysis.dataset.DatasetError` naming it.
-        position_reference: "command": positions are the controller's ``position_cmd``;
+        position_reference: "auto" (default): "command" if the runs record ``position_cmd``, else
+            "imu". "command": positions are the controller's ``position_cmd``;
             "imu": the IMU-based position, strokes found from the accelerometer and placed on the
             routine's nominal trapezoid (the run's metadata; ``position_cmd`` is not read).
 
@@ -340,9 +352,7 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
     """
     if on_bad_run not in ("raise", "skip"):
         raise ValueError(f"on_bad_run is {on_bad_run!r}; expected 'raise' or 'skip'")
-    if position_reference not in POSITION_REFERENCES:
-        raise ValueError(f"position_reference is {position_reference!r}; expected one of "
-                         f"{', '.join(POSITION_REFERENCES)}")
+    position_reference = resolve_position_reference(m, position_reference)
     if not (dx_m > 0 and slow_dx_m > 0):
         raise ValueError(f"grid steps must be > 0 m, got dx_m={dx_m!r}, slow_dx_m={slow_dx_m!r}")
     sm = sensors or sensor_model(m)

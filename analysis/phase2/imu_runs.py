@@ -132,7 +132,8 @@ def segment_run(position_cmd: np.ndarray, fs_hz: float, *, settle_s: float = 0.2
 
 def load_run(m: Measurements, session: str, run: str) -> Phase2Run:
     """Read a run, turning any reader error into :class:`BadRunError` naming session and run,
-    and checking that the IMU channels cover the commanded motion (a run cut short)."""
+    and checking that the IMU channels cover the commanded motion (a run cut short; without
+    ``position_cmd``, that both IMU channels cover the same time)."""
     try:
         r = m.phase2(session, run)
     except DatasetError as e:
@@ -140,7 +141,11 @@ def load_run(m: Measurements, session: str, run: str) -> Phase2Run:
         if msg.startswith(f"{m.label}: "):
             msg = msg[len(m.label) + 2:]
         raise BadRunError(f"{m.label}: session {session}, run {run}: {msg}") from None
-    t_cmd = (r.position_cmd.size - 1) / r.position_cmd_fs_hz
+    if r.position_cmd is not None:
+        t_cmd, ref = (r.position_cmd.size - 1) / r.position_cmd_fs_hz, "position_cmd"
+    else:  # a stand-alone IMU: its two channels must cover the same time (a cut one is short)
+        t_cmd, ref = max((r.imu_acc.shape[0] - 1) / r.imu_acc_fs_hz,
+                         (r.imu_gyro.shape[0] - 1) / r.imu_gyro_fs_hz), "the other IMU channel"
     for name in ("imu_acc", "imu_gyro"):
         arr = getattr(r, name)
         fs = getattr(r, f"{name}_fs_hz")
@@ -153,7 +158,7 @@ def load_run(m: Measurements, session: str, run: str) -> Phase2Run:
         if t_end < t_cmd - 0.05:
             raise BadRunError(
                 f"{m.label}: session {session}, run {run}, channel {name}: run cut short, "
-                f"{name} ends at {t_end:.3f} s but position_cmd at {t_cmd:.3f} s; expected the "
+                f"{name} ends at {t_end:.3f} s but {ref} at {t_cmd:.3f} s; expected the "
                 f"IMU to cover the whole commanded motion")
     return r
 

@@ -32,7 +32,8 @@ import numpy as np
 
 from analysis.phase2.imu_runs import BadRunError, Motion, RunSegments
 
-__all__ = ["Pulse", "StrokeError", "find_pulses", "half_velocity_delay", "imu_segments", "routine_pulses"]
+__all__ = ["Pulse", "StrokeError", "find_pulses", "half_velocity_delay", "imu_segments", "routine_pulses",
+           "imu_run_segments"]
 
 
 class StrokeError(BadRunError):
@@ -230,3 +231,16 @@ def imu_segments(acc_x: np.ndarray, fs_hz: float, speeds_mm_s: tuple[float, ...]
     bounds.append((pulses[-1].end_s + settle_s, t_end))
     still = tuple((a, b) for a, b in bounds if b - a > 0.05)
     return RunSegments(tuple(motions), still)
+
+
+
+def imu_run_segments(run, acc_bandwidth_hz: float, *, label: str = "imu_acc"
+                     ) -> tuple[RunSegments, list[tuple[float, float]]]:
+    """:func:`imu_segments` of a Phase II run (an :class:`analysis.dataset.Phase2Run`, its
+    speeds and routine metadata), and the intervals (t0, t1) s in which the axis moves: each
+    cruise widened by its ramp time v/a. ``acc_bandwidth_hz``: the accelerometer's half-power
+    frequency, Hz."""
+    seg = imu_segments(run.imu_acc[:, 0], run.imu_acc_fs_hz, run.speeds_mm_s or (), run.routine,
+                       acc_bandwidth_hz, label=label)
+    accel = run.routine["accel_mm_s2"] * 1e-3
+    return seg, [(mo.t0_s - mo.speed_m_s / accel, mo.t1_s + mo.speed_m_s / accel) for mo in seg.motions]

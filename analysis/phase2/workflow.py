@@ -14,15 +14,23 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis import registry
 from analysis.dataset import open_measurements, open_truth
 from analysis.files import write_json
 from analysis.injected import injected_change_um
-from analysis.phase2.backlash import BacklashEstimator, CampaignBacklash, campaign_backlash, estimator_for
+from analysis.phase2.backlash import (
+    BacklashEstimator,
+    CampaignBacklash,
+    campaign_backlash,
+    estimator_for,
+    primary_m,
+)
 from analysis.phase2.error_motion_file import write_error_motions
+from analysis.phase2.error_motions import resolve_position_reference
 from analysis.phase2.figures import write_figures
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis, savgol_trend
 
-__all__ = ["BacklashRun", "run"]
+__all__ = ["BacklashRun", "estimator_dir", "run"]
 
 #: What the traces' position axis is, per ``position_reference``, as written in backlash.json.
 POSITION_REFERENCES = {
@@ -53,10 +61,18 @@ class BacklashRun:
     figures: list[Path]
 
 
+def estimator_dir(out: str | Path, name: str) -> Path:
+    """Where estimator ``name`` writes under ``out`` (a campaign's ``backlash/``): ``out`` itself
+    for the default estimator (where scoring, the report and the viewer read it),
+    ``out/<name>`` for every other one."""
+    return Path(out) if name == registry.default("backlash_estimators").name else Path(out) / name
+
+
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
         plots: bool = True, process_noise: float | str = 1e-23,
-        baseline_sessions: int = 1, estimator: BacklashEstimator | None = None,
-        position_reference: str = "command") -> BacklashRun:
+        baseline_sessions: int = 1, estimator: BacklashEstimator | str | None = None,
+        position_reference: str = "auto", params: dict | None = None,
+        map_sessions=None) -> BacklashRun:
     """Estimate the change of backlash of every Phase II session of ``directory``.
 
     Args:
@@ -67,12 +83,18 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         process_noise: Kalman process noise q in m²/h³, or ``"ml"`` (maximum likelihood).
         baseline_sessions: leading sessions known to share the initial backlash; the estimates
             are re-zeroed on their mean.
-        estimator: an unfitted backlash estimator (default :class:`BacklashEstimator()`, the
-            paper's method; on the IMU axis with ``stationary="E_XX"``, Eq. 5); its class is
-            recorded in ``parameters.estimator``.
-        position_reference: "command" (the controller's ``position_cmd``) or "imu" (the
+        estimator: an unfitted backlash estimator, or a registered name or ``module:Class``
+            (:mod:`analysis.registry`; made with ``params`` and the axis's stroke and lead)
+            (default: the registered default, the paper's method; on the IMU axis with
+            ``stationary="E_XX"``, Eq. 5); its registered name and label are recorded in
+            ``estimator`` and its class in ``parameters.estimator``.
+        params: constructor parameters of a named ``estimator``.
+        position_reference: "auto" (default: "command" when the runs record ``position_cmd``, else
+            "imu"), "command" (the controller's ``position_cmd``) or "imu" (the
             IMU-based position: strokes from the accelerometer and the run's routine metadata;
             ``position_cmd`` is not read). Recorded in ``parameters.position_reference``.
+        map_sessions: runs the sessions' error motions elsewhere (the caller's executor; see
+            :func:`analysis.phase2.backlash.campaign_backlash`); None: here, one by one.
 
     Raises:
         DatasetError, FileNotFoundError, OSError: unreadable input (names file, key, channel).
@@ -81,18 +103,19 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     directory = Path(directory)
     out = Path(out) if out is not None else directory / "backlash"
     with open_measurements(directory / "measurements.h5") as m:
-        if position_reference not in POSITION_REFERENCES:
-            raise ValueError(f"position reference {position_reference!r}: expected one of "
-                             f"{', '.join(POSITION_REFERENCES)}")
+        position_reference = resolve_position_reference(m, position_reference)
         if estimator is None and position_reference == "imu":
-            estimator = estimator_for(m, stationary="E_XX")  # Eq. 5
+            estimator = estimator_for(m, stationary="E_XX", **(params or {}))  # Eq. 5
+        elif estimator is None or isinstance(estimator, str):
+            estimator = estimator_for(m, estimator, **(params or {}))
         result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
                                    baseline_sessions=baseline_sessions, estimator=estimator,
-                                   position_reference=position_reference)
+                                   position_reference=position_reference,
+                                   map_sessions=map_sessions)
         dial = m.dial_indicator()
     ses = result.sessions
     hours = [s.hours for s in ses]
-    shift = [s.delta_backlash_shift_m for s in ses]
+    shift = [primary_m(s, result.estimator) for s in ses]  # the estimator's primary estimate
     trend = None
     if len(ses) >= 2 and np.isfinite(shift).any():
         trend = BacklashTrend(process_noise=process_noise).fit(hours, shift)
@@ -104,6 +127,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     records = []
     for i, s in enumerate(ses):
         rec = s.to_json()
+        rec["delta_backlash_um"] = None if not math.isfinite(shift[i]) else shift[i] * 1e6
         if trend is not None:
             rec["smoothed_um"] = float(trend.smoothed[i] * 1e6)
             rec["smoothed_std_um"] = float(trend.smoothed_std[i] * 1e6)
@@ -116,7 +140,10 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
                 rec["dial_delta_um"] = float(dial_delta[1][k])
         records.append(rec)
     est = result.estimator
+    entry = registry.entry_of("backlash_estimators", est)
     doc = {
+        "estimator": {"name": entry.name, "label": entry.label,
+                      "primary_estimate": getattr(est, "primary_estimate", "shift")},
         "sessions": records,
         "prognosis": prog.to_json() if prog is not None else None,
         "reference_session": ses[0].session if ses else None,
@@ -126,6 +153,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         "skipped_sessions": [{"session": a, "reason": b} for a, b in result.skipped_sessions],
         "parameters": {"estimator": f"{type(est).__module__}.{type(est).__qualname__}",
                        "position_reference": position_reference,
+                       "estimator_params": _params_json(est),
                        "cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
                        "baseline_sessions": result.baseline_sessions,
                        "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
@@ -151,3 +179,13 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
                                                            result.baseline_sessions)))
         figures = write_figures(result, doc, out, injected=injected)
     return BacklashRun(doc=doc, result=result, trend=trend, prognosis=prog, figures=figures)
+
+
+def _params_json(est) -> dict:
+    """The estimator's ``get_params()`` as JSON values (tuples as lists, others as strings)."""
+    out = {}
+    for k, v in (est.get_params() if hasattr(est, "get_params") else {}).items():
+        if isinstance(v, tuple):
+            v = list(v)
+        out[k] = v if isinstance(v, (int, float, str, bool, list, type(None))) else repr(v)
+    return out

@@ -30,9 +30,9 @@ def _pearson(a, b) -> float | None:
 
 
 def _method_names() -> dict[str, str]:
-    from analysis.phase1.pipeline import PAPER_NAMES
+    from analysis.registry import entries
 
-    return dict(PAPER_NAMES)
+    return {name: e.label for name, e in entries("detectors").items()}
 
 
 def _phase1_methods(inp_score: dict | None, details: dict | None, detection: dict | None) -> dict:

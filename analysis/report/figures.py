@@ -46,11 +46,11 @@ class Figures:
         if not methods:
             return None
         hours = np.asarray(next(iter(methods.values()))["hours"], float)
-        results = {k: {"scores": np.asarray(v["scores"], float), "threshold": float(v["threshold"])}
-                   for k, v in methods.items()}
+        results = {k: {"scores": np.asarray(v["scores"], float), "threshold": float(v["threshold"]),
+                       "label": v.get("label") or names.get(k, k)} for k, v in methods.items()}
         n_base = int((details or {}).get("n_baseline", 15))
         dst = self.dir / "fig06_detection_drawn.png"
-        plot_fig6(dst, hours, results, names, n_base, onset,
+        plot_fig6(dst, hours, results, n_base, onset,
                   {k: v.get("detection_hours") for k, v in methods.items()})
         self.written.append(dst)
         return f"figures/{dst.name}"

@@ -54,7 +54,8 @@ def _needs_score(d: Path) -> bool:
         return True
     t = path.stat().st_mtime
     return any(p.is_file() and p.stat().st_mtime > t
-               for p in (d / "phase1" / "detection.json", d / "backlash" / "backlash.json"))
+               for p in (d / "phase1" / "detection.json", d / "backlash" / "backlash.json",
+                         *(d / "backlash").glob("*/backlash.json")))
 
 
 def read_inputs(directory: str | Path) -> Inputs:

@@ -234,6 +234,22 @@ def _section_phase1(inp: Inputs, figs: Figures, names: dict[str, str]) -> list[B
     return out
 
 
+def _estimators(ests: dict) -> list[Block]:
+    """Every backlash estimator found in the directory, side by side (score.json's
+    ``phase2_estimators``; ``twin backlash --estimator NAME`` adds one)."""
+    rows = [(f"{r.get('label') or name} [{name}]", r.get("n_sessions"),
+             _f(r.get("rms_error_um"), "{:.3f}"), _f(r.get("max_abs_error_um"), "{:.3f}"),
+             _f(r.get("bias_um"), "{:+.3f}"), _f(r.get("rms_error_vs_lost_motion_um"), "{:.3f}"),
+             _f((r.get("prognosis") or {}).get("error_hours"), "{:+.0f}"))
+            for name, r in ests.items()]
+    return [_p(f"{len(ests)} backlash estimator{'s' if len(ests) != 1 else ''} found in backlash/ "
+               "(the default in backlash/, others in backlash/NAME/), scored against the injected "
+               "change; the tables below are the first one's."),
+            _table(("estimator", "sessions", "RMS error (µm)", "largest |error| (µm)", "bias (µm)",
+                    "RMS error vs lost motion (µm)", "prognosis error (h)"), rows,
+                   "phase2-estimators")]
+
+
 def _phase2_scored(p2: dict) -> list[Block]:
     """The per-session table and the summary of score.json's phase2."""
     k = p2.get("baseline_sessions", 1)
@@ -316,6 +332,9 @@ def _section_phase2(inp: Inputs, figs: Figures) -> list[Block]:
     out: list[Block] = []
     if bl is None:
         out.append(_missing("Phase II", [d / "backlash" / "backlash.json"], COMMANDS["phase2"], d))
+    ests = (inp.score or {}).get("phase2_estimators") or {}
+    if ests:
+        out += _estimators(ests)
     if p2:
         out += _phase2_scored(p2)
     elif bl is not None:
@@ -370,6 +389,8 @@ def render(directory: str | Path, out: str | Path | None = None) -> Report:
     out.mkdir(parents=True, exist_ok=True)
     figs = Figures(d, out)
     names = _method_names()
+    for k, v in ((inp.detection or {}).get("methods") or {}).items():
+        names.setdefault(k, v.get("label") or k)  # a module:Class detector names itself
     missing = [p for p, ok in (("Phase I", inp.detection is not None),
                                ("Phase II", inp.backlash is not None)) if not ok]
     notes = list(inp.notes)

@@ -5,7 +5,8 @@ Used by ``twin demo`` and by every point of ``twin sweep``, so both write the sa
     DIR/measurements.h5, DIR/truth.h5        the simulated campaign (resumable)
     DIR/phase1/detection.json, ...           Phase I (if the campaign has Phase I samples and a
                                              reference data set is given)
-    DIR/backlash/backlash.json, ...          Phase II (if the campaign has >= 2 sessions)
+    DIR/backlash/backlash.json, ...          Phase II (if the campaign has >= 2 sessions): the
+                                             default estimator; DIR/backlash/<name>/ the others
     DIR/score.json                           both phases against truth.h5
 """
 
@@ -37,15 +38,19 @@ class Analysed:
 
 def analyse(directory: str | Path, reference: str | Path | None, *, plots: bool = True,
             process_noise: float | str = "ml", baseline_sessions: int = 1,
-            on_step: Callable[[str], None] | None = None) -> Analysed:
+            on_step: Callable[[str], None] | None = None, methods: list[str] | None = None,
+            estimators: list[str] | None = None) -> Analysed:
     """Run the analyses the campaign in ``directory`` supports, then score it if it has truth.
 
     Phase I needs more than the baseline samples (:data:`analysis.phase1.pipeline.N_BASELINE`)
     and a reference data set directory;
     Phase II needs two sessions. ``process_noise`` of the backlash trend defaults to maximum
     likelihood, since campaigns run at different time scales (the CLI default 1e-23 m²/h³ is
-    tuned to the paper's 8000 h).
+    tuned to the paper's 8000 h). ``methods``: detectors to run (registered names or
+    ``module:Class``; default every registered one); ``estimators``: backlash estimators (default
+    the registered default), each written to :func:`analysis.phase2.workflow.estimator_dir`.
     """
+    from analysis import registry
     from analysis.phase1 import detect
     from analysis.phase2 import workflow
 
@@ -60,13 +65,17 @@ def analyse(directory: str | Path, reference: str | Path | None, *, plots: bool 
         out.skipped["phase1"] = "no Phase I captures"
     else:
         step("Phase I detection")
-        out.phase1 = detect.run(directory, Path(reference), directory / "phase1")
+        out.phase1 = detect.run(directory, Path(reference), directory / "phase1", methods)
     if n2 < 2:
         out.skipped["phase2"] = f"{n2} Phase II session(s); 2 needed"
     else:
-        step("Phase II backlash")
-        out.phase2 = workflow.run(directory, plots=plots, process_noise=process_noise,
-                                  baseline_sessions=baseline_sessions).doc
+        for spec in estimators or [registry.default("backlash_estimators").name]:
+            name = registry.get("backlash_estimators", spec).name
+            step(f"Phase II backlash ({name})")
+            doc = workflow.run(directory, workflow.estimator_dir(directory / "backlash", name),
+                               plots=plots, process_noise=process_noise,
+                               baseline_sessions=baseline_sessions, estimator=spec).doc
+            out.phase2 = out.phase2 or doc
     if (directory / "truth.h5").is_file() and (out.phase1 or out.phase2):
         step("scoring")
         out.score = score(directory)
@@ -75,13 +84,15 @@ def analyse(directory: str | Path, reference: str | Path | None, *, plots: bool 
 
 
 def run_point(s: Scenario, directory: str | Path, reference: str | Path | None, *,
-              plots: bool = False, process_noise: float | str = "ml") -> dict:
+              plots: bool = False, process_noise: float | str = "ml",
+              methods: list[str] | None = None, estimators: list[str] | None = None) -> dict:
     """Simulate ``s`` into ``directory`` in this process, analyse and score it.
 
     Returns ``{"simulated_units": n, "reused_units": m, "score": score.json object or None,
     "skipped": {phase: reason}}``; a campaign killed halfway resumes from its finished parts.
     """
     summary = simulate_campaign(s, directory, workers=1)
-    a = analyse(directory, reference, plots=plots, process_noise=process_noise)
+    a = analyse(directory, reference, plots=plots, process_noise=process_noise, methods=methods,
+                estimators=estimators)
     return {"simulated_units": summary["simulated"], "reused_units": summary["skipped"],
             "score": a.score, "skipped": a.skipped}

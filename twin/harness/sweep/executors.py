@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import os
 import time
-import uuid
-from collections.abc import Iterator
 
+from twin.executors import Executor, ExecutorError
+from twin.executors import make_executor as shared_executor
 from twin.harness.sweep.schema import SweepError
 from twin.scenario import from_dict
 
@@ -14,8 +14,10 @@ from twin.scenario import from_dict
 # Work done on a worker
 
 
-def run_task(scenario: dict, point_dir: str, reference_dir: str | None) -> dict:
+def run_task(scenario: dict, point_dir: str, reference_dir: str | None,
+             analysis: dict | None = None) -> dict:
     """Simulate, analyse and score one point in this process with one BLAS thread.
+    ``analysis``: {"methods", "estimators"} of the sweep's ``[analysis]`` (None: the defaults).
 
     Returns ``{"score": score.json object or None, "simulated_units", "reused_units",
     "skipped", "seconds", "host", "pid"}``."""
@@ -28,92 +30,25 @@ def run_task(scenario: dict, point_dir: str, reference_dir: str | None) -> dict:
     t0 = time.perf_counter()
     s = from_dict(scenario)
     with threadpool_limits(1):
-        r = run_point(s, point_dir, reference_dir)
+        r = run_point(s, point_dir, reference_dir, **(analysis or {}))
     r["seconds"] = time.perf_counter() - t0
     r["host"], r["pid"] = socket.gethostname(), os.getpid()
     return r
 
 
 # ---------------------------------------------------------------------------------------------
-# Executors
+# Executors: the shared ones of twin.executors
 
 
-class _Executor:
-    """submit(fn, *args, key) -> future; completed(futures) yields them as they finish."""
+def make_executor(workers: int | None = None, scheduler: str | None = None) -> Executor:
+    """Default: all local cores (processes); ``workers=N``: a Dask LocalCluster of N worker
+    processes; ``scheduler``: an existing Dask cluster (:func:`twin.executors.make_executor`).
 
-    description = ""
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def close(self) -> None:  # pragma: no cover - overridden
-        pass
-
-
-class _LocalPool(_Executor):
-    def __init__(self, workers: int):
-        import multiprocessing as mp
-        from concurrent.futures import ProcessPoolExecutor
-
-        self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
-        self.description = f"{workers} local processes"
-
-    def submit(self, fn, *args, key: str):
-        return self.pool.submit(fn, *args)
-
-    def completed(self, futures) -> Iterator:
-        from concurrent.futures import as_completed
-
-        yield from as_completed(futures)
-
-    def close(self) -> None:
-        self.pool.shutdown(wait=True, cancel_futures=True)
-
-
-class _Dask(_Executor):
-    def __init__(self, workers: int | None = None, scheduler: str | None = None):
-        import logging
-
-        from distributed import Client, LocalCluster
-
-        self.cluster = None
-        if scheduler is None:
-            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                        dashboard_address=None, silence_logs=logging.ERROR)
-            self.client = Client(self.cluster)
-            self.description = f"dask LocalCluster of {workers} worker processes"
-        else:
-            try:
-                self.client = Client(scheduler, timeout="30s")
-            except (OSError, TimeoutError) as exc:
-                raise SweepError(f"--scheduler {scheduler}: cannot connect to a dask scheduler there "
-                                 f"({exc}); expected the address of a running scheduler, e.g. "
-                                 "tcp://10.0.0.5:8786") from None
-            n = len(self.client.scheduler_info().get("workers", {}))
-            self.description = f"dask cluster at {scheduler} ({n} workers now)"
-        self.token = uuid.uuid4().hex[:8]
-
-    def submit(self, fn, *args, key: str):
-        return self.client.submit(fn, *args, key=f"sweep-{key}-{self.token}", pure=False)
-
-    def completed(self, futures) -> Iterator:
-        from distributed import as_completed
-
-        yield from as_completed(futures)
-
-    def close(self) -> None:
-        self.client.close()
-        if self.cluster is not None:
-            self.cluster.close()
-
-
-def make_executor(workers: int | None = None, scheduler: str | None = None) -> _Executor:
-    if scheduler is not None:
-        return _Dask(scheduler=scheduler)
-    if workers is not None:
-        return _Dask(workers=workers)
-    return _LocalPool(os.cpu_count() or 1)
+    Raises:
+        SweepError: no scheduler answers at ``scheduler``.
+    """
+    try:
+        return shared_executor(os.cpu_count() or 2, dask_workers=workers, scheduler=scheduler,
+                               prefix="sweep")
+    except ExecutorError as exc:
+        raise SweepError(str(exc)) from None

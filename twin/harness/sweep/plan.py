@@ -83,14 +83,45 @@ class Plan:
     base: dict
     reference: dict | None
     tasks: list[Task] = field(default_factory=list)
+    methods: list[str] | None = None          # [analysis] methods (None: every registered detector)
+    estimators: list[str] | None = None       # [analysis] estimators (None: the default one)
+
+    @property
+    def analysis(self) -> dict:
+        """What every point runs: {"methods": [...] or None, "estimators": [...] or None}."""
+        return {"methods": self.methods, "estimators": self.estimators}
 
     def manifest(self) -> dict:
         return {"format": FORMAT, "version": 1, "sweep_file": str(self.path),
                 "definition": self.sweep.model_dump(mode="json", exclude={"name", "description",
-                                                                          "scenario", "reference"})
-                | {"reference_set": None if self.sweep.reference is None else self.sweep.reference.set},
+                                                                          "scenario", "reference",
+                                                                          "analysis"})
+                | {"reference_set": None if self.sweep.reference is None else self.sweep.reference.set}
+                | ({"analysis": self.analysis} if self.sweep.analysis is not None else {}),
                 "base_scenario": self.base, "reference_scenario": self.reference,
                 "columns": self.columns, "n_points": self.n_points, "seeds": self.seeds}
+
+
+def _analysis(sw, src: str) -> tuple[list[str] | None, list[str] | None]:
+    """The ``[analysis]`` lists, each name checked against :mod:`analysis.registry`."""
+    from analysis import registry
+
+    if sw.analysis is None:
+        return None, None
+    out = []
+    for key, kind in (("methods", "detectors"), ("estimators", "backlash_estimators")):
+        specs = getattr(sw.analysis, key)
+        if specs is not None:
+            if not specs:
+                raise SweepError(f"{src}: analysis.{key} is empty; expected at least one name "
+                                 f"(or leave the key out for the default)")
+            for spec in specs:
+                try:
+                    registry.get(kind, spec)
+                except registry.RegistryError as exc:
+                    raise SweepError(f"{src}: analysis.{key}: {exc}") from None
+        out.append(None if specs is None else list(specs))
+    return out[0], out[1]
 
 
 def plan_sweep(path: str | Path) -> Plan:
@@ -104,6 +135,7 @@ def plan_sweep(path: str | Path) -> Plan:
     if sw.reference is not None:
         reference = _scenario_dict(path.parent / sw.reference.scenario, sw.reference.set, src,
                                    "reference.scenario")
+    methods, estimators = _analysis(sw, src)
     columns: list[str] = []
     primary: list[str] = []
     tied: dict[str, list[str]] = {}
@@ -135,7 +167,7 @@ def plan_sweep(path: str | Path) -> Plan:
     plan = Plan(path=path, sweep=sw, name=sw.name or path.stem, columns=columns, primary=primary,
                 tied=tied,
                 log_columns=log_columns, n_points=len(grid) * len(rand), seeds=list(seeds),
-                base=base, reference=reference)
+                base=base, reference=reference, methods=methods, estimators=estimators)
     point = 0
     for g in grid:
         for r in rand:

@@ -73,6 +73,7 @@ KEY_SCORES = ("phase2.rms_error_um", "phase2.bias_um", "phase2.prognosis.error_h
 
 
 def phase1_methods(df) -> list[str]:
+    """The Phase I methods of a results table (columns ``phase1.<method>.delay_hours``)."""
     seen = []
     for c in df.columns:
         if c.startswith("phase1.") and c.endswith(".delay_hours"):
@@ -80,12 +81,32 @@ def phase1_methods(df) -> list[str]:
     return seen
 
 
-def summary(plan: Plan, df, methods: tuple[str, ...] = ("pca_t2",)) -> tuple[list[str], list[list[str]]]:
+def phase2_estimators(df) -> list[str]:
+    """The backlash estimators of a results table (columns ``phase2.<estimator>.rms_error_um``)."""
+    return [c.split(".")[1] for c in df.columns
+            if c.startswith("phase2.") and c.endswith(".rms_error_um") and c.count(".") == 2]
+
+
+def summary(plan: Plan, df, methods: list[str] | None = None) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the summary table: per point, the swept values, the number of seeds,
-    and mean ± std over seeds of the key scores (Phase I: delay, false-alarm rate and the
-    fraction of seeds detected after the onset, for ``methods``)."""
+    mean ± std over seeds of the key scores, the RMS error of every backlash estimator if there
+    are several, and for each of ``methods`` (default: the registered default detector) the
+    Phase I delay, false-alarm rate and the fraction of seeds detected (an alarm after the
+    onset). Raises ValueError naming a method the table does not have."""
+    from analysis import registry
+
     score_cols = [c for c in KEY_SCORES if c in df.columns]
-    p1 = [m for m in methods if m in phase1_methods(df)]
+    have = phase1_methods(df)
+    if methods is None:
+        methods = [m for m in [registry.default("detectors").name] if m in have]
+    missing = [m for m in methods if m not in have]
+    if missing:
+        raise ValueError(f"--methods {', '.join(missing)}: not in the sweep's table; expected "
+                         f"some of {', '.join(have) or '(no Phase I method)'}")
+    p1 = list(methods)
+    ests = phase2_estimators(df)
+    if len(ests) > 1:
+        score_cols += [f"phase2.{e}.rms_error_um" for e in ests]
     header = [c.split(".")[-1] if len(c) > 24 else c for c in plan.primary] + ["seeds"]
     header += [c.removeprefix("phase2.") for c in score_cols]
     for m in p1:
@@ -105,19 +126,19 @@ def summary(plan: Plan, df, methods: tuple[str, ...] = ("pca_t2",)) -> tuple[lis
         for m in p1:
             delay = g[f"phase1.{m}.delay_hours"]
             row += [ms(delay), ms(g[f"phase1.{m}.false_alarm_rate"]),
-                    f"{int((delay > 0).sum())}/{len(g)}"]
+                    f"{int(g[f'phase1.{m}.detection_hours'].notna().sum())}/{len(g)}"]
         rows.append(row)
     return header, rows
 
 
 def method_summary(df) -> tuple[list[str], list[list[str]]]:
     """Header and rows of the Phase I methods over all rows (at each method's own limit):
-    detected after the onset, mean false-alarm rate, median delay of the detections (h)."""
-    header = ["method", "detected after onset", "mean false-alarm rate", "median delay h"]
+    detected (an alarm after the onset), mean false-alarm rate, median delay of the detections (h)."""
+    header = ["method", "detected", "mean false-alarm rate", "median delay h"]
     rows = []
     for m in phase1_methods(df):
         delay = df[f"phase1.{m}.delay_hours"]
-        det = delay > 0
+        det = df[f"phase1.{m}.detection_hours"].notna()
         fa = df[f"phase1.{m}.false_alarm_rate"].astype(float)
         rows.append([m, f"{int(det.sum())}/{len(df)}",
                      "-" if fa.isna().all() else f"{fa.mean():.3f}",

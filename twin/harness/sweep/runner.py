@@ -73,7 +73,8 @@ def run_sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
             futures = {}
             for t in todo:
                 futures[ex.submit(run_task, t.scenario, str(point_dir(out, t)),
-                                  None if ref_dir is None else str(ref_dir), key=t.id)] = t
+                                  None if ref_dir is None else str(ref_dir), plan.analysis,
+                                  key=t.id)] = t
             for fut in ex.completed(list(futures)):
                 t = futures[fut]
                 try:

@@ -141,6 +141,14 @@ class ReferenceConfig(_Model):
     set: dict[str, Any] = Field(default_factory=dict)
 
 
+class AnalysisConfig(_Model):
+    """Which methods every point runs: registered names or ``module:Class`` (default: every
+    registered detector; the default backlash estimator)."""
+
+    methods: list[str] | None = None
+    estimators: list[str] | None = None
+
+
 class SweepFile(_Model):
     name: str | None = None
     description: str = ""
@@ -150,6 +158,7 @@ class SweepFile(_Model):
     grid: list[GridAxis] = Field(default_factory=list)
     random: RandomSampling | None = None
     reference: ReferenceConfig | None = None
+    analysis: AnalysisConfig | None = None
 
     @field_validator("seeds")
     @classmethod

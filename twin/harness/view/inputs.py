@@ -91,15 +91,13 @@ _AXIS_KEYS = ("travel_mm", "lead_mm", "rail_spacing_mm", "truck_spacing_mm", "ca
 
 
 def _axis_from_measurements(desc: dict, notes: list[str], label: str) -> Axis:
-    """The axis to draw from the nominal description of ``measurements.h5``: the few dimensions it
-    names (``travel_mm`` or ``travel_m``, ...), the defaults of :class:`Scenario` for the rest."""
-    given: dict[str, float] = {}
-    for key in _AXIS_KEYS:
-        unit = key.rsplit("_", 1)[1]
-        if isinstance(desc.get(key), (int, float)):
-            given[key] = float(desc[key])
-        elif unit == "mm" and isinstance(desc.get(key[:-3] + "_m"), (int, float)):
-            given[key] = float(desc[key[:-3] + "_m"]) * 1e3
+    """The axis to draw from the nominal description of ``measurements.h5`` (the axis contract,
+    :class:`analysis.dataset.axis.AxisDescription`): the few dimensions it names, the defaults of
+    :class:`Scenario` for the rest."""
+    from analysis.dataset.axis import AxisDescription
+
+    axis = AxisDescription.from_dict(desc, label)
+    given = {key: float(getattr(axis, key)) for key in _AXIS_KEYS if getattr(axis, key) is not None}
     try:
         s = from_dict({"axis": given})
     except ScenarioError as exc:

@@ -93,6 +93,8 @@ def _log_phase2(r: _Recorder, m, truth, directory: Path, session: str, run: str,
     for ch, unit, cols in PHASE2_CHANNELS:
         arr = getattr(data, ch)
         fs = getattr(data, f"{ch}_fs_hz")
+        if arr is None:  # an optional channel the run does not have (a stand-alone IMU)
+            continue
         k = _stride(len(arr), max_points)
         t = np.arange(0, len(arr), k) / fs
         every = "" if k == 1 else f", every {k}th sample"

@@ -1,0 +1,219 @@
+"""``twin check``: what a recording (``measurements.h5``) holds and what is wrong or suspicious.
+
+:func:`check_recording` reads every capture and run through the validating reader and looks at
+the signals: NaN or inf (the reader's refusal, naming the index), flat lines, clipping at the
+converter's range, dropouts (a sensor's value held for many samples), operating hours that are
+negative or go back in time, sampling rates that differ between captures or runs, and an IMU
+accelerometer that does not see gravity (about 9.81 m/s², on its z axis, at standstill).
+Findings are *errors* (the analysis would fail or be wrong: ``twin check`` exits 1) or
+*warnings* (suspicious; worth a look).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from analysis.dataset import DatasetError, open_measurements
+from analysis.dataset.axis import AxisDescription
+
+G = 9.80665
+#: A sensor's value held this many samples in a row is a dropout.
+DROPOUT_SAMPLES = 10
+#: Samples at one extreme value (and at least 3) that make a clipping warning.
+CLIP_FRACTION = 1e-3
+#: Accepted deviation of the IMU's mean |acceleration| from 1 g.
+GRAVITY_TOLERANCE = 0.1
+#: Axis keys the analyses need (docs/dataset-format.md#the-axis-contract): key -> who needs it.
+NEEDED_AXIS_KEYS = {"lead_mm": "twin backlash", "travel_mm": "twin backlash"}
+_SENSOR_RANGE = {"acc1": "sensors.nut_accelerometers.range_g", "acc2": "sensors.nut_accelerometers.range_g",
+                 "imu_acc": "sensors.imu_accelerometer.range_g", "imu_gyro": "sensors.imu_gyroscope.range_deg_s"}
+
+
+@dataclass
+class Finding:
+    """One problem: ``level`` "error" or "warning", ``where`` the HDF5 key, ``what`` the message."""
+
+    level: str
+    where: str
+    what: str
+
+
+@dataclass
+class CheckReport:
+    """What :func:`check_recording` found: ``summary`` (counts, rates, durations, hours span)
+    and ``findings``."""
+
+    file: str
+    summary: dict = field(default_factory=dict)
+    findings: list[Finding] = field(default_factory=list)
+
+    @property
+    def errors(self) -> list[Finding]:
+        return [f for f in self.findings if f.level == "error"]
+
+    def to_json(self) -> dict:
+        return {"file": self.file, "summary": self.summary, "findings": [asdict(f) for f in self.findings],
+                "errors": len(self.errors), "warnings": len(self.findings) - len(self.errors)}
+
+
+def _longest_run(x: np.ndarray) -> tuple[int, int]:
+    """(length, start index) of the longest run of equal consecutive samples of (n,) ``x``."""
+    if x.size < 2:
+        return x.size, 0
+    same = np.concatenate(([False], x[1:] == x[:-1], [False]))
+    edges = np.flatnonzero(np.diff(same.astype(np.int8)))
+    if edges.size == 0:
+        return 1, 0
+    starts, ends = edges[::2], edges[1::2]
+    k = int(np.argmax(ends - starts))
+    return int(ends[k] - starts[k]) + 1, int(starts[k]) - 1
+
+
+def _signal(rep: CheckReport, key: str, x: np.ndarray, *, sensor: bool, range_si: float | None) -> None:
+    cols = x.reshape(len(x), -1)
+    names = "xyz" if cols.shape[1] == 3 else [""]
+    for j, ax in enumerate(names):
+        c = cols[:, j]
+        where = f"{key}[{ax}]" if ax else key
+        if c.size > 1 and np.ptp(c) == 0:
+            rep.findings.append(Finding("error", where, f"flat line: all {c.size} samples are {c[0]:g}"))
+            continue
+        if not sensor:
+            continue
+        run, start = _longest_run(c)
+        if run >= DROPOUT_SAMPLES:
+            rep.findings.append(Finding("warning", where, f"dropout: {run} samples in a row hold {c[start]:g} "
+                                                          f"from index {start}"))
+        for name, v in (("maximum", c.max()), ("minimum", c.min())):
+            k = int(np.count_nonzero(c == v))
+            if k >= max(3, CLIP_FRACTION * c.size):
+                rep.findings.append(Finding("warning", where, f"clipping: {k} samples at the {name} {v:g}"))
+        if range_si is not None and np.abs(c).max() >= 0.99 * range_si:
+            rep.findings.append(Finding("error", where, f"clipping: |value| reaches {np.abs(c).max():g}, the "
+                                                        f"sensor's range is {range_si:g} (axis contract)"))
+
+
+def _ranges(axis: AxisDescription | None) -> dict[str, float | None]:
+    out = {}
+    for ch, key in _SENSOR_RANGE.items():
+        v = axis.get(key) if axis is not None else None
+        out[ch] = None if v is None else (v * G if ch != "imu_gyro" else math.radians(v))
+    return out
+
+
+def _hours_order(rep: CheckReport, kind: str, items: list[tuple[str, float]]) -> None:
+    """Items in name order must not go back in hours, nor be negative."""
+    for name, h in items:
+        if h < 0:
+            rep.findings.append(Finding("error", name, f"operating hours {h:g} < 0; expected hours >= 0"))
+    for (a, ha), (b, hb) in zip(items, items[1:], strict=False):
+        if hb < ha:
+            rep.findings.append(Finding("error", b, f"operating hours go back: {hb:g} h after {a} at {ha:g} h "
+                                                    f"(the {kind} are in name order)"))
+
+
+def check_recording(path: str | os.PathLike) -> CheckReport:
+    """Check ``path`` (a campaign directory or a ``measurements.h5``); see the module's doc.
+
+    Raises DatasetError / FileNotFoundError only when the file cannot be opened at all."""
+    path = Path(path)
+    if path.is_dir() or path.suffix != ".h5":
+        path = path / "measurements.h5"
+    rep = CheckReport(str(path))
+    with open_measurements(path) as m:
+        axis = None
+        try:
+            axis = AxisDescription.from_dict(m.axis(), m.label)
+        except DatasetError as e:
+            rep.findings.append(Finding("error", "/@axis", str(e)))
+        if axis is not None:
+            for key, who in NEEDED_AXIS_KEYS.items():
+                if axis.get(key) is None:
+                    rep.findings.append(Finding("warning", f"/@axis.{key}", f"missing; {who} needs it"))
+        ranges = _ranges(axis)
+        s = rep.summary
+        caps = m.phase1_captures()
+        hours_all: list[float] = []
+        p1_rates, p1_dur, samples, p1_hours = set(), [], set(), []
+        for c in sorted(caps):
+            key = f"/phase1/{c}"
+            try:
+                cap = m.phase1(c)
+            except DatasetError as e:
+                rep.findings.append(Finding("error", key, str(e).removeprefix(f"{m.label}: ")))
+                continue
+            p1_rates.add(cap.fs_hz)
+            p1_dur.append(len(cap.speed) / cap.fs_hz)
+            samples.add(cap.sample)
+            p1_hours.append((key, cap.hours))
+            for ch in ("speed", "torque", "acc1", "acc2"):
+                _signal(rep, f"{key}/{ch}", getattr(cap, ch), sensor=ch.startswith("acc"), range_si=ranges.get(ch))
+        _hours_order(rep, "captures", p1_hours)
+        hours_all += [h for _, h in p1_hours]
+        s["phase1"] = {"captures": len(caps), "samples": len(samples), "fs_hz": sorted(p1_rates),
+                       "capture_s": [min(p1_dur), max(p1_dur)] if p1_dur else None}
+        if len(p1_rates) > 1:
+            rep.findings.append(Finding("warning", "/phase1", f"captures at different rates {sorted(p1_rates)} Hz"))
+        sessions = m.phase2_sessions()
+        rates: dict[str, set] = {"imu_acc": set(), "imu_gyro": set(), "position_cmd": set()}
+        run_dur, n_runs, s_hours = [], 0, []
+        for sname in sorted(sessions):
+            skey = f"/phase2/{sname}"
+            try:
+                s_hours.append((skey, m.session_hours(sname)))
+                runs = m.phase2_runs(sname)
+            except DatasetError as e:
+                rep.findings.append(Finding("error", skey, str(e).removeprefix(f"{m.label}: ")))
+                continue
+            for rname in runs:
+                n_runs += 1
+                key = f"{skey}/{rname}"
+                try:
+                    r = m.phase2(sname, rname)
+                except DatasetError as e:
+                    rep.findings.append(Finding("error", key, str(e).removeprefix(f"{m.label}: ")))
+                    continue
+                for ch in rates:
+                    arr = getattr(r, ch, None)
+                    if arr is None:
+                        continue
+                    rates[ch].add(getattr(r, f"{ch}_fs_hz"))
+                    _signal(rep, f"{key}/{ch}", arr, sensor=ch != "position_cmd", range_si=ranges.get(ch))
+                run_dur.append(len(r.imu_acc) / r.imu_acc_fs_hz)
+                _gravity(rep, f"{key}/imu_acc", r.imu_acc)
+        _hours_order(rep, "sessions", s_hours)
+        hours_all += [h for _, h in s_hours]
+        for ch, rs in rates.items():
+            if len(rs) > 1:
+                rep.findings.append(Finding("warning", f"/phase2/*/*/{ch}", f"runs at different rates {sorted(rs)} Hz"))
+        s["phase2"] = {"sessions": len(sessions), "runs": n_runs, "fs_hz": {k: sorted(v) for k, v in rates.items()},
+                       "run_s": [min(run_dur), max(run_dur)] if run_dur else None}
+        try:
+            dial = m.dial_indicator()
+        except DatasetError as e:
+            rep.findings.append(Finding("error", "/dial_indicator", str(e).removeprefix(f"{m.label}: ")))
+            dial = None
+        s["dial_readings"] = 0 if dial is None else len(dial[0])
+        s["hours"] = [min(hours_all), max(hours_all)] if hours_all else None
+        s["axis"] = axis.to_dict() if axis is not None else None
+    return rep
+
+
+def _gravity(rep: CheckReport, key: str, acc: np.ndarray) -> None:
+    """The IMU on the load sees gravity: mean |a| about 1 g, mostly on z."""
+    mean = acc.mean(axis=0)
+    g = float(np.linalg.norm(mean))
+    if abs(g - G) > GRAVITY_TOLERANCE * G:
+        hint = " (samples in g rather than m/s^2?)" if abs(g - 1.0) < 0.1 else (
+            " (gravity removed, or an AC-coupled sensor?)" if g < 0.5 * G else "")
+        rep.findings.append(Finding("error", key, f"mean acceleration {g:.3g} m/s^2; expected about {G:.2f} "
+                                                  f"(gravity){hint}"))
+    elif abs(mean[2]) < (1 - GRAVITY_TOLERANCE) * g:
+        axis = "xyz"[int(np.argmax(np.abs(mean)))]
+        rep.findings.append(Finding("warning", key, f"gravity is on the {axis} axis (mean {np.round(mean, 2).tolist()} "
+                                                    "m/s^2); expected it on z (axes swapped or sensor tilted?)"))

@@ -1,0 +1,90 @@
+"""One executor choice for `twin simulate`, `twin backlash` and `twin sweep`
+(twin/executors.py): units of a campaign sent to a real Dask scheduler, and the sessions
+of `twin backlash` run on local processes or on that scheduler, give exactly what one process
+gives."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import h5py
+import numpy as np
+import pytest
+from conftest import REPO, run_twin
+
+from analysis.phase2.workflow import run as backlash_run
+from twin.campaign import simulate_campaign
+from twin.executors import mapper
+from twin.scenario import load
+
+# backlash-steps cut to three sessions (0, 2 and 20 µm) of two short runs at 100 mm/s.
+TINY = ["phase2.session_hours=[100.0, 300.0, 600.0]", "phase2.runs_per_session=2",
+        "phase2.dwell_s=0.3", "phase2.start_mm=150.0", "phase2.end_mm=300.0"]
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """The address of a real dask.distributed LocalCluster (two single-threaded processes)."""
+    from distributed import LocalCluster
+
+    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.ERROR)
+    yield cluster.scheduler_address
+    cluster.close()
+
+
+@pytest.fixture(scope="module")
+def campaigns(tmp_path_factory, scheduler):
+    """The tiny campaign simulated in this process and on the Dask cluster."""
+    s = load(REPO / "scenarios/backlash-steps.toml", TINY)
+    root = tmp_path_factory.mktemp("executors")
+    serial = simulate_campaign(s, root / "serial", workers=1)
+    dask = simulate_campaign(s, root / "dask", scheduler=scheduler)
+    return root, serial, dask
+
+
+def _items(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda k, v: out.__setitem__(k, (v[()] if isinstance(v, h5py.Dataset) else None,
+                                                      dict(v.attrs))))
+        out["/"] = (None, dict(f.attrs))
+    return out
+
+
+def test_simulate_on_a_dask_scheduler_equals_one_process(campaigns):
+    root, serial, dask = campaigns
+    assert serial["executor"] == "this process" and dask["executor"].startswith("dask cluster at")
+    assert dask["simulated"] == serial["simulated"] > 3
+    for name in ("measurements.h5", "truth.h5"):
+        a, b = _items(root / "serial" / name), _items(root / "dask" / name)
+        assert a.keys() == b.keys()
+        for k in a:
+            (da, aa), (db, ab) = a[k], b[k]
+            assert (da is None) == (db is None) and (da is None or np.array_equal(da, db)), (name, k)
+            assert aa.keys() == ab.keys(), (name, k)
+            for key in aa:
+                assert np.array_equal(aa[key], ab[key]), (name, k, key)
+
+
+def test_backlash_sessions_in_parallel_equal_serial(campaigns, scheduler):
+    root, _, _ = campaigns
+    d = root / "serial"
+    docs = {}
+    for label, mapping in (("serial", None), ("processes", mapper(2, prefix="session")),
+                           ("dask", mapper(scheduler=scheduler, prefix="session"))):
+        br = backlash_run(d, root / f"bl-{label}", plots=False, map_sessions=mapping)
+        docs[label] = json.loads((root / f"bl-{label}" / "backlash.json").read_text())
+        assert [s["session"] for s in docs[label]["sessions"]] == ["s0000", "s0001", "s0002"]
+        assert len(br.result.error_motions) == 3
+    assert docs["processes"] == docs["serial"]
+    assert docs["dask"] == docs["serial"]
+
+
+def test_scheduler_and_workers_exclude_each_other(tmp_path):
+    for cmd in (["simulate", REPO / "scenarios/quick.toml", "-o", tmp_path / "x"],
+                ["backlash", tmp_path]):
+        r = run_twin(*cmd, "--workers", "2", "--scheduler", "tcp://127.0.0.1:9", check=False)
+        assert r.returncode == 2 and "--scheduler and --workers exclude each other" in r.stdout + r.stderr
+        assert "Traceback" not in r.stderr

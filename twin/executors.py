@@ -1,0 +1,223 @@
+"""Where independent pieces of work run: this process, local processes or a Dask cluster.
+
+One executor choice serves ``twin sweep`` (campaigns), ``twin simulate`` (the units of a
+campaign) and ``twin backlash`` (the sessions of a campaign):
+
+- local processes (the default): a ``concurrent.futures.ProcessPoolExecutor`` started with
+  ``spawn``;
+- ``dask_workers=N``: a ``dask.distributed.LocalCluster`` of N single-threaded worker processes;
+- ``scheduler=ADDRESS``: an existing Dask cluster; its workers need the same environment and must
+  see the files the work reads and writes at the same paths (a shared file system).
+
+Every piece of work handed to an executor is a pure function of its arguments (seeded draws, files
+read), so the results do not depend on which executor runs it, nor on the order; :func:`map_ordered`
+returns them in the order of the arguments.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+
+__all__ = ["ExecutorError", "Executor", "make_executor", "map_ordered", "mapper"]
+
+
+class ExecutorError(ValueError):
+    """The executor cannot be set up (e.g. no Dask scheduler at the given address)."""
+
+
+class Executor:
+    """submit(fn, *args, key) -> future; completed(futures) yields them as they finish;
+    ``description`` says where the work runs (for logs)."""
+
+    description = ""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def submit(self, fn, *args, key: str):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def completed(self, futures) -> Iterator:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def close(self) -> None:  # pragma: no cover - overridden
+        pass
+
+    def interrupt(self) -> None:
+        """Ctrl-C: cancel the queued work and stop what runs now, as far as this executor can
+        (the caller then closes it); pieces of work must be safe to stop (atomic writes)."""
+        self.close()
+
+
+def _ignore_sigint() -> None:
+    """Worker initializer: Ctrl-C is the parent's to handle (it stops the workers), so a worker
+    neither dies with a traceback nor reports a half-done piece of work as an error."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class _Deferred:
+    """A call made in this process when its result is first asked for (so that progress is
+    reported as each call finishes)."""
+
+    def __init__(self, fn, args):
+        self._fn, self._args, self._done, self._value = fn, args, False, None
+
+    def result(self):
+        if not self._done:
+            self._value, self._done = self._fn(*self._args), True
+        return self._value
+
+
+class _Serial(Executor):
+    description = "this process"
+
+    def submit(self, fn, *args, key: str):
+        return _Deferred(fn, args)
+
+    def completed(self, futures) -> Iterator:
+        yield from futures
+
+    def interrupt(self) -> None:
+        pass  # the call in progress was interrupted in this process; the rest never start
+
+
+class _LocalPool(Executor):
+    def __init__(self, workers: int):
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.workers = workers
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                        initializer=_ignore_sigint)
+        self.description = f"{workers} local processes"
+
+    def submit(self, fn, *args, key: str):
+        return self.pool.submit(fn, *args)
+
+    def completed(self, futures) -> Iterator:
+        from concurrent.futures import as_completed
+
+        yield from as_completed(futures)
+
+    def close(self) -> None:
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+    def interrupt(self) -> None:
+        # ProcessPoolExecutor cannot stop running calls: its worker processes (in _processes,
+        # which shutdown() forgets, so they are taken first) are killed.
+        procs = list((getattr(self.pool, "_processes", None) or {}).values())
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.kill()
+        for proc in procs:
+            proc.join(timeout=1.0)
+
+
+class _Dask(Executor):
+    def __init__(self, workers: int | None = None, scheduler: str | None = None,
+                 prefix: str = "task"):
+        import logging
+
+        from distributed import Client, LocalCluster
+
+        self.cluster = None
+        if scheduler is None:
+            self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                        dashboard_address=None, silence_logs=logging.ERROR)
+            self.client = Client(self.cluster)
+            self.description = f"dask LocalCluster of {workers} worker processes"
+        else:
+            try:
+                self.client = Client(scheduler, timeout="30s")
+            except (OSError, TimeoutError) as exc:
+                raise ExecutorError(f"--scheduler {scheduler}: cannot connect to a dask scheduler "
+                                    f"there ({exc}); expected the address of a running scheduler, "
+                                    "e.g. tcp://10.0.0.5:8786") from None
+            n = len(self.client.scheduler_info().get("workers", {}))
+            self.description = f"dask cluster at {scheduler} ({n} workers now)"
+        self.prefix = prefix
+        self.token = uuid.uuid4().hex[:8]
+        self._submitted: list = []
+
+    def submit(self, fn, *args, key: str):
+        fut = self.client.submit(fn, *args, key=f"{self.prefix}-{key}-{self.token}", pure=False)
+        self._submitted.append(fut)
+        return fut
+
+    def completed(self, futures) -> Iterator:
+        from distributed import as_completed
+
+        yield from as_completed(futures)
+
+    def interrupt(self) -> None:
+        self.client.cancel(self._submitted, force=True)
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def make_executor(processes: int | None = None, *, dask_workers: int | None = None,
+                  scheduler: str | None = None, prefix: str = "task") -> Executor:
+    """The executor for one command.
+
+    Args:
+        processes: local processes (default ``os.cpu_count()``); 1 runs in this process.
+        dask_workers: start a Dask LocalCluster of this many worker processes instead.
+        scheduler: connect to the Dask scheduler at this address instead (``tcp://host:8786``).
+        prefix: first part of the Dask task keys (seen on the cluster's dashboard).
+
+    Raises:
+        ExecutorError: no scheduler answers at ``scheduler``.
+    """
+    if scheduler is not None:
+        return _Dask(scheduler=scheduler, prefix=prefix)
+    if dask_workers is not None:
+        return _Dask(workers=dask_workers, prefix=prefix)
+    n = processes or os.cpu_count() or 1
+    return _Serial() if n == 1 else _LocalPool(n)
+
+
+def map_ordered(executor: Executor, fn: Callable, args: Sequence[tuple], keys: Sequence[str],
+                on_done: Callable[[int, str], None] | None = None) -> list:
+    """``[fn(*a) for a in args]`` on ``executor``, in the order of ``args``.
+
+    ``keys`` names each call (Dask task keys, progress); ``on_done(i, key)`` is called as each
+    call finishes (in completion order). The first call that raised re-raises here, after the
+    executor has finished or cancelled the rest (when the caller closes it)."""
+    futures = [executor.submit(fn, *a, key=k) for a, k in zip(args, keys, strict=True)]
+    index = {id(f): i for i, f in enumerate(futures)}
+    results: list = [None] * len(futures)
+    for fut in executor.completed(futures):
+        i = index[id(fut)]
+        results[i] = fut.result()
+        if on_done is not None:
+            on_done(i, keys[i])
+    return results
+
+
+def mapper(processes: int | None = None, *, scheduler: str | None = None,
+           prefix: str = "task") -> Callable[[Callable, Sequence[tuple]], list]:
+    """A ``map(fn, args) -> [fn(*a) for a in args]`` (in order) that runs the calls on an
+    executor started for them and closed after: local processes (``processes``, default all
+    cores, never more than there are calls; one runs them in this process) or the Dask cluster
+    at ``scheduler``. What ``twin backlash`` passes to the analysis for its sessions.
+
+    Raises (when called):
+        ExecutorError: no scheduler answers at ``scheduler``.
+    """
+    def run(fn: Callable, args: Sequence[tuple]) -> list:
+        n = len(args)
+        local = min(processes or os.cpu_count() or 1, max(n, 1))
+        with make_executor(local, scheduler=scheduler, prefix=prefix) as ex:
+            return map_ordered(ex, fn, args, [str(i) for i in range(n)])
+
+    return run

@@ -1,0 +1,199 @@
+"""``twin scenario init``: a scenario that reproduces a recording's layout and routine.
+
+The layout (Phase I samples, captures, rates and durations, Phase II sessions, runs and rates,
+the hours) and the routines are measured from the recording
+(:func:`analysis.ingest.routine.measure_recording`), the axis values come from its axis
+contract (``/@axis``), and every other value is the twin's default. Each line of the written
+TOML says which of the three it is, so the owner knows what to check. The text is validated by
+:func:`twin.scenario.load` before it is written.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from analysis.files import write_text
+from analysis.ingest.routine import measure_recording
+from twin.scenario import AxisConfig, Phase1Config, Phase2Config, ScenarioError, SensorsConfig, load
+
+MEASURED, AXIS, DEFAULT = "measured", "axis description", "twin default"
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(float(f"{v:.6g}"))
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    if isinstance(v, str):
+        return json.dumps(v)
+    return str(v)
+
+
+class _Table:
+    def __init__(self, name: str):
+        self.name, self.rows = name, []
+
+    def add(self, key: str, value: Any, source: str, note: str = "") -> None:
+        self.rows.append((key, value, source + (f": {note}" if note else "")))
+
+    def text(self) -> str:
+        lines = [f"[{self.name}]"] if self.name else []
+        width = max((len(f"{k} = {_fmt(v)}") for k, v, _ in self.rows), default=0)
+        lines += [f"{f'{k} = {_fmt(v)}':<{width}}  # {c}" for k, v, c in self.rows]
+        return "\n".join(lines)
+
+
+def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tuple[str, list[str]]:
+    """The scenario TOML for ``recording`` and the notes on what could not be measured."""
+    meas = measure_recording(recording)
+    axis = meas["axis"]
+    notes: list[str] = []
+    p1, p2 = meas.get("phase1"), meas.get("phase2")
+    title = name or Path(meas["file"]).resolve().parent.name
+    head = _Table("")
+    head.add("name", title, MEASURED, "the recording's directory")
+    head.add("description", f"the layout and routine of {meas['file']}", MEASURED)
+    head.add("seed", 0, DEFAULT, "the seed of the twin's random draws")
+
+    ax = _Table("axis")
+    d_axis = AxisConfig()
+    for key in ("travel_mm", "lead_mm", "carriage_mass_kg", "truck_spacing_mm", "rail_spacing_mm"):
+        v = getattr(axis, key, None)
+        if v is not None:
+            ax.add(key, float(v), AXIS)
+        else:
+            ax.add(key, getattr(d_axis, key), DEFAULT, "not in /@axis")
+            if key in ("travel_mm", "lead_mm"):
+                notes.append(f"/@axis.{key} is missing: the scenario uses the twin's {getattr(d_axis, key):g} mm")
+    travel = float(axis.travel_mm or d_axis.travel_mm)
+    if d_axis.shaft_length_mm < travel + 50:
+        ax.add("shaft_length_mm", travel + 80.0, DEFAULT, "the travel plus the nut and bearings")
+    for key, value in d_axis.model_dump().items():
+        if key not in {r[0] for r in ax.rows}:
+            ax.add(key, value, DEFAULT)
+
+    sens = _Table("sensors")
+    d_sens = SensorsConfig()
+    if p2:
+        for ch in ("imu_acc", "imu_gyro", "position_cmd"):
+            if ch in p2["fs_hz"]:
+                sens.add(f"{ch}_fs_hz", p2["fs_hz"][ch], MEASURED)
+    for key, path in (("imu_acc_bandwidth_hz", "sensors.imu_accelerometer.bandwidth_hz"),
+                      ("imu_acc_noise_ug_per_rthz", "sensors.imu_accelerometer.noise_ug_per_rthz"),
+                      ("imu_gyro_bandwidth_hz", "sensors.imu_gyroscope.bandwidth_hz"),
+                      ("imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyroscope.noise_urad_s_per_rthz")):
+        v = axis.get(path)
+        sens.add(key, float(v) if v is not None else getattr(d_sens, key), AXIS if v is not None else DEFAULT)
+    for key, value in d_sens.model_dump().items():
+        if key not in {r[0] for r in sens.rows}:
+            sens.add(key, value, DEFAULT)
+
+    camp = _Table("campaign")
+    ph1 = _Table("phase1")
+    d1 = Phase1Config()
+    last_hours = 0.0
+    if p1:
+        r1 = p1.get("routine", {})
+        cps = max(p1["captures_per_sample"])
+        if len(p1["captures_per_sample"]) > 1:
+            notes.append(f"Phase I samples hold {p1['captures_per_sample']} captures; the scenario gives each {cps}")
+        ph1.add("fs_hz", p1["fs_hz"][0], MEASURED)
+        ph1.add("capture_s", p1["capture_s"], MEASURED)
+        ph1.add("captures_per_sample", cps, MEASURED)
+        step_min = p1["capture_interval_minutes"] or d1.capture_interval_minutes
+        ph1.add("capture_interval_minutes", step_min, MEASURED if p1["capture_interval_minutes"] else DEFAULT)
+        interval = p1["sample_interval_hours"] or d1.sample_interval_hours
+        ph1.add("sample_interval_hours", interval, MEASURED if p1["sample_interval_hours"] else DEFAULT)
+        if "speeds_mm_s" in r1:
+            ph1.add("speed_mm_s", r1["speeds_mm_s"][-1], MEASURED, "from the motor speed and the lead")
+        if "accel_mm_s2" in r1:
+            ph1.add("accel_mm_s2", r1["accel_mm_s2"], MEASURED, "from the motor speed and the lead")
+        pr = axis.phase1_routine
+        stroke = r1.get("stroke_mm")
+        if pr is not None and pr.start_mm is not None and pr.end_mm is not None:
+            ph1.add("start_mm", pr.start_mm, AXIS)
+            ph1.add("end_mm", pr.end_mm, AXIS)
+        elif stroke is not None:
+            if stroke >= travel:
+                raise ScenarioError(
+                    f"{meas['file']}: the Phase I stroke measured from the motor speed through /@axis.lead_mm "
+                    f"= {axis.lead_mm:g} mm is {stroke:g} mm, not within the travel /@axis.travel_mm = "
+                    f"{travel:g} mm; expected a stroke shorter than the travel (is the lead right?)")
+            start = round((travel - stroke) / 2, 3)
+            ph1.add("start_mm", start, MEASURED, "stroke measured; its place assumed centred in the travel")
+            ph1.add("end_mm", round(start + stroke, 3), MEASURED, "stroke measured")
+        elif d1.end_mm > travel:
+            ph1.add("start_mm", round(0.25 * travel, 3), DEFAULT, "a half-travel stroke, centred")
+            ph1.add("end_mm", round(0.75 * travel, 3), DEFAULT, "a half-travel stroke, centred")
+        if "dwell_s" in r1:
+            ph1.add("dwell_s", r1["dwell_s"], MEASURED)
+        n = p1["samples"]
+        first = p1["first_hours"]
+        total = first + (n - 1) * interval + (cps - 1) * step_min / 60.0 + 0.5 * min(interval, 1.0)
+        camp.add("warmup_hours", first, MEASURED, "the first Phase I sample")
+        last_hours = total
+        camp.add("phase1", True, MEASURED)
+    else:
+        camp.add("phase1", False, MEASURED, "no Phase I capture")
+    for key, value in d1.model_dump().items():
+        if key not in {r[0] for r in ph1.rows}:
+            ph1.add(key, value, DEFAULT, "not measurable from the recording" if key == "dwell_s" else "")
+
+    ph2 = _Table("phase2")
+    d2 = Phase2Config()
+    if p2:
+        r2 = p2.get("routine", {})
+        pr = axis.phase2_routine
+        for key in ("speeds_mm_s", "accel_mm_s2", "start_mm", "end_mm", "dwell_s"):
+            if key in r2:
+                ph2.add(key, r2[key], MEASURED, "from position_cmd")
+            elif pr is not None and getattr(pr, key) is not None:
+                ph2.add(key, getattr(pr, key), AXIS)
+        if len(p2["runs_per_session"]) > 1:
+            notes.append(f"Phase II sessions hold {p2['runs_per_session']} runs; the scenario gives each "
+                         f"{max(p2['runs_per_session'])}")
+        ph2.add("runs_per_session", max(p2["runs_per_session"]), MEASURED)
+        ph2.add("session_hours", p2["session_hours"], MEASURED)
+        camp.add("phase2", True, MEASURED)
+        last_hours = max(last_hours, max(p2["session_hours"]))
+    else:
+        camp.add("phase2", False, MEASURED, "no Phase II session")
+    for key, value in d2.model_dump().items():
+        if key not in {r[0] for r in ph2.rows}:
+            ph2.add(key, value, DEFAULT)
+    camp.add("total_hours", float(last_hours or 1.0), MEASURED, "covers every sample and session")
+    camp.add("pauses", [], DEFAULT, "none known")
+
+    deg = _Table("degradation")
+    hours = sorted({0.0, float(last_hours or 1.0)})
+    deg.add("law", "table", DEFAULT, "a nominal machine: no preload loss, no backlash growth")
+    deg.add("table_hours", hours, DEFAULT)
+    deg.add("table_preload_fraction", [1.0] * len(hours), DEFAULT)
+    deg.add("table_backlash_um", [0.0] * len(hours), DEFAULT)
+
+    header = ("# Scenario of the recording " + meas["file"] + ", written by `twin scenario init`.\n"
+              f"# Each value says where it comes from: '{MEASURED}' (the recording's signals and layout),\n"
+              f"# '{AXIS}' (its /@axis), or '{DEFAULT}' (not in the recording: check it).\n")
+    body = "\n\n".join(t.text() for t in (head, ax, sens, ph1, ph2, deg, camp))
+    notes_text = "".join(f"# note: {n}\n" for n in notes)
+    return header + notes_text + "\n" + body + "\n", notes
+
+
+def write_scenario(recording: str | os.PathLike, out: str | os.PathLike, name: str | None = None) -> list[str]:
+    """Write the scenario of ``recording`` to ``out`` after checking that it loads; the notes."""
+    text, notes = scenario_text(recording, name)
+    with tempfile.TemporaryDirectory() as tmp:
+        probe = Path(tmp) / "scenario.toml"
+        probe.write_text(text, encoding="utf-8")
+        load(probe)  # ScenarioError if the measured values are outside the twin's ranges
+    write_text(out, text)
+    return notes
+
+
+__all__ = ["scenario_text", "write_scenario"]
