@@ -427,6 +427,22 @@ class CampaignDirectoryError(ValueError):
     """The output directory holds the parts of a different scenario."""
 
 
+class CampaignInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`simulate_campaign`: the queued units were cancelled and the running
+    ones stopped; ``done`` of ``total`` units are stored as parts (a rerun resumes from them),
+    ``cancelled`` were not started or were stopped unfinished."""
+
+    def __init__(self, done: int, total: int, cancelled: int):
+        super().__init__(f"interrupted: {done} of {total} units finished")
+        self.done, self.total, self.cancelled = done, total, cancelled
+
+
+def _stored(store: PartStore, units: list[Unit]) -> int:
+    """How many of ``units`` are stored as parts (part files appear complete, by atomic rename)."""
+    names = {kind: set(store.names(kind)) for kind in {u.kind for u in units}}
+    return sum(u.name in names[u.kind] for u in units)
+
+
 def _claim(out: Path, s: Scenario) -> None:
     """Record the scenario in ``out/.parts/scenario.json``; refuse to mix with another one.
 
@@ -473,6 +489,8 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
 
     Raises:
         twin.executors.ExecutorError: no scheduler answers at ``scheduler``.
+        CampaignInterrupted: on Ctrl-C (KeyboardInterrupt), after cancelling the queued units and
+            stopping the running ones; the finished units stay stored.
     """
     from twin.executors import make_executor
 
@@ -491,12 +509,17 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
     processes = 1 if len(todo) <= 1 and scheduler is None else workers
     with make_executor(processes, scheduler=scheduler, prefix="unit") as ex:
-        futures = [ex.submit(run_unit, payload, u, str(out), key=u.name) for u in todo]
-        for fut in ex.completed(futures):
-            name = fut.result()
-            done += 1
-            if on_progress:
-                on_progress(done, len(units), name)
+        try:
+            futures = [ex.submit(run_unit, payload, u, str(out), key=u.name) for u in todo]
+            for fut in ex.completed(futures):
+                name = fut.result()
+                done += 1
+                if on_progress:
+                    on_progress(done, len(units), name)
+        except KeyboardInterrupt:
+            ex.interrupt()
+            kept = _stored(store, units)
+            raise CampaignInterrupted(kept, len(units), len(units) - kept) from None
         where = ex.description
     assemble(s, out, units)
     return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo),

@@ -6,6 +6,8 @@ with code 2 and one message naming the file, key and value."""
 
 from __future__ import annotations
 
+import importlib.util
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -15,12 +17,16 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from twin.scenario import ScenarioError, load
+from twin.scenario import SHIPPED, ScenarioError, load
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="MuJoCo digital twin of a ball-screw linear axis.")
 console = Console(stderr=True)
-SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
+SCENARIOS = SHIPPED
+#: The optional parts of the tool (pyproject extras): extra -> (modules, what they are).
+EXTRAS = {"sim": (("mujoco",), "MuJoCo (the simulator)"), "view": (("rerun",), "Rerun (the viewer)"),
+          "cluster": (("distributed",), "Dask (the cluster)")}
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, as a shell reports a command stopped by Ctrl-C
 
 
 def _fail(message: str, code: int = 2) -> None:
@@ -29,15 +35,61 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+def _installed(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def _require(verb: str, *extras: str) -> None:
+    """Exit 2 naming the extra to install when an optional dependency of ``verb`` is missing;
+    the imports of those modules stay inside the verbs, so the others work without them."""
+    for extra in extras:
+        modules, what = EXTRAS[extra]
+        missing = [m for m in modules if not _installed(m)]
+        if missing:
+            _fail(f"twin {verb} needs {what}: {', '.join(missing)} is not installed; install the extra "
+                  f"with: pip install 'ballscrew-twin[{extra}]' (or [all] for every extra)")
+
+
+def _writable_dir(out: Path, what: str = "output directory") -> None:
+    """Exit 2 when ``out`` cannot be a directory: it, or a folder above it, is an existing file."""
+    for p in (out, *out.parents):
+        if p.exists():
+            if not p.is_dir():
+                _fail(f"{out}: cannot write the {what} there: {p} is a file, not a directory")
+            return
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            v = version("ballscrew-twin")
+        except PackageNotFoundError:
+            v = "unknown (not installed as a package)"
+        typer.echo(f"ballscrew-twin {v}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="print the version and exit")) -> None:
+    """MuJoCo digital twin of a ball-screw linear axis."""
+
+
 def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None,
                     scheduler: str | None = None) -> dict:
-    from twin.campaign import CampaignDirectoryError, plan, simulate_campaign
+    from twin.campaign import CampaignDirectoryError, CampaignInterrupted, plan, simulate_campaign
     from twin.executors import ExecutorError
 
     try:
         s = load(scenario, overrides)
     except ScenarioError as exc:
         _fail(str(exc))
+    _writable_dir(out, "campaign directory")
     units = plan(s)
     n1 = sum(u.kind == "phase1" for u in units)
     n2 = sum(u.kind == "phase2" for u in units)
@@ -57,6 +109,11 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: in
         except (CampaignDirectoryError, ExecutorError) as exc:
             progress.stop()
             _fail(str(exc))
+        except CampaignInterrupted as exc:
+            progress.stop()
+            _fail(f"interrupted: {exc.done} of {exc.total} units finished and kept in {out / '.parts'}, "
+                  f"the other {exc.cancelled} cancelled; resume with: twin {shlex.join(sys.argv[1:])}",
+                  code=EXIT_INTERRUPTED)
     summary["seconds"] = time.perf_counter() - t0
     summary["scenario"] = s
     return summary
@@ -64,7 +121,7 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: in
 
 @app.command()
 def simulate(
-    scenario: Path = typer.Argument(..., help="scenario TOML file"),
+    scenario: Path = typer.Argument(..., help="scenario TOML file, or a shipped scenario's name (quick)"),
     out: Path = typer.Option(..., "-o", "--out", help="campaign directory to write"),
     set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE (TOML value), repeatable"),
     workers: int | None = typer.Option(None, "--workers", min=1,
@@ -74,7 +131,9 @@ def simulate(
                                               "send the units to; OUT must be on a file system its "
                                               "workers share"),
 ) -> None:
-    """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed)."""
+    """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed).
+    SCENARIO is a TOML file or the name of a shipped scenario (quick, demo, paper-rtf, ...)."""
+    _require("simulate", "sim", *(["cluster"] if scheduler is not None else []))
     if scheduler is not None and workers is not None:
         _fail("--scheduler and --workers exclude each other: --scheduler sends the units to an "
               "existing dask cluster, --workers N runs them in N local processes")
@@ -195,12 +254,13 @@ def score(
 def demo(
     out: Path = typer.Option(Path("runs/demo"), "-o", "--out", help="where to write the demo"),
     set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE on scenarios/demo.toml"),
-    workers: int | None = typer.Option(None, "--workers", help="processes (default: all cores)"),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
 ) -> None:
     """The whole chain on a small campaign (scenarios/demo.toml): simulate the Phase I reference
     data set and the campaign, run Phase I (Fisher selection, six detectors) and Phase II
     (backlash, trend), score both against the truth, write the report and a Rerun recording,
     and print the summary."""
+    _require("demo", "sim", "view")
     from analysis.report import write_report
     from twin.harness.chain import analyse
     from twin.harness.view import write_recording
@@ -240,6 +300,7 @@ def export_model(
 ) -> None:
     """Write the MJCF of the axis in its new, healthy state: a complete model that holds still,
     e.g. to open in MuJoCo's viewer (`python -m mujoco.viewer --mjcf models/linear_axis.xml`)."""
+    _require("export-model", "sim")
     from twin.campaign import make_world
     from twin.model import build_mjcf
     from twin.scenario import Scenario, to_axis
@@ -248,6 +309,7 @@ def export_model(
         s = load(scenario) if scenario else Scenario()
     except ScenarioError as exc:
         _fail(str(exc))
+    _writable_dir(out.parent)
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
         text = build_mjcf(to_axis(s), timestep or s.phase1.timestep_s, make_world(s).base_mode)
@@ -271,10 +333,17 @@ def detect(
     from analysis.phase1.detect import run
 
     out = out or directory / "phase1"
+    for d, what in ((directory, "recording"), (reference, "reference data set")):
+        if not (d / "measurements.h5").is_file():
+            _fail(f"{d}: no measurements.h5; expected the {what} in the dataset format "
+                  "(docs/dataset-format.md)")
+    _writable_dir(out)
+    existed = out.is_dir() and any(out.iterdir())
     try:
         details = run(directory, reference, out, method or None, consecutive)
     except (ValueError, FileNotFoundError) as exc:  # DatasetError, ExtractionError, DetectError
-        _fail(f"{exc} (anything computed before the error is in {out})")
+        kept = not existed and out.is_dir() and any(out.iterdir())
+        _fail(f"{exc}" + (f" (what was computed before the error is in {out})" if kept else ""))
     onset = details["onset_hours"]
     table = Table(title=f"Phase I detection, {details['n_samples']} samples, baseline "
                         f"{details['n_baseline']}, injected onset "
@@ -338,6 +407,8 @@ def backlash(
     from analysis.phase2.workflow import estimator_dir, run
     from twin.executors import ExecutorError, mapper
 
+    if scheduler is not None:
+        _require("backlash --scheduler", "cluster")
     if scheduler is not None and workers is not None:
         _fail("--scheduler and --workers exclude each other: --scheduler sends the sessions to an "
               "existing dask cluster, --workers N runs them in N local processes")
@@ -349,6 +420,7 @@ def backlash(
         _fail(f"--estimator: {exc}")
     params = _parse_params(set_param)
     out = estimator_dir(out or directory / "backlash", entry.name)
+    _writable_dir(out)
     try:
         q = process_noise if process_noise == "ml" else float(process_noise)
         if q != "ml" and not (math.isfinite(q) and q >= 0):
@@ -417,6 +489,9 @@ def import_(
     rates, hours and the axis description. Resumes: files converted before are not read again."""
     from analysis.dataset import DatasetError
     from analysis.ingest import ImportSpecError, run_import
+
+    if out is not None:
+        _writable_dir(out, "campaign directory")
 
     t0 = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -539,6 +614,7 @@ def sweep(
 ) -> None:
     """Run a sweep: every point and seed simulated, analysed and scored; writes OUT/results.parquet,
     OUT/results.csv and plots. Default executor: all local cores (processes). Resumes if interrupted."""
+    _require("sweep", "sim", *(["cluster"] if scheduler is not None or workers is not None else []))
     from twin.harness.sweep import Callbacks, SweepError, method_summary, plan_sweep, run_sweep, summary
 
     if scheduler is not None and workers is not None:
@@ -549,6 +625,7 @@ def sweep(
     except SweepError as exc:
         _fail(str(exc))
     out = out or Path("runs/sweeps") / sweep_file.stem
+    _writable_dir(out)
     n_tasks = len(plan.tasks)
     console.print(f"sweep [bold]{plan.name}[/]: {plan.n_points} points x {len(plan.seeds)} seeds = "
                   f"{n_tasks} campaigns of scenario {plan.base['name']} "
@@ -680,6 +757,7 @@ def diagnose(
     """Where the twin and the recording differ, which effect of the library explains it, and how
     far the gap shrinks once it is added (held-out data). Writes OUT/diagnosis.json and
     OUT/report/ (gap maps before and after)."""
+    _require("diagnose", "sim")
     from analysis.dataset import DatasetError
     from twin.harness.gap_runner import run_diagnosis
 
@@ -691,6 +769,7 @@ def diagnose(
         _fail(f"{real_dir}: no measurements.h5; expected a recording in the dataset format "
               "(docs/dataset-format.md)")
     out = out or real_dir / "diagnosis"
+    _writable_dir(out)
     console.print(f"diagnosing {real_dir} against scenario [bold]{s.name}[/] "
                   f"({seeds} twin seeds) -> {out}")
     t0 = time.perf_counter()
@@ -723,6 +802,7 @@ def diagnose_benchmark(
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
+    _require("diagnose-benchmark", "sim")
     from twin.harness.gap_benchmark import plan_cases, run_benchmark
 
     try:
@@ -777,6 +857,7 @@ def view(
     limits and the onset, backlash estimates against the truth and the dial indicator over
     operating hours, the scenario as properties. Parts whose inputs are missing are left out
     with a note (e.g. no truth.h5 on a real machine)."""
+    _require("view", "view")
     from analysis.dataset import DatasetError
     from twin.harness.view import ViewError, serve_recording, write_recording
 
@@ -827,6 +908,7 @@ def report(
     computes DIRECTORY/score.json first if it is missing and truth.h5 is there."""
     from analysis.report import INPUT_ERRORS, render
 
+    _writable_dir(out or directory / "report", "report folder")
     try:
         rep = render(directory, out)
     except INPUT_ERRORS as exc:

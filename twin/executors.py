@@ -48,6 +48,19 @@ class Executor:
     def close(self) -> None:  # pragma: no cover - overridden
         pass
 
+    def interrupt(self) -> None:
+        """Ctrl-C: cancel the queued work and stop what runs now, as far as this executor can
+        (the caller then closes it); pieces of work must be safe to stop (atomic writes)."""
+        self.close()
+
+
+def _ignore_sigint() -> None:
+    """Worker initializer: Ctrl-C is the parent's to handle (it stops the workers), so a worker
+    neither dies with a traceback nor reports a half-done piece of work as an error."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
 
 class _Deferred:
     """A call made in this process when its result is first asked for (so that progress is
@@ -71,6 +84,9 @@ class _Serial(Executor):
     def completed(self, futures) -> Iterator:
         yield from futures
 
+    def interrupt(self) -> None:
+        pass  # the call in progress was interrupted in this process; the rest never start
+
 
 class _LocalPool(Executor):
     def __init__(self, workers: int):
@@ -78,7 +94,8 @@ class _LocalPool(Executor):
         from concurrent.futures import ProcessPoolExecutor
 
         self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"))
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                        initializer=_ignore_sigint)
         self.description = f"{workers} local processes"
 
     def submit(self, fn, *args, key: str):
@@ -91,6 +108,16 @@ class _LocalPool(Executor):
 
     def close(self) -> None:
         self.pool.shutdown(wait=True, cancel_futures=True)
+
+    def interrupt(self) -> None:
+        # ProcessPoolExecutor cannot stop running calls: its worker processes (in _processes,
+        # which shutdown() forgets, so they are taken first) are killed.
+        procs = list((getattr(self.pool, "_processes", None) or {}).values())
+        self.pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.kill()
+        for proc in procs:
+            proc.join(timeout=1.0)
 
 
 class _Dask(Executor):
@@ -117,14 +144,20 @@ class _Dask(Executor):
             self.description = f"dask cluster at {scheduler} ({n} workers now)"
         self.prefix = prefix
         self.token = uuid.uuid4().hex[:8]
+        self._submitted: list = []
 
     def submit(self, fn, *args, key: str):
-        return self.client.submit(fn, *args, key=f"{self.prefix}-{key}-{self.token}", pure=False)
+        fut = self.client.submit(fn, *args, key=f"{self.prefix}-{key}-{self.token}", pure=False)
+        self._submitted.append(fut)
+        return fut
 
     def completed(self, futures) -> Iterator:
         from distributed import as_completed
 
         yield from as_completed(futures)
+
+    def interrupt(self) -> None:
+        self.client.cancel(self._submitted, force=True)
 
     def close(self) -> None:
         self.client.close()

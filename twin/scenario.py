@@ -330,9 +330,33 @@ def read_toml(path: str | Path, what: str, error: type[Exception] = ValueError) 
         raise error(f"{path}: not valid TOML: {exc}.") from None
 
 
-def load(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Scenario:
-    """Read a TOML scenario and apply ``KEY=VALUE`` overrides."""
+#: The scenarios shipped with the package (``scenarios/`` of the checkout, package data once
+#: installed): found by name, e.g. ``twin simulate quick``.
+SHIPPED = Path(__file__).parent / "scenarios"
+
+
+def shipped_names() -> list[str]:
+    """Names of the shipped scenarios (file stems), sorted."""
+    return sorted(p.stem for p in SHIPPED.glob("*.toml"))
+
+
+def find_scenario(path: str | Path) -> Path:
+    """``path`` if it exists, else the shipped scenario of that name (``quick`` or
+    ``quick.toml``); an unknown name raises :class:`ScenarioError` listing the shipped ones."""
     path = Path(path)
+    if path.exists() or len(path.parts) != 1:
+        return path
+    shipped = SHIPPED / (path.name if path.suffix == ".toml" else f"{path.name}.toml")
+    if shipped.is_file():
+        return shipped
+    raise ScenarioError(f"{path}: no such file, nor a shipped scenario; shipped scenarios: "
+                        f"{', '.join(shipped_names())}")
+
+
+def load(path: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Scenario:
+    """Read a TOML scenario (a file, or a shipped scenario by name: :func:`find_scenario`) and
+    apply ``KEY=VALUE`` overrides."""
+    path = find_scenario(path)
     data = copy.deepcopy(read_toml(path, "scenario file", ScenarioError))
     for item in overrides:
         key, value = parse_override(item)

@@ -17,6 +17,7 @@ from analysis.dataset.schema import (
     OPTIONAL_PHASE2_CHANNELS,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
+    PHYSICAL_RANGE,
     SESSION_TRUTH_REQUIRED,
     STROKE_TRUTH,
     TIMELINE_REQUIRED,
@@ -30,7 +31,9 @@ from analysis.dataset.validate import (
     _attr_int,
     _attr_number,
     _check_finite,
+    _check_range,
     _check_shape,
+    _check_size,
     _check_unit,
     _dims,
     _fmt,
@@ -107,7 +110,25 @@ class _Reader:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def _link(self, key: str):
+        """Refuse soft and external links on the way to ``key``: the data must be in the file
+        itself (an external link would read another file, a soft link alias another item)."""
+        parts = [p for p in key.split("/") if p]
+        for i in range(1, len(parts) + 1):
+            sub = "/" + "/".join(parts[:i])
+            try:
+                link = self._f.get(sub, getlink=True)
+            except (OSError, KeyError, RuntimeError, ValueError) as e:
+                raise DatasetError(f"{self.label}: {sub} could not be read; the file may be corrupt ({e})") from None
+            if link is None:
+                return
+            if not isinstance(link, h5py.HardLink):
+                kind = "an external link" if isinstance(link, h5py.ExternalLink) else "a soft link"
+                raise DatasetError(f"{self.label}: {sub} is {kind}; expected the group or dataset itself "
+                                   "(links are not followed)")
+
     def _obj(self, key: str, kind: type, what: str):
+        self._link(key)
         try:
             obj = self._f.get(key)
         except (OSError, KeyError, RuntimeError) as e:
@@ -130,7 +151,12 @@ class _Reader:
         if key not in self._f:
             return []
         g = self._obj(key, h5py.Group, "a group")
-        return sorted(k for k, v in g.items() if isinstance(v, h5py.Group))
+        try:
+            names = sorted(k for k in g if isinstance(g.get(k, getlink=True), h5py.HardLink)
+                           and isinstance(g.get(k), h5py.Group))
+        except (OSError, KeyError, RuntimeError, ValueError) as e:
+            raise DatasetError(f"{self.label}: {key} could not be listed; the file may be corrupt ({e})") from None
+        return names
 
     def _array(
         self,
@@ -145,15 +171,27 @@ class _Reader:
         ds = self._obj(key, h5py.Dataset, what)
         check_dtype(self.label, key, ds.dtype)
         _check_shape(self.label, key, ds.shape, dims, n_expected, n_ref)
+        _check_size(self.label, key, ds.shape)
         attrs = self._attrs(ds, key)
         if unit is not None:
             _check_unit(self.label, key, attrs, unit)
         try:
             arr = np.asarray(ds[()], dtype=np.float64)
-        except OSError as e:
+        except (OSError, RuntimeError, ValueError) as e:
+            try:
+                checked = ds.fletcher32
+            except (OSError, RuntimeError, ValueError):
+                checked = False
+            if checked and "filter" in str(e).lower():
+                raise DatasetError(
+                    f"{self.label}: {key} fails its Fletcher-32 checksum: its bytes changed after it was "
+                    "written (a corrupt copy or disk); restore the file from a good copy") from None
             raise DatasetError(
                 f"{self.label}: {key} could not be read; the file may be truncated or corrupt ({e})") from None
         _check_finite(self.label, key, arr)
+        name = key.rsplit("/", 1)[-1]
+        if self._format == MEASUREMENTS_FORMAT and name in PHYSICAL_RANGE and unit is not None:
+            _check_range(self.label, key, arr, PHYSICAL_RANGE[name], unit)
         return arr, attrs
 
     def _json_attr(self, key: str, obj: h5py.HLObject, name: str) -> dict:
@@ -262,6 +300,11 @@ class Measurements(_Reader):
             "/dial_indicator/backlash_um", "a dataset of backlash readings in um, shape (n,)", ("n",), "um",
             len(hours), "len(hours)",
         )
+        bad = (hours < 0) | np.r_[False, np.diff(hours) < 0]
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise DatasetError(f"{self.label}: /dial_indicator/hours[{i}] is {hours[i]:g}; expected operating "
+                               "hours >= 0 that do not decrease")
         return hours, backlash
 
     def validate(self) -> None:

@@ -30,6 +30,22 @@ PHASE2_CHANNELS: dict[str, tuple[str, str, int]] = {
 #: position (``twin backlash --position-reference imu``).
 OPTIONAL_PHASE2_CHANNELS = ("position_cmd",)
 DIAL_UNITS = {"hours": "h", "backlash_um": "um"}
+#: Largest magnitude a channel can physically hold (its unit as above): well beyond what the
+#: paper's sensors and drive can output (section III: accelerometers of ±50 g and less, a MEMS
+#: gyroscope of some ±35 rad/s (2000 °/s), a servo motor of a few thousand rpm). A sample beyond
+#: it is garbage (a wrong scale factor, a flipped exponent), never analysed.
+PHYSICAL_RANGE = {
+    "speed": 1.0e3,           # rad/s (about 9500 rpm)
+    "torque": 1.0e3,          # N*m
+    "acc1": 5.0e3,            # m/s^2 (about 500 g)
+    "acc2": 5.0e3,
+    "imu_acc": 5.0e3,
+    "imu_gyro": 1.0e2,        # rad/s (about 5700 °/s)
+    "position_cmd": 1.0e2,    # m
+}
+#: Most values one dataset may hold: the reader converts to float64 in memory, so a file that
+#: declares a larger array (an absurd dimension) is refused before any allocation (256 MiB).
+MAX_VALUES = 2**25
 #: Optional Phase II run attributes describing the routine (Table I of the paper), needed to
 #: analyse a run from the IMU alone: name -> what it holds. ``speeds_mm_s`` is a list.
 ROUTINE_ATTRS = {

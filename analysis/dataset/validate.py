@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.dataset.schema import ROUTINE_ATTRS, DatasetError
+from analysis.dataset.schema import MAX_VALUES, ROUTINE_ATTRS, DatasetError
 
 #: A group name: letters, digits, "_", "-", "." (not starting with ".").
 NAME_RE = re.compile(r"^[A-Za-z0-9_-][A-Za-z0-9_.-]*$")
@@ -79,6 +79,31 @@ def _check_finite(label: str, key: str, arr: np.ndarray) -> None:
     )
 
 
+def _check_range(label: str, key: str, arr: np.ndarray, limit: float, unit: str) -> None:
+    """Every sample within ±``limit`` (the channel's physical range, :data:`PHYSICAL_RANGE`)."""
+    if arr.size == 0:
+        return
+    mag = np.abs(arr)
+    flat = int(np.argmax(mag))
+    if mag.reshape(-1)[flat] <= limit:
+        return
+    count = int(np.count_nonzero(mag > limit))
+    first: Any = flat if arr.ndim == 1 else tuple(int(i) for i in np.unravel_index(flat, arr.shape))
+    raise DatasetError(
+        f"{label}: {key} has {count} value(s) beyond the physical range of the channel, the largest "
+        f"{arr.reshape(-1)[flat]:.6g} {unit} at index {first}; expected |x| <= {limit:g} {unit} "
+        "(a wrong unit or scale factor, or corrupt data)"
+    )
+
+
+def _check_size(label: str, key: str, shape: tuple[int, ...]) -> None:
+    """At most :data:`MAX_VALUES` values, checked on the declared shape before reading."""
+    n = int(np.prod(shape, dtype=np.float64)) if shape else 1
+    if n > MAX_VALUES:
+        raise DatasetError(f"{label}: {key} has shape {tuple(int(s) for s in shape)} ({n} values); expected at "
+                           f"most {MAX_VALUES} values per dataset")
+
+
 def as_str(value: Any) -> str | None:
     """A string attribute value as str (accepts bytes and 1-element arrays, as MATLAB writes)."""
     if isinstance(value, np.ndarray) and value.size == 1:
@@ -122,7 +147,11 @@ def _attr_number(label: str, attrs: Mapping[str, Any], key: str, name: str, what
 
 
 def _attr_hours(label: str, attrs: Mapping[str, Any], key: str) -> float:
-    return _attr_number(label, attrs, key, "hours", "a finite number of operating hours")
+    what = "a finite number of operating hours >= 0"
+    hours = _attr_number(label, attrs, key, "hours", what)
+    if hours < 0:
+        raise DatasetError(f"{label}: {key}@hours is {_fmt(attrs['hours'])}; expected {what}")
+    return hours
 
 
 def _attr_fs(label: str, attrs: Mapping[str, Any], key: str) -> float:

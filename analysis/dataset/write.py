@@ -23,6 +23,7 @@ from analysis.dataset.schema import (
     OPTIONAL_PHASE2_CHANNELS,
     PHASE1_CHANNELS,
     PHASE2_CHANNELS,
+    PHYSICAL_RANGE,
     SESSION_TRUTH_REQUIRED,
     STROKE_TRUTH,
     TIMELINE_REQUIRED,
@@ -36,6 +37,7 @@ from analysis.dataset.validate import (
     _attr_number,
     _check_finite,
     _check_name,
+    _check_range,
     _check_shape,
     _check_unit,
     _dims,
@@ -68,7 +70,11 @@ def _check_new(label: str, key: str, parent: h5py.Group, name: str, what: str) -
 
 def _put(label: str, key: str, g: h5py.Group, name: str, arr: np.ndarray, attrs: Mapping[str, Any]) -> None:
     _check_finite(label, key, arr)
-    ds = g.create_dataset(name, data=arr)
+    if name in PHYSICAL_RANGE and g.file.attrs.get("format") == MEASUREMENTS_FORMAT:
+        _check_range(label, key, arr, PHYSICAL_RANGE[name], str(attrs.get("unit", "")))
+    # Fletcher-32: every chunk carries a checksum that the reader verifies, so bytes changed after
+    # writing (a corrupt copy, a bad disk) raise an error instead of being analysed.
+    ds = g.create_dataset(name, data=arr, fletcher32=True)
     write_attrs(ds, attrs)
 
 
