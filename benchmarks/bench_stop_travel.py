@@ -1,0 +1,54 @@
+"""D − L at the stops: the carriage's true rest-to-rest travel D against the commanded stroke L,
+for a backlash b and a deceleration a (Eq. 9 of the paper assumes D = L − b).
+
+One run per case of a 20 mm stroke at 5 mm/s (quick scenario, dwell 1 s), simulated directly;
+prints D − L forward and reverse in µm. Options: ``--damping-ratio Z`` (the nut contact's,
+default the scenario's), ``--friction-timeconst S`` (the rail friction constraint's MuJoCo
+solref time constant; default MuJoCo's 0.02 s). Usage:
+``python benchmarks/bench_stop_travel.py [--damping-ratio 0.0003] [--friction-timeconst 0.0004]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from twin.campaign import condition_at, make_world
+from twin.scenario import load
+from twin.simulate import Simulator, phase2_trajectory, stroke_travels
+
+
+def d_minus_l_um(accel_m_s2: float, backlash_um: float, damping_ratio: float | None,
+                 friction_timeconst_s: float | None) -> np.ndarray:
+    sets = ["campaign.phase1=false", "phase2.runs_per_session=1", "phase2.session_hours=[100.0]",
+            "phase2.speeds_mm_s=[5.0]", f"phase2.accel_mm_s2={accel_m_s2 * 1e3}", "phase2.start_mm=100.0",
+            "phase2.end_mm=120.0", "phase2.dwell_s=1.0", "degradation.law=table",
+            "degradation.table_hours=[0.0, 1000.0]", "degradation.table_preload_fraction=[1.0, 1.0]",
+            f"degradation.table_backlash_um=[{backlash_um}, {backlash_um}]"]
+    if damping_ratio is not None:
+        sets.append(f"axis.contact_damping_ratio={damping_ratio}")
+    s = load("quick", sets)
+    sim = Simulator(make_world(s), s.phase2.timestep_s)
+    if friction_timeconst_s is not None:
+        sim.model.dof_solref[sim.model.joint("carriage_x").dofadr[0]] = [friction_timeconst_s, 1.0]
+    traj = phase2_trajectory(sim, s.phase2, condition_at(s, 100.0))
+    st = stroke_travels(sim.world, traj)
+    return (np.abs(st["carriage_m"]) - np.abs(st["command_m"])) * 1e6
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--damping-ratio", type=float, default=None)
+    p.add_argument("--friction-timeconst", type=float, default=None)
+    a = p.parse_args()
+    print(f"D − L (µm), forward | reverse; 5 mm/s, 20 mm stroke; damping ratio "
+          f"{a.damping_ratio or 'scenario'}, friction time constant {a.friction_timeconst or 'MuJoCo default'}")
+    for acc in (19.6, 2.0, 0.5, 0.1, 0.05):
+        cells = [f"b {b:g} µm: {d[0]:+6.2f} | {d[1]:+6.2f}"
+                 for b in (0.0, 10.0, 20.0) for d in [d_minus_l_um(acc, b, a.damping_ratio, a.friction_timeconst)]]
+        print(f"a {acc:5.2f} m/s²  " + "   ".join(cells), flush=True)
+
+
+if __name__ == "__main__":
+    main()
