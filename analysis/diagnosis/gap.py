@@ -3,8 +3,9 @@ twin's own spread from seed to seed, with the multiple comparisons corrected for
 
 For statistic j, the twin is simulated with K seeds (new rails, screw phases, noise each time):
 mean μ_j, and a standard deviation pooled over the statistics of the same region (the same
-channel and band or phase at every hour; :attr:`Region.pool_key`), σ_R, with ν = Σ (K − 1)
-degrees of freedom. A recording
+channel and band or phase at every hour; :attr:`Region.pool_key`), σ_R, with ν degrees of
+freedom between K − 1 and Σ (K − 1): the statistics of a region share their seeds, and what a
+seed draws once moves them alike (:func:`pooled_dof`). A recording
 that the twin describes is one more draw, so
 
     t_j = (r_j − μ_j − Δ_j) / (σ_R √(1 + 1/K))
@@ -57,6 +58,34 @@ def check_same(a: Signature, b: Signature, what_a: str, what_b: str) -> None:
             f"{only_a or 'none'}; only in {what_b}: {only_b or 'none'})")
 
 
+def pooled_dof(v: np.ndarray) -> float:
+    """Effective degrees of freedom of the variance pooled over the m statistics of one region,
+    v (K, m): the values of each statistic in each of K seeds.
+
+    The m statistics (one region at m hours) are measured on the same K simulated machines, so
+    they are not m independent replicates: what a seed draws once (its rails, the phases of its
+    screw's errors) moves all of them alike. The pooled variance is the two-way decomposition
+    MS_seed/m + (1 − 1/m)·MS_res, MS_seed = m·Σ_k (ē_k − ē)²/(K − 1) from the seeds' means over
+    the m statistics (K − 1 degrees of freedom) and MS_res the seed × statistic residual
+    ((K − 1)(m − 1)); Satterthwaite's approximation (Satterthwaite, Biometrics Bull. 2, 1946;
+    Montgomery, Design and Analysis of Experiments, 8th ed., section 13.6) gives its degrees of
+    freedom: m(K − 1) when the statistics vary independently from seed to seed, down to K − 1
+    when each seed moves them all alike.
+    """
+    k, m = v.shape
+    if m == 1:
+        return float(k - 1)
+    d = v - v.mean(axis=0)  # (K, m) deviations from each statistic's mean
+    seed = d.mean(axis=1)  # (K,) what each seed shares over the m statistics
+    ms_seed = m * np.sum(seed ** 2) / (k - 1)
+    ms_res = np.sum((d - seed[:, None]) ** 2) / ((k - 1) * (m - 1))
+    a, b = ms_seed / m, (1.0 - 1.0 / m) * ms_res
+    den = a ** 2 / (k - 1) + b ** 2 / ((k - 1) * (m - 1))
+    if not den > 0.0:  # constant over the seeds: nothing to pool, the floor of `spread` applies
+        return float(m * (k - 1))
+    return float(np.clip((a + b) ** 2 / den, k - 1, m * (k - 1)))
+
+
 def spread(signatures: list[Signature]) -> Spread:
     """The spread of K ≥ 3 twin signatures of the same part (identical statistics)."""
     if len(signatures) < 3:
@@ -78,7 +107,7 @@ def spread(signatures: list[Signature]) -> Spread:
             groups.setdefault(key, []).append(j)
     for idx in groups.values():
         pooled[idx] = np.mean(var[idx])
-        dof[idx] = len(idx) * (k - 1)
+        dof[idx] = pooled_dof(v[:, idx])
     floor = 1e-9 * np.maximum(1.0, np.abs(np.nan_to_num(mean)))
     sd = np.sqrt(np.maximum(np.nan_to_num(pooled), floor ** 2)) * np.sqrt(1.0 + 1.0 / k)
     return Spread(mean=mean, sd=sd, dof=np.maximum(dof, 1.0), k=k, valid=valid)
