@@ -296,6 +296,16 @@ def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
     return attribution.diagnose(real, ens.twin, cands, alpha=alpha)
 
 
+def library_json(names: list[str]) -> dict:
+    """The library's entry of ``diagnosis.json``: per effect its title, source and, per
+    parameter, the prior range (low, high) and how the report prints it (label, unit, digits,
+    the fit grid's ends: :meth:`twin.effects.base.Param.display`)."""
+    return {n: {"title": LIBRARY[n].title, "source": LIBRARY[n].source,
+                "params": {p.name: {"low": p.low, "high": p.high, **p.display()}
+                           for p in LIBRARY[n].params}}
+            for n in names}
+
+
 def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   library: list[str] | None = None, plots: bool = True,
@@ -310,10 +320,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
-              "library": {c.name: {"title": LIBRARY[c.name].title, "source": LIBRARY[c.name].source,
-                                   "params": {p.name: {"low": p.low, "high": p.high}
-                                              for p in LIBRARY[c.name].params}}
-                          for c in ens.candidates},
+              "library": library_json([c.name for c in ens.candidates]),
               **result}
     write_json(out / "diagnosis.json", result, nan_as_null=True)
     if plots:
