@@ -21,8 +21,10 @@ For each candidate:
 
 3. **Regions it makes worse.** A region (channel × band, phase, segment, …: a
    :attr:`Region.key` over all hours) is *made worse* when its held-out Σ t² over its m usable
-   statistics rises by more than the χ²_m(1 − α) quantile once the candidate is added: more than
-   a whole region of the twin's own spread would hold (:func:`worse_regions`). The rise outside
+   statistics rises by more than the χ²_m(1 − α) quantile once the candidate is added (more than
+   a whole region of the twin's own spread would hold) and by at least ``WORSE_FRACTION`` (10 %)
+   of its Σ t² before (a smaller relative rise in a region far beyond the spread is within the
+   error of taking the response from one seed) (:func:`worse_regions`). The rise outside
    the statistics S (inside S it is already in G_after) is the candidate's *penalty*; its net
    gain is ΔG − penalty and its net reduction (ΔG − penalty)/G_before.
 4. **At the edge of its grid.** A fitted value, or an end of its interval, on the first or last
@@ -112,11 +114,16 @@ def grid_edge(axis: ParamAxis, value: float, interval: tuple[float, float]) -> s
     return "both" if low and high else "low" if low else "high" if high else None
 
 
+#: The least relative rise of a region's Σ t² that makes it "worse" (with the χ² criterion).
+WORSE_FRACTION = 0.1
+
+
 def worse_regions(z_before: np.ndarray, z_after: np.ndarray, regions: list,
                   alpha: float) -> list[dict]:
     """The regions whose held-out Σ t² over their m usable statistics rises by more than the
-    χ²_m(1 − α) quantile from ``z_before`` to ``z_after`` ((n,) each; ``regions`` (n,)), worst
-    first: domain, channel, family, bin, n_statistics, heldout_gap_before/after (mean t²),
+    χ²_m(1 − α) quantile and by at least :data:`WORSE_FRACTION` of its value from ``z_before``
+    to ``z_after`` ((n,) each; ``regions`` (n,)), worst first: domain, channel, family, bin,
+    n_statistics, heldout_gap_before/after (mean t²),
     increase (of Σ t²) and threshold (the quantile)."""
     acc: dict[tuple, list[float]] = {}
     for j, r in enumerate(regions):
@@ -128,7 +135,7 @@ def worse_regions(z_before: np.ndarray, z_after: np.ndarray, regions: list,
     out = []
     for key, (m, sb, sa) in acc.items():
         thr = float(stats.chi2.ppf(1.0 - alpha, m))
-        if sa - sb > thr:
+        if sa - sb > thr and sa - sb >= WORSE_FRACTION * sb:
             out.append({"domain": key[0], "channel": key[1], "family": key[2], "bin": key[3],
                         "n_statistics": m, "heldout_gap_before": sb / m, "heldout_gap_after": sa / m,
                         "increase": sa - sb, "threshold": thr})

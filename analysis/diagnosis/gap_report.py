@@ -181,7 +181,7 @@ def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
         axes[1].set_yticks(range(len(names)), names, fontsize=7)
         axes[1].invert_yaxis()
         axes[1].set_xlabel("net held-out gap reduction, % (green: passes the test)")
-    axes[1].set_title("candidates, first round", fontsize=9)
+    axes[1].set_title("candidates (added ones first, then the last round)", fontsize=9)
     p = out_dir / "gap_hours_and_ranking.png"
     fig.savefig(p, dpi=110)
     plt.close(fig)
@@ -190,6 +190,9 @@ def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
     write_text(out_dir / "index.html", render_page(result, pngs))
     return pngs
 
+
+#: The least held-out reduction of a candidate whose edge flags the ranking table shows.
+NOTE_FROM = 0.01
 
 _CAPTIONS = {
     "gap_phase1_channel_band": "Phase I: channel × frequency band, before and after adding the effects.",
@@ -231,7 +234,10 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
         ranking.append({
             "rank": i + 1, "title": title_of(r["effect"]), "effect": r["effect"],
             "fit": "; ".join(f"{p['label']} {p['value']} ({p['interval']})" for p in pars),
-            "notes": [f"{p['label']}: {p['note']}" for p in pars if p["note"]],
+            # Edge notes where the candidate removes something: a candidate fitted to nothing
+            # (its amplitude at zero) sits on an edge of the others' grids without meaning.
+            "notes": [f"{p['label']}: {p['note']}" for p in pars
+                      if p["note"] and r["heldout_reduction"] >= NOTE_FROM],
             "reduction": w.percent(r["heldout_reduction"]),
             "worse": (_worse_text(r.get("worse_regions", []))
                       + (f" (−{w.gap_number(r['worse_penalty'])})" if r.get("worse_penalty") else "")),
@@ -247,7 +253,8 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
     figures = [{"link": q.name, "alt": q.stem.replace("_", " "),
                 "caption": _CAPTIONS.get(q.stem, q.stem.replace("_", " "))} for q in pngs]
     return {"title": f"Gap diagnosis: {verdict}", "verdict": verdict, "verdict_class": cls,
-            "answer": w.answer(result), "facts": facts, "added": added, "ranking": ranking,
+            "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
+            "facts": facts, "added": added, "ranking": ranking,
             "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}
 
 

@@ -50,7 +50,8 @@ def percent(fraction: float) -> str:
     """0.3769 → "38 %"."""
     if fraction is None or not math.isfinite(fraction):
         return "–"
-    return f"{100 * fraction:.0f} %".replace("-", MINUS)
+    pc = round(100 * fraction)
+    return f"{pc:.0f} %".replace("-", MINUS) if pc != 0 else "0 %"
 
 
 def spec(result: dict, effect: str, param: str) -> dict:
@@ -146,54 +147,61 @@ def _places(rows: list[dict], k: int = 3) -> str:
 def answer(result: dict) -> str:
     """The report's opening paragraph, from the result alone: where the recording differs from
     the twin, what explains it, how sure, how much of the gap it removes, what is left."""
+    return " ".join(f"{head}: {text}" if head else text for head, text in answer_parts(result))
+
+
+def answer_parts(result: dict) -> list[tuple[str, str]]:
+    """:func:`answer` as (heading, sentence) pairs ("Where", "What", "How sure", "How much",
+    "What is left"; an empty heading when there is no gap), for the page to set the headings
+    in bold."""
     n, k = result["n_statistics"], result["n_significant_calibration"]
     g0, g1 = result["heldout_gap_before"], result["heldout_gap_after"]
     crit = result["heldout_gap_critical"]
     alpha = result.get("alpha", 0.01)
     if result["verdict"] == "no significant gap":
-        return (f"The recording is within the twin's seed-to-seed spread: {k} of {n} statistics "
+        return [("", f"The recording is within the twin's seed-to-seed spread: {k} of {n} statistics "
                 f"differ significantly on the calibration part (Holm, α = {number(alpha, 2)}), "
                 f"and the held-out gap {gap_number(g0)} does not exceed what the spread allows "
-                f"({gap_number(crit)}). Nothing needs to be added to the twin.")
+                f"({gap_number(crit)}). Nothing needs to be added to the twin.")]
     sig = [r for r in result.get("regions", []) if r.get("significant")]
     hours = sorted(result.get("hours", []), key=lambda h: -(h["heldout_gap_before"] or 0))
     when = f", worst at {number(hours[0]['hours'], 6)} h of operation" if hours else ""
-    out = [f"Where: the recording differs from the twin beyond its seed-to-seed spread in {k} of "
-           f"{n} statistics (Holm, α = {number(alpha, 2)}), most in {_places(sig)}{when}."]
+    out = [("Where", f"the recording differs from the twin beyond its seed-to-seed spread in {k} of "
+           f"{n} statistics (Holm, α = {number(alpha, 2)}), most in {_places(sig)}{when}.")]
     added = result.get("added", [])
     if added:
         what = "; then ".join(f"{_title(result, a['effect'])}: {fit_phrase(result, a)}" for a in added)
-        out.append(f"What: {what}.")
+        out.append(("What", f"{what}."))
         sure = ", ".join(f"{_title(result, a['effect'])} gains {number(a['gain'] / a['gain_threshold'], 2)}× "
                          "its significance threshold" for a in added if a.get("gain_threshold"))
         edges = [f"{r['label']} is {r['note']}" for a in added for r in parameters(result, a) if r["note"]]
-        out.append(f"How sure: {sure} on the held-out part"
-                   + (f"; but {'; '.join(edges)}" if edges else "") + ".")
-        out.append(f"How much: the effects remove {percent(result['heldout_shrink'])} of the "
+        out.append(("How sure", f"{sure} on the held-out part"
+                    + (f"; but {'; '.join(edges)}" if edges else "") + "."))
+        out.append(("How much", f"the effects remove {percent(result['heldout_shrink'])} of the "
                    f"held-out gap ({gap_number(g0)} → {gap_number(g1)}; the twin's own spread "
-                   f"allows {gap_number(crit)}).")
+                   f"allows {gap_number(crit)})."))
     else:
         best = (result.get("ranking") or [None])[0]
         if best:
-            out.append(f"What: no effect of the library explains it; the best candidate, "
+            out.append(("What", "no effect of the library explains it; the best candidate, "
                        f"{_title(result, best['effect'])} ({fit_phrase(result, best)}), would remove "
                        f"{percent(best.get('net_reduction', best['heldout_reduction']))} of the "
-                       "held-out gap, which does not pass the selection test.")
+                       "held-out gap, which does not pass the selection test."))
         else:
-            out.append("What: no candidate effect was tried.")
-        out.append(f"How much: nothing is removed (held-out gap {gap_number(g0)}; the twin's own "
-                   f"spread allows {gap_number(crit)}).")
+            out.append(("What", "no candidate effect was tried."))
+        out.append(("How much", f"nothing is removed (held-out gap {gap_number(g0)}; the twin's "
+                    f"own spread allows {gap_number(crit)})."))
     residual = result.get("residual", {})
     if result["verdict"] == "explained":
-        left = ("What is left: nothing beyond the spread." if not residual.get("significant") else
-                f"What is left: a small remainder ({percent(1 - result['heldout_shrink'])} of the "
+        left = ("nothing beyond the spread." if not residual.get("significant") else
+                f"a small remainder ({percent(1 - result['heldout_shrink'])} of the "
                 f"gap), still beyond the spread mostly in {_places(residual.get('top_regions', []), 2)}.")
     else:
-        left = (f"What is left is unexplained: {percent(g1 / g0 if g0 else 0.0)} of the gap, "
+        left = (f"unexplained, {percent(g1 / g0 if g0 else 0.0)} of the gap, "
                 f"mostly in {_places(residual.get('top_regions', []) or sig)}.")
     worse = result.get("worse_regions", [])
     if worse:
         left += (f" The added effects make {len(worse)} region{'s' if len(worse) > 1 else ''} worse "
                  f"than the twin as it is: {_places(worse)}.")
-    out.append(left)
-    return " ".join(out)
+    out.append(("What is left", left))
+    return out
