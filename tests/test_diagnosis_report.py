@@ -36,7 +36,7 @@ def test_gap_numbers_and_percent():
 
 LIBRARY = {
     "servo_dynamics": {"title": "servo loop dynamics (following error)", "params": {
-        "bandwidth_factor": {"low": 0.35, "high": 0.75, "label": "servo loop bandwidths, times the twin's",
+        "bandwidth_factor": {"low": 0.35, "high": 0.75, "label": "servo bandwidth factor",
                              "unit": "×", "digits": 2, "grid": [0.3, 1.0]}}},
     "base_resonance": {"title": "structural resonance of the base", "params": {
         "frequency_hz": {"low": 80.0, "high": 450.0, "label": "base resonance frequency", "unit": "Hz",
@@ -59,7 +59,7 @@ def test_parameters_with_units_digits_and_edge_note():
         {"label": "base resonance frequency", "value": "175 Hz", "interval": "175–175 Hz", "note": ""},
         {"label": "modal mass of the base", "value": "290 kg", "interval": "240–340 kg", "note": ""}]
     assert w.parameters(res, SERVO) == [
-        {"label": "servo loop bandwidths, times the twin's", "value": "0.3×", "interval": "0.3–0.3×",
+        {"label": "servo bandwidth factor", "value": "0.3×", "interval": "0.3–0.3×",
          "note": "at the lower edge of the tried range 0.3–1×: the true value may lie beyond"}]
     # No display entry: the name, no unit, 3 digits.
     assert w.parameters({}, SERVO)[0]["value"] == "0.3"
@@ -240,11 +240,11 @@ def test_answer_paragraph():
         "statistics (Holm, α = 0.01), most in Phase I acc1_x, 150-200 Hz band and Phase II acc_x RMS "
         "in the transient phase, worst at 300 h of operation. "
         "What: structural resonance of the base: base resonance frequency 175 Hz (175–175 Hz), modal "
-        "mass of the base 290 kg (240–340 kg); then servo loop dynamics (following error): servo loop "
-        "bandwidths, times the twin's 0.3× (0.3–0.3×). "
+        "mass of the base 290 kg (240–340 kg); then servo loop dynamics (following error): servo "
+        "bandwidth factor 0.3× (0.3–0.3×). "
         "How sure: structural resonance of the base gains 30× its significance threshold, servo loop "
         "dynamics (following error) gains 10× its significance threshold on the held-out part; but "
-        "servo loop bandwidths, times the twin's is at the lower edge of the tried range 0.3–1×: the "
+        "servo bandwidth factor is at the lower edge of the tried range 0.3–1×: the "
         "true value may lie beyond. "
         "How much: the effects remove 70 % of the held-out gap (5\u202f000 → 1\u202f500; the twin's "
         "own spread allows 150). "
