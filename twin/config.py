@@ -16,6 +16,8 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
+from analysis.locations import key_path, value_at
+
 __all__ = ["explain_errors", "get_dotted", "key_path", "model_at", "parse_key", "set_dotted", "value_at"]
 
 _PART = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
@@ -92,27 +94,6 @@ def get_dotted(data: dict, key: str, *, source: str = "key", error: type[Excepti
 
 # ---------------------------------------------------------------------------------------------
 # Validation errors
-
-
-def key_path(loc: tuple) -> str:
-    """A pydantic location as the key a user writes: ``("grid", 0, "num")`` -> ``grid[0].num``."""
-    out = ""
-    for p in loc:
-        if isinstance(p, int):
-            out += f"[{p}]"
-        else:
-            out += ("." if out else "") + str(p)
-    return out or "(top level)"
-
-
-def value_at(data: Any, loc: tuple) -> Any:
-    """The raw value at ``loc`` in the file's dict, or None."""
-    for p in loc:
-        try:
-            data = data[p]
-        except (KeyError, IndexError, TypeError):
-            return None
-    return data
 
 
 def _submodel(annotation: Any) -> type[BaseModel] | None:

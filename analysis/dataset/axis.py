@@ -21,6 +21,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from analysis.dataset.schema import DatasetError
+from analysis.locations import value_at
 
 #: Version of the axis contract written in ``axis_version``; a description without it is version 1.
 AXIS_VERSION = 1
@@ -150,7 +151,7 @@ class AxisDescription(_Part):
         except ValidationError as e:
             err = e.errors()[0]
             loc = ".".join(str(p) for p in err["loc"])
-            value = _at(data, err["loc"])
+            value = value_at(data, err["loc"])
             where = f"/@axis.{loc}" if loc else "/@axis"
             raise DatasetError(f"{label}: {where} is {value!r}; expected {_expected(err)}") from None
         out._label = label
@@ -187,17 +188,6 @@ class MissingAxisKey(DatasetError):
 def _toml_hint(key: str) -> str:
     *table, name = key.split(".")
     return f"[{'.'.join(['axis', *table])}] {name} = ..."
-
-
-def _at(data: Any, loc: tuple) -> Any:
-    for p in loc:
-        if isinstance(data, dict) and p in data:
-            data = data[p]
-        elif isinstance(data, list) and isinstance(p, int) and p < len(data):
-            data = data[p]
-        else:
-            return data
-    return data
 
 
 def _expected(err: dict) -> str:

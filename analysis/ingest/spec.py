@@ -35,6 +35,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from analysis.ingest.units import QUANTITY, UNITS
+from analysis.locations import value_at
 
 SPEC_VERSION = 1
 PHASE1 = ("speed", "torque", "acc1", "acc2")
@@ -179,7 +180,7 @@ def load_spec(path: str | Path) -> tuple[ImportSpec, Path]:
     except ValidationError as e:
         err = e.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])
-        value = _at(raw, err["loc"])
+        value = value_at(raw, err["loc"], missing="(missing)")
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "not a key of the import spec (docs/import.md)"
@@ -189,14 +190,3 @@ def load_spec(path: str | Path) -> tuple[ImportSpec, Path]:
             raise ImportSpecError(f"{path}: {loc} = {value!r}: {msg}") from None
         raise ImportSpecError(f"{path}: {msg}") from None
     return spec, path.parent
-
-
-def _at(data: Any, loc: tuple) -> Any:
-    for p in loc:
-        if isinstance(data, dict) and p in data:
-            data = data[p]
-        elif isinstance(data, list) and isinstance(p, int) and p < len(data):
-            data = data[p]
-        else:
-            return "(missing)"
-    return data
