@@ -726,6 +726,8 @@ def _print_diagnosis(res: dict) -> None:
                                        for h in hours[:3]) + " (held-out, worst first)")
     for i, a in enumerate(res["added"]):
         pars = ", ".join(f"{k} = {v:.3g} [{a['interval'][k][0]:.3g}, {a['interval'][k][1]:.3g}]"
+                         + (f" at the {a['at_grid_edge'][k]} edge of its grid"
+                            if a.get("at_grid_edge", {}).get(k) else "")
                          for k, v in a["params"].items())
         out.print(f"effect {i + 1}: [bold]{a['effect']}[/] ({pars}): held-out gap "
                   f"{a['heldout_gap_before']:.1f} -> {a['heldout_gap_after']:.1f} "
@@ -741,6 +743,11 @@ def _print_diagnosis(res: dict) -> None:
                       f"{r['domain']} {r['channel']} {r['family']} {r['bin']}"
                       for r in res["residual"].get("top_regions", [])[:3])
                      if res["residual"].get("significant") else ""))
+    if res.get("worse_regions"):
+        out.print("made worse by the added effects (held-out): " + "; ".join(
+            f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² "
+            f"{r['heldout_gap_before']:.1f} -> {r['heldout_gap_after']:.1f})"
+            for r in res["worse_regions"][:3]))
 
 
 @app.command()
