@@ -61,6 +61,12 @@ def test_parameters_with_units_digits_and_edge_note():
     assert w.parameters(res, SERVO) == [
         {"label": "servo bandwidth factor", "value": "0.3×", "interval": "0.3–0.3×",
          "note": "at the lower edge of the tried range 0.3–1×: the true value may lie beyond"}]
+    # More digits where the interval needs them to show its width.
+    cog = {"library": {"cogging": {"params": {"torque_Nm": {"label": "cogging torque", "unit": "N·m",
+                                                             "digits": 2}}}}}
+    fit = {"effect": "cogging", "params": {"torque_Nm": 0.1031}, "interval": {"torque_Nm": [0.1024, 0.1036]}}
+    assert w.parameters(cog, fit)[0]["value"] == "0.103 N·m"
+    assert w.parameters(cog, fit)[0]["interval"] == "0.102–0.104 N·m"
     # No display entry: the name, no unit, 3 digits.
     assert w.parameters({}, SERVO)[0]["value"] == "0.3"
     assert w.parameters({}, SERVO)[0]["label"] == "bandwidth_factor"
@@ -96,6 +102,8 @@ def test_region_in_words():
         "Phase I mean |torque| in the reversal phase"
     assert w.region({"domain": "phase2", "channel": "acc_z", "family": "level", "bin": "dwell mean"}) == \
         "Phase II acc_z dwell mean"
+    assert w.region({"domain": "phase1", "channel": "torque", "family": "level", "bin": "dwell"}) == \
+        "Phase I mean |torque| in the dwell phase"
     assert w.region({"domain": "phase2", "channel": "E_AX", "family": "position", "bin": "18-84 mm"}) == \
         "Phase II error motion E_AX, stroke 18-84 mm"
     assert w.region({"domain": "phase2", "channel": "E_XX", "family": "lag", "bin": "22-86 mm"}) == \

@@ -92,11 +92,16 @@ def edge_note(edge: str | None, grid: list[float] | None, sp: dict) -> str:
 
 def parameters(result: dict, fit: dict) -> list[dict]:
     """One row per fitted parameter of ``fit`` (an entry of ``added`` or ``ranking``): label,
-    value, interval, note (the edge)."""
+    value, interval, note (the edge). The parameter's digits, or up to 3 more where its
+    interval needs them to show its width (0.102–0.103 N·m, not 0.1–0.1 N·m)."""
     rows = []
     for name, v in fit["params"].items():
         sp = spec(result, fit["effect"], name)
         lo, hi = fit.get("interval", {}).get(name, (float("nan"), float("nan")))
+        base = sp["digits"]
+        while lo != hi and number(lo, sp["digits"]) == number(hi, sp["digits"]) \
+                and sp["digits"] < base + 3:
+            sp = {**sp, "digits": sp["digits"] + 1}
         grid = fit.get("grid", {}).get(name) or sp["grid"]
         rows.append({"label": sp["label"], "value": value(v, sp), "interval": span(lo, hi, sp),
                      "note": edge_note(fit.get("at_grid_edge", {}).get(name), grid, sp)})
@@ -123,7 +128,7 @@ def region(r: dict) -> str:
     if fam == "phase":
         return f"{dom} {ch} RMS in the {b} phase"
     if fam == "level":
-        return f"{dom} {ch} {b}" if b.startswith("dwell") else f"{dom} mean |{ch}| in the {b} phase"
+        return f"{dom} {ch} {b}" if b == "dwell mean" else f"{dom} mean |{ch}| in the {b} phase"
     if fam == "feature":
         return f"{dom} feature {b}"
     if fam == "position":
