@@ -274,7 +274,8 @@ def _store_phase2(s: Scenario, sim: Simulator, store: PartStore, unit: Unit, con
                   traj) -> None:
     datasets, dattrs = {}, {}
     rngs = [rng_for(s.seed, KIND_PHASE2, unit.index, r) for r in range(s.runs_per_session)]
-    for r, m in enumerate(phase2_measure_runs(sim, traj, rngs)):
+    lead_s = s.sensors.position_cmd_lead_ms_per_kh * 1e-6 * unit.hours  # ms/kh · h -> s
+    for r, m in enumerate(phase2_measure_runs(sim, traj, rngs, lead_s)):
         for key in ("imu_acc", "imu_gyro", "position_cmd"):
             datasets[f"r{r:04d}/{key}"] = m[key]
             dattrs[f"r{r:04d}/{key}"] = {"fs_hz": m[f"{key}_fs_hz"]}
@@ -285,7 +286,7 @@ def _store_phase2(s: Scenario, sim: Simulator, store: PartStore, unit: Unit, con
     store.write("phase2", unit.name,
                 attrs={"hours": unit.hours, "backlash_um": cond.mech.backlash * 1e6,
                        "origin_offset_m": cond.origin_offset, "preload_N": cond.mech.preload,
-                       "temperature_rise_K": cond.temperature_rise},
+                       "temperature_rise_K": cond.temperature_rise, "position_cmd_lead_s": lead_s},
                 datasets=datasets, dataset_attrs=dattrs)
 
 

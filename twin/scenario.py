@@ -101,6 +101,11 @@ class SensorsConfig(_Section):
     encoder_counts_per_rev: int = Field(2**20, ge=16)
     torque_noise_Nm: float = Field(0.005, ge=0)
     position_cmd_fs_hz: float = Field(1000.0, gt=0)
+    position_cmd_lead_ms_per_kh: float = Field(0.0, ge=-100.0, le=100.0, description=(
+        "how far the recorded position_cmd runs ahead of the IMU's clock, ms per 1000 operating "
+        "hours (a trigger latency between the controller and a separately clocked IMU that "
+        "drifts over the campaign); it shifts forward traces by +v·τ and reverse ones by −v·τ on "
+        "the command axis, common to every DOF. 0 = in sync"))
 
 
 class DegradationConfig(_Section):

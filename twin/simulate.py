@@ -501,19 +501,21 @@ def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -
     return phase2_measure_runs(sim, traj, [rng])[0]
 
 
-def phase2_measure_runs(sim: Simulator, traj: Trajectory,
-                        rngs: list[np.random.Generator]) -> list[dict]:
+def phase2_measure_runs(sim: Simulator, traj: Trajectory, rngs: list[np.random.Generator],
+                        position_cmd_lead_s: float = 0.0) -> list[dict]:
     """:func:`phase2_measure` for the runs of a session at once, run j from ``rngs[j]``: the
     motion's sensor-frame signals, the filter designs and the spline factorisation are computed
     once, the noise of each run is drawn from its own generator (accelerometer, then gyroscope,
-    as :func:`phase2_measure`), so every array is bit for bit the one-run result."""
+    as :func:`phase2_measure`), so every array is bit for bit the one-run result.
+    ``position_cmd_lead_s``: the recorded ``position_cmd`` at t is the command at t + this, s (a
+    controller clock running ahead of the IMU's)."""
     w = sim.world
     fs = sim.fs
     force = traj.sens[:, traj.index.imu_acc]
     rate = traj.angular_velocity_imu
     n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
     t_cmd = np.arange(n_cmd) / w.position_cmd_fs
-    pos = np.interp(t_cmd, traj.cmd.t, traj.cmd.x)
+    pos = np.interp(t_cmd + position_cmd_lead_s, traj.cmd.t, traj.cmd.x)
     out = []
     # Groups of runs, so that only one group's float64 samples are held at a time.
     for start in range(0, len(rngs), _RUNS_PER_GROUP):
