@@ -82,13 +82,15 @@ class ParamAxis:
 class CandidateResponse:
     """The simulated response of one candidate effect.
 
-    name: effect name; params: its axes; delta: {"cal": array, "heldout": array}, each of shape
-    (*[len(a.values) for a in params], n) with the change of every statistic on the grid.
+    name: candidate name; params: its axes; delta: {"cal": array, "heldout": array}, each of
+    shape (*[len(a.values) for a in params], n) with the change of every statistic on the grid;
+    kind: "physical effect" (simulated) or "signal artefact" (applied to a simulated recording).
     """
 
     name: str
     params: list[ParamAxis]
     delta: dict[str, np.ndarray]
+    kind: str = "physical effect"
 
     def __post_init__(self) -> None:
         shape = tuple(len(a.values) for a in self.params)
@@ -170,6 +172,7 @@ class Fit:
     at_grid_edge: dict[str, str | None] = field(default_factory=dict)
     worse: list[dict] = field(default_factory=list)
     penalty: float = 0.0
+    kind: str = "physical effect"
 
     @property
     def reduction(self) -> float:
@@ -192,7 +195,7 @@ class Fit:
         return self.net_gain > self.gain_threshold and self.net_reduction >= min_gain
 
     def as_dict(self, min_gain: float) -> dict:
-        return {"effect": self.name, "params": self.params,
+        return {"effect": self.name, "kind": self.kind, "params": self.params,
                 "interval": {k: list(v) for k, v in self.interval.items()},
                 "grid": {k: list(v) for k, v in self.grid.items()},
                 "at_grid_edge": self.at_grid_edge,
@@ -294,7 +297,7 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
                grid={a.name: (float(min(a.values)), float(max(a.values))) for a in cand.params},
                at_grid_edge={a.name: grid_edge(a, params[a.name], interval[a.name])
                              for a in cand.params},
-               worse=worse, penalty=penalty)
+               worse=worse, penalty=penalty, kind=cand.kind)
 
 
 def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
