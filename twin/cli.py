@@ -710,6 +710,8 @@ def _progress_callback(progress: Progress, tasks: dict):
 
 
 def _print_diagnosis(res: dict) -> None:
+    from analysis.diagnosis.wording import owner_phrase
+
     out = Console(width=max(110, Console().width))
     out.print(f"[bold]{res['verdict']}[/]: {res['n_significant_calibration']} of "
               f"{res['n_statistics']} statistics beyond the twin's seed-to-seed spread on the "
@@ -729,13 +731,17 @@ def _print_diagnosis(res: dict) -> None:
                          + (f" at the {a['at_grid_edge'][k]} edge of its grid"
                             if a.get("at_grid_edge", {}).get(k) else "")
                          for k, v in a["params"].items())
-        out.print(f"effect {i + 1}: [bold]{a['effect']}[/] ({pars}): held-out gap "
+        kind = res.get("library", {}).get(a["effect"], {}).get("kind", "physical effect")
+        out.print(f"{'effect' if kind == 'physical effect' else 'artefact'} {i + 1}: "
+                  f"[bold]{a['effect']}[/] ({kind}; {pars}): held-out gap "
                   f"{a['heldout_gap_before']:.1f} -> {a['heldout_gap_after']:.1f} "
                   f"(-{100 * a['heldout_reduction']:.0f} %, gain {a['gain']:.1f} > {a['gain_threshold']:.1f})")
+        out.print(f"  in words: {owner_phrase(res, a)}", markup=False, highlight=False)
     if res["ranking"] and not res["added"]:
         best = res["ranking"][0]
-        out.print(f"no effect of the library reduces the held-out gap significantly (best: "
-                  f"{best['effect']}, -{100 * best['heldout_reduction']:.0f} %)")
+        out.print(f"no candidate (physical effect or signal artefact) reduces the held-out gap "
+                  f"significantly (best: {best['effect']}, {best.get('kind', 'physical effect')}, "
+                  f"-{100 * best['heldout_reduction']:.0f} %)")
     if res["verdict"] != "no significant gap":
         out.print(f"held-out gap {res['heldout_gap_before']:.1f} -> {res['heldout_gap_after']:.1f} "
                   f"(shrink {100 * res['heldout_shrink']:.0f} %)"

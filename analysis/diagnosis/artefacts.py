@@ -139,7 +139,8 @@ class ArtefactParam:
     """One parameter of an artefact (the fields of :class:`twin.effects.base.Param` that the
     diagnosis and the benchmark use): prior range ``low``–``high`` of a present artefact (of
     |value| when ``signed``), fit ``grid`` (ascending, with ``off`` where it can be absent),
-    ``discrete`` (no interpolation), ``log`` (drawn log-uniformly), and how a person reads it."""
+    ``discrete`` (no interpolation), ``closed`` (the grid lists every value it can take: no
+    "beyond" at its ends), ``log`` (drawn log-uniformly), and how a person reads it."""
 
     name: str
     low: float
@@ -147,6 +148,7 @@ class ArtefactParam:
     grid: tuple[float, ...]
     off: float | None = 0.0
     discrete: bool = False
+    closed: bool = False
     log: bool = False
     signed: bool = False
     label: str = ""
@@ -286,14 +288,14 @@ def _candidates() -> list[Artefact]:
         out.append(Artefact(
             "mains_line", TARGETS[t], f"fixed-frequency line on {TARGETS[t].words}",
             (amp, ArtefactParam("frequency_hz", 50.0, 180.0, _MAINS_HZ, off=None, discrete=True,
-                                label="line frequency", unit="Hz", digits=3)),
+                                closed=True, label="line frequency", unit="Hz", digits=3)),
             lambda x, c: fixed_line(x, c["fs_hz"], c["amplitude"], c["frequency_hz"]),
             f"a {{frequency_hz}} line of {{amplitude}} on {TARGETS[t].words} at every speed: "
             "electrical pickup", "mains pickup on signal lines (IEC 61000-4-16)", amplitude="amplitude"))
         out.append(Artefact(
             "order_line", TARGETS[t], f"speed-locked line on {TARGETS[t].words}",
             (amp, ArtefactParam("order", 1.0, 5.0, _ORDERS, off=None, discrete=True,
-                                label="line order", unit="per revolution", digits=2)),
+                                closed=True, label="line order", unit="per revolution", digits=2)),
             lambda x, c: order_line(x, c["angle"], c["amplitude"], c["order"]),
             f"a line of {{amplitude}} at {{order}} of the motor on {TARGETS[t].words}, "
             "following the speed: a mechanical source (unbalance, misalignment)",

@@ -71,11 +71,14 @@ NO_GAP, EXPLAINED, UNEXPLAINED = "no significant gap", "explained", "unexplained
 class ParamAxis:
     """One parameter of a candidate: name (with its unit, e.g. ``rise_K``), the grid values at
     which the response was simulated (ascending, including the value that turns it off where
-    there is one), and whether it is discrete (no interpolation between grid values)."""
+    there is one), whether it is discrete (no interpolation between grid values), and whether
+    the grid is closed: it lists every value the parameter can take (the mains frequency and
+    its harmonics), so that a fit on its first or last value is not "at the edge"."""
 
     name: str
     values: tuple[float, ...]
     discrete: bool = False
+    closed: bool = False
 
 
 @dataclass
@@ -110,6 +113,9 @@ def grid_edge(axis: ParamAxis, value: float, interval: tuple[float, float]) -> s
     if hi_g == lo_g:
         return None
     tol = 1e-9 * (hi_g - lo_g)
+    if axis.closed:
+        spans = interval[0] <= lo_g + tol and interval[1] >= hi_g - tol
+        return "both" if spans else None
     floor = lo_g == 0.0
     low = not floor and min(value, interval[0]) <= lo_g + tol
     high = max(value, interval[1]) >= hi_g - tol

@@ -142,6 +142,33 @@ def _title(result: dict, effect: str) -> str:
     return result.get("library", {}).get(effect, {}).get("title", effect)
 
 
+def kind(result: dict, effect: str) -> str:
+    """The candidate's kind as the library entry states it: "physical effect" (simulated by
+    the twin) or "signal artefact" (applied to the recording's channels); "physical effect"
+    when the entry does not say (results written before artefacts existed)."""
+    return result.get("library", {}).get(effect, {}).get("kind", "physical effect")
+
+
+def owner_phrase(result: dict, fit: dict) -> str:
+    """The fit in the owner's words: an artefact's ``phrase`` (library entry) with each
+    ``{param}`` replaced by its fitted value and unit ("a 50 Hz line of 0.029 m/s² on acc1 and
+    acc2 at every speed: electrical pickup"); for a candidate without a phrase, its title and
+    :func:`fit_phrase`. The kind follows in brackets."""
+    entry = result.get("library", {}).get(fit["effect"], {})
+    phrase = entry.get("phrase")
+    if phrase:
+        vals = {n: value(v, spec(result, fit["effect"], n)) for n, v in fit["params"].items()}
+        text = phrase.format(**vals)
+        iv = fit.get("interval", {})
+        rows = [r for n, r in zip(fit["params"], parameters(result, fit), strict=True)
+                if n in iv and iv[n][0] != iv[n][1]]
+        if rows:
+            text += " (" + "; ".join(f"{r['label']} {r['interval']}" for r in rows) + ")"
+    else:
+        text = f"{_title(result, fit['effect'])}: {fit_phrase(result, fit)}"
+    return f"{text} [{kind(result, fit['effect'])}]"
+
+
 def _places(rows: list[dict], k: int = 3) -> str:
     names = [region(r) for r in rows[:k]]
     if len(names) <= 1:
@@ -175,21 +202,21 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
            f"{n} statistics (Holm, α = {number(alpha, 2)}), most in {_places(sig)}{when}.")]
     added = result.get("added", [])
     if added:
-        what = "; then ".join(f"{_title(result, a['effect'])}: {fit_phrase(result, a)}" for a in added)
+        what = "; then ".join(owner_phrase(result, a) for a in added)
         out.append(("What", f"{what}."))
         sure = ", ".join(f"{_title(result, a['effect'])} gains {number(a['gain'] / a['gain_threshold'], 2)}× "
                          "its significance threshold" for a in added if a.get("gain_threshold"))
         edges = [f"{r['label']} is {r['note']}" for a in added for r in parameters(result, a) if r["note"]]
         out.append(("How sure", f"{sure} on the held-out part"
                     + (f"; but {'; '.join(edges)}" if edges else "") + "."))
-        out.append(("How much", f"the effects remove {percent(result['heldout_shrink'])} of the "
+        out.append(("How much", f"the added candidates remove {percent(result['heldout_shrink'])} of the "
                    f"held-out gap ({gap_number(g0)} → {gap_number(g1)}; the twin's own spread "
                    f"allows {gap_number(crit)})."))
     else:
         best = (result.get("ranking") or [None])[0]
         if best:
-            out.append(("What", "no effect of the library explains it; the best candidate, "
-                       f"{_title(result, best['effect'])} ({fit_phrase(result, best)}), would remove "
+            out.append(("What", "no candidate (physical effect or signal artefact) explains it; the "
+                       f"best, {owner_phrase(result, best)}, would remove "
                        f"{percent(best.get('net_reduction', best['heldout_reduction']))} of the "
                        "held-out gap, which does not pass the selection test."))
         else:

@@ -355,7 +355,7 @@ def artefact_responses(names: list[str], base: Scenario, cache: Path, workers: i
     for (name, index), sig in zip(where, sigs, strict=True):
         for p in PARTS:
             deltas[name][p][index] = sig[p].values - base_sig[p].values
-    return [CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete)
+    return [CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed)
                                      for q in ARTEFACTS[name].params], deltas[name], kind=KIND_ARTEFACT)
             for name in names]
 
