@@ -279,6 +279,13 @@ def _artefact_batch(h5: str, specs: list[str], paths: list[str], base_path: str,
             atomic_write(Path(path), lambda t, a=arrays: _save_npz(t, a))
 
 
+def artefact_cached(base: Scenario, specs: list[dict[str, dict[str, float]]], cache: Path) -> bool:
+    """Whether :func:`artefact_signatures` of these specs would read them all from the cache."""
+    adir = Path(cache) / _key(base) / "artefacts"
+    return (adir / f"base-{_spec_key({}, base.seed)}.npz").exists() and all(
+        (adir / f"{_spec_key(sp, base.seed)}.npz").exists() for sp in specs)
+
+
 def artefact_signatures(base: Scenario, specs: list[dict[str, dict[str, float]]], cache: Path,
                         workers: int = 1, keep_campaign: bool = True,
                         on_progress: Callable[[int, int], None] | None = None
