@@ -206,7 +206,7 @@ class Artefact:
     phrase: str
     source: str
     amplitude: str | None = None
-    random: bool = False
+    seed_dependent: bool = False
 
     @property
     def name(self) -> str:
@@ -282,7 +282,7 @@ def _candidates() -> list[Artefact]:
                             lambda x, c: white_noise(x, c["rms"], c["rng"]),
                             f"white noise of {{rms}} RMS on {TARGETS[t].words}: a noisier channel "
                             "(cable, connector, amplifier)",
-                            "acquisition noise floor", amplitude="rms", random=True))
+                            "acquisition noise floor", amplitude="rms"))
     for t, unit in _LINE_UNITS.items():
         amp = _amp("amplitude", unit, tuple(_LINE_AMPS), 0.01, 0.08, "line amplitude (peak)")
         out.append(Artefact(
@@ -299,7 +299,8 @@ def _candidates() -> list[Artefact]:
             lambda x, c: order_line(x, c["angle"], c["amplitude"], c["order"]),
             f"a line of {{amplitude}} at {{order}} of the motor on {TARGETS[t].words}, "
             "following the speed: a mechanical source (unbalance, misalignment)",
-            "order-locked vibration (Randall 2011, ch. 3)", amplitude="amplitude"))
+            "order-locked vibration (Randall 2011, ch. 3)", amplitude="amplitude",
+            seed_dependent=True))
     for t, (unit, grid, lo, hi) in _DRIFT.items():
         out.append(Artefact(
             "bias_drift", TARGETS[t], f"bias drifting with the hours on {TARGETS[t].words}",

@@ -344,27 +344,74 @@ def artefact_grid(name: str) -> list[tuple[tuple[int, ...], dict[str, float]]]:
     return out
 
 
-def artefact_responses(names: list[str], base: Scenario, cache: Path, workers: int = 1,
+def _simulate_kept(payloads: list[str], dirs: list[str]) -> None:
+    """Worker: simulate campaigns (batched rollouts) into ``dirs`` (their files kept)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        simulate_campaigns_batched([from_dict(json.loads(p)) for p in payloads], [Path(d) for d in dirs])
+
+
+def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int) -> None:
+    """Simulate the campaigns of ``scenarios`` whose files are not kept in the cache
+    (``cache/<key>/campaign``), in batches of up to ``BATCH`` on ``workers`` processes."""
+    todo = [s for s in scenarios if not (Path(cache) / _key(s) / "campaign" / "measurements.h5").exists()]
+    if not todo:
+        return
+    size = max(1, min(BATCH, -(-len(todo) // max(workers, 1))))
+    batches = [todo[k:k + size] for k in range(0, len(todo), size)]
+    args = [([s.to_json() for s in b], [str(Path(cache) / _key(s) / "campaign") for s in b]) for b in batches]
+    if workers <= 1 or len(batches) <= 1:
+        for a in args:
+            _simulate_kept(*a)
+        return
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        for fut in as_completed([pool.submit(_simulate_kept, *a) for a in args]):
+            fut.result()
+
+
+def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, workers: int = 1,
                        on_progress: Callable[[int, int], None] | None = None
                        ) -> list[CandidateResponse]:
     """The artefact candidates' responses: the change of every statistic when each grid point
-    is applied to the campaign of ``base`` (the twin's first seed), against that campaign."""
-    specs, where = [], []
+    is applied to the campaign of the twin's first seed, against that campaign; for a
+    ``seed_dependent`` artefact, the mean of that change over every seed of ``seeded``."""
+    n_bases = max([len(seeded) if ARTEFACTS[n].seed_dependent else 1 for n in names] + [1])
+    plans: list[tuple[list, list]] = []
+    for k in range(n_bases):
+        specs, where = [], []
+        for name in names:
+            if k > 0 and not ARTEFACTS[name].seed_dependent:
+                continue
+            for index, values in artefact_grid(name):
+                if not ARTEFACTS[name].is_off(values):
+                    where.append((name, index))
+                    specs.append({name: values})
+        plans.append((specs, where))
+    # The seeds' campaigns simulated together where their post-processed signatures are missing.
+    ensure_campaigns([seeded[k] for k in range(1, n_bases) if not artefact_cached(seeded[k], plans[k][0], cache)],
+                     cache, workers)
+    sums: dict[str, dict[str, np.ndarray]] = {}
+    for k, (specs, where) in enumerate(plans):
+        # The first seed's campaign stays in the cache (the artefact grid of a later version is
+        # post-processed from it); the others only serve the seed-dependent artefacts.
+        base_sig, sigs = artefact_signatures(seeded[k], specs, cache, workers, keep_campaign=k == 0,
+                                             on_progress=on_progress)
+        n = base_sig["cal"].values.size
+        for name in names:
+            if k == 0 or ARTEFACTS[name].seed_dependent:
+                sums.setdefault(name, {p: np.zeros(tuple(len(q.grid) for q in ARTEFACTS[name].params) + (n,))
+                                       for p in PARTS})
+        for (name, index), sig in zip(where, sigs, strict=True):
+            for p in PARTS:
+                sums[name][p][index] += sig[p].values - base_sig[p].values
+    out = []
     for name in names:
-        for index, values in artefact_grid(name):
-            if not ARTEFACTS[name].is_off(values):
-                where.append((name, index))
-                specs.append({name: values})
-    base_sig, sigs = artefact_signatures(base, specs, cache, workers, on_progress=on_progress)
-    n = base_sig["cal"].values.size
-    deltas = {name: {p: np.zeros(tuple(len(q.grid) for q in ARTEFACTS[name].params) + (n,))
-                     for p in PARTS} for name in names}
-    for (name, index), sig in zip(where, sigs, strict=True):
-        for p in PARTS:
-            deltas[name][p][index] = sig[p].values - base_sig[p].values
-    return [CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed)
-                                     for q in ARTEFACTS[name].params], deltas[name], kind=KIND_ARTEFACT)
-            for name in names]
+        k = n_bases if ARTEFACTS[name].seed_dependent else 1
+        out.append(CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed)
+                                            for q in ARTEFACTS[name].params],
+                                     {p: sums[name][p] / k for p in PARTS}, kind=KIND_ARTEFACT))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -407,7 +454,7 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
     cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
     if artefacts:
-        cands += artefact_responses(artefacts, seeded[0], cache, workers)
+        cands += artefact_responses(artefacts, seeded, cache, workers)
     return TwinEnsemble(nominal, seed_list, twin, cands)
 
 
