@@ -38,8 +38,8 @@ from analysis.dataset import DOFS, DatasetError, open_truth
 from analysis.files import read_json, write_json
 from analysis.injected import injected_backlash_um
 from analysis.phase1.scoring import score_method
-from analysis.phase2.error_motion_file import read_error_motions
-from analysis.phase2.fusion import remove_unobservable
+from analysis.phase2.error_motion_file import read_error_motion_bands, read_error_motions
+from analysis.phase2.fusion import band_limit, remove_unobservable
 
 __all__ = ["ESTIMATOR_SCORES", "ScoreError", "THRESHOLD_FACTORS", "backlash_results", "flat", "score",
            "write_score"]
@@ -108,25 +108,50 @@ def _crossing(hours: np.ndarray, values: np.ndarray, limit: float) -> float | No
 
 
 def _error_motion_errors(path: Path, truth) -> dict | None:
-    """Median over sessions of the RMS error of the recovered error motions (µm, µrad)."""
+    """Median over sessions of the RMS error of the recovered error motions (µm, µrad): over the
+    whole stroke (``rms_um``, ``rms_urad``) and, where ``error_motions.h5`` records the band the
+    recording resolves, within that band (``in_band``: the error, the true error motion's RMS
+    in the band for scale, and the band in mm; both traces band-limited by
+    :func:`analysis.phase2.fusion.band_limit`)."""
     if not path.is_file():
         return None
+    bands = read_error_motion_bands(path)
     per = {d: [] for d in EM_DOFS}
+    per_band = {d: [] for d in EM_DOFS}
+    true_band = {d: [] for d in EM_DOFS}
+    band_lims = {d: [] for d in EM_DOFS}
     for name, (x, fwd, rev) in read_error_motions(path).items():
         try:
             xt, et, attrs = truth.session(name)
         except DatasetError:
             continue
         ref = np.array([np.interp(x + attrs["origin_offset_m"], xt, et[i]) for i in range(6)])
-        err = remove_unobservable(0.5 * (fwd + rev), x) - remove_unobservable(ref, x)
-        rms = np.sqrt((err ** 2).mean(axis=1))
+        est = remove_unobservable(0.5 * (fwd + rev), x)
+        ref = remove_unobservable(ref, x)
+        rms = np.sqrt(((est - ref) ** 2).mean(axis=1))
+        band = bands.get(name)
         for d in EM_DOFS:
-            per[d].append(float(rms[DOFS.index(d)]) * 1e6)
+            i = DOFS.index(d)
+            per[d].append(float(rms[i]) * 1e6)
+            if band is not None and np.isfinite(band[i]).all():
+                dx = float(x[1] - x[0])
+                eb, tb = (band_limit(a[i], dx, tuple(band[i])) for a in (est, ref))
+                per_band[d].append(float(np.sqrt(np.mean((eb - tb) ** 2))) * 1e6)
+                true_band[d].append(float(np.sqrt(np.mean(tb ** 2))) * 1e6)
+                band_lims[d].append(band[i] * 1e3)
     if not per[EM_DOFS[0]]:
         return None
-    return {"rms_um": {d: float(np.median(per[d])) for d in EM_DOFS[:2]},
-            "rms_urad": {d: float(np.median(per[d])) for d in EM_DOFS[2:]},
-            "sessions": len(per[EM_DOFS[0]])}
+    out = {"rms_um": {d: float(np.median(per[d])) for d in EM_DOFS[:2]},
+           "rms_urad": {d: float(np.median(per[d])) for d in EM_DOFS[2:]},
+           "sessions": len(per[EM_DOFS[0]])}
+    if any(per_band.values()):
+        med = {d: float(np.median(v)) if v else None for d, v in per_band.items()}
+        tru = {d: float(np.median(v)) if v else None for d, v in true_band.items()}
+        out["in_band"] = {
+            "rms_um": {d: med[d] for d in EM_DOFS[:2]}, "rms_urad": {d: med[d] for d in EM_DOFS[2:]},
+            "true_rms_um": {d: tru[d] for d in EM_DOFS[:2]}, "true_rms_urad": {d: tru[d] for d in EM_DOFS[2:]},
+            "band_mm": {d: np.median(band_lims[d], axis=0).tolist() if band_lims[d] else None for d in EM_DOFS}}
+    return out
 
 
 def _elastic_um(scenario: dict, tl: dict, hours: list[float]) -> np.ndarray | None:
@@ -284,4 +309,6 @@ def flat(doc: dict) -> dict[str, float | int | None]:
         for unit in ("rms_um", "rms_urad"):
             for d, v in em.get(unit, {}).items():
                 row[f"phase2.error_motion.{d}.{unit}"] = v
+            for d, v in (em.get("in_band") or {}).get(unit, {}).items():
+                row[f"phase2.error_motion.{d}.in_band_{unit}"] = v
     return row

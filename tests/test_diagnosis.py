@@ -67,6 +67,11 @@ def _acts_on(effect: str, region: list[str]) -> bool:
                for d, c, f in ACTS_ON[effect])
 
 
+# The benchmark fixture simulates its 36 cases' campaigns (about 11 min of CPU, 6 min on two
+# idle cores); the first test that needs it carries that setup, so the module allows 30 min.
+pytestmark = pytest.mark.timeout(1800)
+
+
 @pytest.fixture(scope="session")
 def benchmark(tmp_path_factory):
     out = tmp_path_factory.mktemp("diagnose-benchmark")

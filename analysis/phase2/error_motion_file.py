@@ -12,14 +12,15 @@ import numpy as np
 from analysis.dataset import DOFS, DatasetError
 from analysis.files import atomic_write
 
-__all__ = ["read_error_motions", "write_error_motions"]
+__all__ = ["read_error_motion_bands", "read_error_motions", "write_error_motions"]
 
 
 def write_error_motions(path: Path, ems) -> None:
     """Write the combined error motions of every session: group ``/<session>`` with ``x_m`` (n,)
     position in m (on the sessions' position axis, attribute
     ``position_reference``: "command" or "imu") and ``forward``, ``reverse`` (6, n) in m and rad (rows ``dofs``
-    attribute), attributes ``hours``, ``runs``. Read back by :func:`read_error_motions`."""
+    attribute), ``band_m`` (6, 2) the resolved wavelength band of each DOF in m (shortest,
+    longest; NaN where none), attributes ``hours``, ``runs``. Read back by :func:`read_error_motions`."""
     def create(tmp: Path) -> None:
         with h5py.File(tmp, "w") as f:
             f.attrs["dofs"] = list(DOFS)
@@ -31,6 +32,8 @@ def write_error_motions(path: Path, ems) -> None:
                 g.create_dataset("x_m", data=em.combined.x_m)
                 g.create_dataset("forward", data=em.combined.forward)
                 g.create_dataset("reverse", data=em.combined.reverse)
+                if em.combined.band_m is not None:
+                    g.create_dataset("band_m", data=em.combined.band_m)
 
     atomic_write(path, create)
 
@@ -61,6 +64,30 @@ def read_error_motions(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np
                             f"{path}: /{name}/{key} has shape {arr.shape} with x_m {x.shape}; "
                             f"expected ({len(dofs)}, n) with n = len(x_m) >= 2")
                 out[name] = (x, fwd[order], rev[order])
+    except (OSError, KeyError) as exc:
+        raise DatasetError(f"{path}: cannot read the error motions ({exc}); rerun `twin backlash` "
+                           "to rewrite it") from None
+    return out
+
+
+def read_error_motion_bands(path: Path) -> dict[str, np.ndarray | None]:
+    """``{session: band_m (6, 2) m, rows in DOFS order}`` of an ``error_motions.h5``; None for a
+    session written before the band was recorded. Raises :class:`DatasetError` as
+    :func:`read_error_motions` does."""
+    out: dict[str, np.ndarray | None] = {}
+    try:
+        with h5py.File(path, "r") as f:
+            dofs = [d.decode() if isinstance(d, bytes) else str(d) for d in f.attrs["dofs"]]
+            order = [dofs.index(d) for d in DOFS if d in dofs]
+            for name, g in f.items():
+                if "band_m" not in g:
+                    out[name] = None
+                    continue
+                band = np.asarray(g["band_m"][...], dtype=np.float64)
+                if band.shape != (len(dofs), 2) or len(order) != len(DOFS):
+                    raise DatasetError(f"{path}: /{name}/band_m has shape {band.shape}; expected "
+                                       f"({len(DOFS)}, 2) with every DOF in /@dofs")
+                out[name] = band[order]
     except (OSError, KeyError) as exc:
         raise DatasetError(f"{path}: cannot read the error motions ({exc}); rerun `twin backlash` "
                            "to rewrite it") from None

@@ -296,18 +296,55 @@ def _streams(layer: _Layer, sm: SensorModel, directions: tuple[int, ...], *,
     return st
 
 
+#: The precision that defines the resolved wavelength band of the error motions
+#: (:func:`fusion.resolved_band`): expected RMS error at most 0.2 µm for the translations and
+#: 1 µrad for the angles over the band (rows :data:`DOFS`).
+BAND_PRECISION = (0.2e-6, 0.2e-6, 0.2e-6, 1e-6, 1e-6, 1e-6)
+
+
+def _error_psds(st: dict, dx: float) -> tuple[np.ndarray, list[np.ndarray]]:
+    """k (m,) 1/m and the posterior error PSD (m,) of each DOF (rows :data:`DOFS`) for the
+    streams of :func:`_streams`, paired as in :func:`_solve_streams`."""
+    out: list = [None] * 6
+    k, out[0], out[4] = fusion.posterior_psd(st["x"] + st["gy"], dx, coupling=-1.0,
+                                             prior_t=PRIORS[0], prior_r=PRIORS[4])
+    _, out[1], out[3] = fusion.posterior_psd(st["y"] + st["gx"], dx, coupling=+1.0,
+                                             prior_t=PRIORS[1], prior_r=PRIORS[3])
+    _, out[2], _ = fusion.posterior_psd(st["z"], dx, coupling=None, prior_t=PRIORS[2], prior_r=PRIORS[3])
+    _, _, out[5] = fusion.posterior_psd(st["gz"], dx, coupling=None, prior_t=PRIORS[0], prior_r=PRIORS[5])
+    return k, out
+
+
+def _bands(k: np.ndarray, psds: list[np.ndarray]) -> np.ndarray:
+    """(6, 2) resolved band (shortest, longest wavelength, m) per DOF; NaN where none."""
+    out = np.full((6, 2), np.nan)
+    for i, p in enumerate(psds):
+        b = fusion.resolved_band(k, p, BAND_PRECISION[i])
+        if b is not None:
+            out[i] = b
+    return out
+
+
 def _fuse(layer: _Layer, sm: SensorModel, *, pool_wavelength_m: float | None,
           **kw) -> DirectionalTraces:
     """Average the accumulated signals and combine them per direction; with
     ``pool_wavelength_m`` the wavelengths above it come from both directions together
-    (:func:`fusion.pool_long_wavelengths`)."""
-    out = {d: _solve_streams(_streams(layer, sm, (d,), **kw), layer.dx) for d in (1, -1)}
+    (:func:`fusion.pool_long_wavelengths`, applied to the error spectra as to the traces). The
+    resolved band is that of the forward direction (the reverse has the same speeds and runs)."""
+    streams = {d: _streams(layer, sm, (d,), **kw) for d in (1, -1)}
+    out = {d: _solve_streams(streams[d], layer.dx) for d in (1, -1)}
+    k, psds = _error_psds(streams[1], layer.dx)
     if pool_wavelength_m is not None:
-        both = _solve_streams(_streams(layer, sm, (1, -1), **kw), layer.dx)
+        st_both = _streams(layer, sm, (1, -1), **kw)
+        both = _solve_streams(st_both, layer.dx)
         for d in (1, -1):
             out[d] = fusion.pool_long_wavelengths(out[d], both, layer.dx, pool_wavelength_m)
+        # the same crossover on the error spectra: own above 2/λ, pooled below 1/λ
+        w_own = 0.5 - 0.5 * np.cos(np.pi * np.clip(np.log2(k * pool_wavelength_m), 0.0, 1.0))
+        _, pooled = _error_psds(st_both, layer.dx)
+        psds = [w_own * own + (1.0 - w_own) * pb for own, pb in zip(psds, pooled, strict=True)]
     return DirectionalTraces(layer.grid, fusion.remove_unobservable(out[1], layer.grid),
-                             fusion.remove_unobservable(out[-1], layer.grid))
+                             fusion.remove_unobservable(out[-1], layer.grid), band_m=_bands(k, psds))
 
 
 def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3,

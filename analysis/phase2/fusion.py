@@ -36,7 +36,8 @@ from analysis.phase2.imu_runs import lowpass_power
 
 G = 9.80665  # m/s², standard gravity (the IMU's reference)
 
-__all__ = ["G", "Prior", "Stream", "butterworth2_magnitude", "pool_long_wavelengths", "remove_unobservable", "solve"]
+__all__ = ["G", "Prior", "Stream", "band_limit", "butterworth2_magnitude", "pool_long_wavelengths",
+           "posterior_psd", "remove_unobservable", "resolved_band", "solve"]
 
 
 def butterworth2_magnitude(f_hz: np.ndarray, bandwidth_hz: float) -> np.ndarray:
@@ -85,21 +86,11 @@ class Prior:
         return self.rms ** 2 * self.k_min_per_m / k ** 2
 
 
-def solve(streams: list[Stream], dx_m: float, *, coupling: float | None,
-          prior_t: Prior, prior_r: Prior) -> tuple[np.ndarray, np.ndarray]:
-    """Maximum a-posteriori (Wiener) estimate per wavenumber of a translation T and an angle R.
-
-    Per κ: minimise Σ_s w_s |D_s − G_s·u|² + |T|²/S_T + |R|²/S_R over u = (T, R), with data
-    weights w_s = count/(|v|·n²) (the inverse position-domain noise PSD of the averaged record)
-    and the prior PSDs S of ``prior_t``/``prior_r``; both sides are per unit of the same DFT
-    normalisation, so the weighting is absolute (Wiener filter; with a weak prior this is the
-    weighted least squares). Wavenumbers the data do not determine (a
-    single speed cannot split g·R from v²κ²·T at long wavelengths) fall back to the prior, zero.
-
-    coupling: c in f = v²T'' + c·g·R (+1 for E_YX/E_AX, −1 for E_XX/E_BX); None for an
-    uncoupled DOF: then "acc" streams determine T alone and "gyro" streams R alone.
-    Returns T (n,) m and R (n,) rad (κ = 0, the mean, set to zero).
-    """
+def _normal_equations(streams: list[Stream], dx_m: float, coupling: float | None, prior_t: Prior,
+                      prior_r: Prior) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per wavenumber of the evenly mirrored grid (2n points): κ (2n,) rad/m, the normal matrix
+    (2n, 2, 2) with the prior's inverse PSDs on its diagonal, the right-hand side (2n, 2) and the
+    prior PSDs (2n, 2) of (T, R). See :func:`solve` for the model and the weights."""
     n = streams[0].data.size
     kappa = 2.0 * np.pi * np.fft.fftfreq(2 * n, dx_m)
     nb = kappa.size
@@ -126,15 +117,100 @@ def solve(streams: list[Stream], dx_m: float, *, coupling: float | None,
         normal += w[:, None, None] * np.conj(row)[:, :, None] * row[:, None, :]
         rhs += (w * spec)[:, None] * np.conj(row)
     k = kappa / (2.0 * np.pi)
-    normal[:, 0, 0] += 1.0 / prior_t.psd(k)
-    normal[:, 1, 1] += 1.0 / prior_r.psd(k)
-    ok = np.ones(nb, dtype=bool)
+    prior = np.stack([prior_t.psd(k), prior_r.psd(k)], axis=1)
+    normal[:, 0, 0] += 1.0 / prior[:, 0]
+    normal[:, 1, 1] += 1.0 / prior[:, 1]
+    return kappa, normal, rhs, prior
+
+
+def solve(streams: list[Stream], dx_m: float, *, coupling: float | None,
+          prior_t: Prior, prior_r: Prior) -> tuple[np.ndarray, np.ndarray]:
+    """Maximum a-posteriori (Wiener) estimate per wavenumber of a translation T and an angle R.
+
+    Per κ: minimise Σ_s w_s |D_s − G_s·u|² + |T|²/S_T + |R|²/S_R over u = (T, R), with data
+    weights w_s = count/(|v|·n²) (the inverse position-domain noise PSD of the averaged record)
+    and the prior PSDs S of ``prior_t``/``prior_r``; both sides are per unit of the same DFT
+    normalisation, so the weighting is absolute (Wiener filter; with a weak prior this is the
+    weighted least squares). Wavenumbers the data do not determine (a
+    single speed cannot split g·R from v²κ²·T at long wavelengths) fall back to the prior, zero.
+
+    coupling: c in f = v²T'' + c·g·R (+1 for E_YX/E_AX, −1 for E_XX/E_BX); None for an
+    uncoupled DOF: then "acc" streams determine T alone and "gyro" streams R alone.
+    Returns T (n,) m and R (n,) rad (κ = 0, the mean, set to zero).
+    """
+    n = streams[0].data.size
+    kappa, normal, rhs, _ = _normal_equations(streams, dx_m, coupling, prior_t, prior_r)
+    ok = np.ones(kappa.size, dtype=bool)
     ok[0] = False  # κ = 0: constants are unobservable
-    sol = np.zeros((nb, 2), dtype=complex)
+    sol = np.zeros((kappa.size, 2), dtype=complex)
     sol[ok] = np.linalg.solve(normal[ok], rhs[ok][:, :, None])[:, :, 0]
     t = np.real(np.fft.ifft(sol[:, 0]))[:n]
     r = np.real(np.fft.ifft(sol[:, 1]))[:n]
     return t, r
+
+
+def posterior_psd(streams: list[Stream], dx_m: float, *, coupling: float | None,
+                  prior_t: Prior, prior_r: Prior) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The error spectrum of :func:`solve`: per wavenumber the posterior covariance of (T, R) is
+    P = N⁻¹, N the normal matrix with the prior's inverse PSDs on its diagonal (the linear-Gaussian
+    model; e.g. Kay, *Fundamentals of Statistical Signal Processing: Estimation Theory*, 1993,
+    ch. 12). Its diagonal is a one-sided PSD in the prior's units: Σ P(k)·Δk over a band of
+    spatial frequencies is the expected squared error of that band (noise where the data determine
+    the value, the prior's variance where they do not).
+
+    Returns k (m,) spatial frequencies > 0 in 1/m, ascending with uniform step Δk = k[0] (the
+    non-negative half of the mirrored grid's DFT without 0), and the posterior PSDs (m,) of T
+    (m²·m) and of R (rad²·m).
+    """
+    kappa, normal, _, _ = _normal_equations(streams, dx_m, coupling, prior_t, prior_r)
+    k = kappa / (2.0 * np.pi)
+    pos = np.flatnonzero(k > 0)
+    pos = pos[np.argsort(k[pos])]
+    cov = np.linalg.inv(normal[pos])
+    return k[pos], np.real(cov[:, 0, 0]), np.real(cov[:, 1, 1])
+
+
+def resolved_band(k_per_m: np.ndarray, psd: np.ndarray, precision: float) -> tuple[float, float] | None:
+    """The widest band of wavelengths whose expected RMS error stays within ``precision``.
+
+    Starting at the spatial frequency of the lowest error PSD (:func:`posterior_psd`), the band
+    grows one frequency at a time towards the neighbour with the lower PSD while Σ PSD·Δk stays at
+    most ``precision``². Returns (shortest, longest wavelength), m, or None when even the best
+    frequency alone exceeds it.
+    """
+    k = np.asarray(k_per_m, dtype=float)
+    p = np.asarray(psd, dtype=float)
+    dk = float(k[0])
+    budget = precision ** 2
+    lo = hi = int(np.argmin(p))
+    total = p[lo] * dk
+    if total > budget:
+        return None
+    while True:
+        left = p[lo - 1] if lo > 0 else np.inf
+        right = p[hi + 1] if hi + 1 < p.size else np.inf
+        step = min(left, right)
+        if not np.isfinite(step) or total + step * dk > budget:
+            break
+        total += step * dk
+        if left <= right:
+            lo -= 1
+        else:
+            hi += 1
+    return 1.0 / float(k[hi]), 1.0 / float(k[lo])
+
+
+def band_limit(e: np.ndarray, dx_m: float, band_m: tuple[float, float]) -> np.ndarray:
+    """``e`` (..., n) on a grid of step ``dx_m`` keeping only the wavelengths inside ``band_m``
+    (shortest, longest; m): an ideal band-pass of the evenly mirrored record (length 2n, as
+    :func:`solve` extends accelerometer data), its mean removed."""
+    e = np.asarray(e, dtype=float)
+    n = e.shape[-1]
+    ext = np.concatenate([e, e[..., ::-1]], axis=-1)
+    k = np.abs(np.fft.fftfreq(2 * n, dx_m))
+    lo, hi = band_m
+    keep = (k >= 1.0 / hi * (1 - 1e-9)) & (k <= 1.0 / lo * (1 + 1e-9)) & (k > 0)
+    return np.real(np.fft.ifft(np.fft.fft(ext, axis=-1) * keep, axis=-1))[..., :n]
 
 
 def remove_unobservable(e: np.ndarray, x_m: np.ndarray) -> np.ndarray:

@@ -22,11 +22,15 @@ class DirectionalTraces:
 
     x_m: (n,) commanded position, m, ascending with uniform step ``dx_m``.
     forward, reverse: (6, n) error motions while moving towards +X and towards −X, rows DOFS.
+    band_m: (6, 2) per DOF the wavelengths (shortest, longest; m) the recording resolves: the
+        widest band whose expected RMS error is within the stated precision
+        (:func:`analysis.phase2.fusion.resolved_band`); NaN where none; None when not known.
     """
 
     x_m: np.ndarray
     forward: np.ndarray
     reverse: np.ndarray
+    band_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.x_m)
@@ -60,3 +64,12 @@ class SessionErrorMotions:
     slow: DirectionalTraces
     skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
     position_reference: str = "command"
+
+
+def band_mm(band_m: np.ndarray | None) -> dict[str, list[float] | None] | None:
+    """A (6, 2) resolved band in m (:attr:`DirectionalTraces.band_m`) as JSON: ``{dof: [shortest,
+    longest] wavelength in mm, or None where no band is resolved}``; None when ``band_m`` is None."""
+    if band_m is None:
+        return None
+    return {d: None if not np.isfinite(band_m[i]).all() else [float(band_m[i, 0] * 1e3), float(band_m[i, 1] * 1e3)]
+            for i, d in enumerate(DOFS)}

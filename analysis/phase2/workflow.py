@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis import registry
-from analysis.dataset import open_measurements, open_truth
+from analysis.dataset import DOFS, open_measurements, open_truth
 from analysis.files import write_json
 from analysis.injected import injected_change_um
 from analysis.phase2.backlash import (
@@ -26,9 +26,10 @@ from analysis.phase2.backlash import (
     primary_m,
 )
 from analysis.phase2.error_motion_file import write_error_motions
-from analysis.phase2.error_motions import resolve_position_reference
+from analysis.phase2.error_motions import BAND_PRECISION, resolve_position_reference
 from analysis.phase2.figures import write_figures
 from analysis.phase2.prognosis import BacklashTrend, Prognosis, prognosis, savgol_trend
+from analysis.phase2.traces import band_mm
 
 __all__ = ["BacklashRun", "estimator_dir", "run"]
 
@@ -124,9 +125,11 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
     dial_delta = None
     if dial is not None and len(dial[0]):
         dial_delta = (dial[0], dial[1] - dial[1][0])
+    bands = {em.session: em.combined.band_m for em in result.error_motions}
     records = []
     for i, s in enumerate(ses):
         rec = s.to_json()
+        rec["error_motion_band_mm"] = band_mm(bands.get(s.session))
         rec["delta_backlash_um"] = None if not math.isfinite(shift[i]) else shift[i] * 1e6
         if trend is not None:
             rec["smoothed_um"] = float(trend.smoothed[i] * 1e6)
@@ -154,6 +157,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         "parameters": {"estimator": f"{type(est).__module__}.{type(est).__qualname__}",
                        "position_reference": position_reference,
                        "estimator_params": _params_json(est),
+                       "error_motion_band_precision": {
+                           d: BAND_PRECISION[i] * 1e6 for i, d in enumerate(DOFS)},
                        "cutoff_wavelength_mm": est.cutoff_wavelength_m * 1e3,
                        "baseline_sessions": result.baseline_sessions,
                        "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
