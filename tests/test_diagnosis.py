@@ -67,8 +67,10 @@ def _acts_on(effect: str, region: list[str]) -> bool:
                for d, c, f in ACTS_ON[effect])
 
 
-# The benchmark fixture simulates its 36 cases' campaigns (about 11 min of CPU, 6 min on two
-# idle cores); the first test that needs it carries that setup, so the module allows 30 min.
+# The benchmark fixture simulates its 36 physical cases' campaigns (about 11 min of CPU, 6 min on
+# two idle cores), then the signal artefacts' grids and its 14 artefact cases (about 6 min more on
+# two loaded cores, docs/gap-diagnosis.md); the first test that needs it carries that setup, so
+# the module allows 30 min.
 pytestmark = pytest.mark.timeout(1800)
 
 
