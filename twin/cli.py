@@ -710,6 +710,8 @@ def _progress_callback(progress: Progress, tasks: dict):
 
 
 def _print_diagnosis(res: dict) -> None:
+    from analysis.diagnosis.wording import owner_phrase
+
     out = Console(width=max(110, Console().width))
     out.print(f"[bold]{res['verdict']}[/]: {res['n_significant_calibration']} of "
               f"{res['n_statistics']} statistics beyond the twin's seed-to-seed spread on the "
@@ -726,14 +728,20 @@ def _print_diagnosis(res: dict) -> None:
                                        for h in hours[:3]) + " (held-out, worst first)")
     for i, a in enumerate(res["added"]):
         pars = ", ".join(f"{k} = {v:.3g} [{a['interval'][k][0]:.3g}, {a['interval'][k][1]:.3g}]"
+                         + (f" at the {a['at_grid_edge'][k]} edge of its grid"
+                            if a.get("at_grid_edge", {}).get(k) else "")
                          for k, v in a["params"].items())
-        out.print(f"effect {i + 1}: [bold]{a['effect']}[/] ({pars}): held-out gap "
+        kind = res.get("library", {}).get(a["effect"], {}).get("kind", "physical effect")
+        out.print(f"{'effect' if kind == 'physical effect' else 'artefact'} {i + 1}: "
+                  f"[bold]{a['effect']}[/] ({kind}; {pars}): held-out gap "
                   f"{a['heldout_gap_before']:.1f} -> {a['heldout_gap_after']:.1f} "
                   f"(-{100 * a['heldout_reduction']:.0f} %, gain {a['gain']:.1f} > {a['gain_threshold']:.1f})")
+        out.print(f"  in words: {owner_phrase(res, a)}", markup=False, highlight=False)
     if res["ranking"] and not res["added"]:
         best = res["ranking"][0]
-        out.print(f"no effect of the library reduces the held-out gap significantly (best: "
-                  f"{best['effect']}, -{100 * best['heldout_reduction']:.0f} %)")
+        out.print(f"no candidate (physical effect or signal artefact) reduces the held-out gap "
+                  f"significantly (best: {best['effect']}, {best.get('kind', 'physical effect')}, "
+                  f"-{100 * best['heldout_reduction']:.0f} %)")
     if res["verdict"] != "no significant gap":
         out.print(f"held-out gap {res['heldout_gap_before']:.1f} -> {res['heldout_gap_after']:.1f} "
                   f"(shrink {100 * res['heldout_shrink']:.0f} %)"
@@ -741,6 +749,11 @@ def _print_diagnosis(res: dict) -> None:
                       f"{r['domain']} {r['channel']} {r['family']} {r['bin']}"
                       for r in res["residual"].get("top_regions", [])[:3])
                      if res["residual"].get("significant") else ""))
+    if res.get("worse_regions"):
+        out.print("made worse by the added effects (held-out): " + "; ".join(
+            f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² "
+            f"{r['heldout_gap_before']:.1f} -> {r['heldout_gap_after']:.1f})"
+            for r in res["worse_regions"][:3]))
 
 
 @app.command()
@@ -796,6 +809,8 @@ def diagnose_benchmark(
     nulls: int = typer.Option(10, "--nulls", min=0),
     open_set: int = typer.Option(5, "--open-set", min=0),
     pairs: int = typer.Option(5, "--pairs", min=0),
+    artefacts: int = typer.Option(1, "--artefacts", min=0,
+                                  help="cases per signal artefact and magnitude (0: none)"),
     rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
     seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the spread"),
     workers: int | None = typer.Option(None, "--workers", min=1),
@@ -809,7 +824,7 @@ def diagnose_benchmark(
         s = load(scenario)
     except ScenarioError as exc:
         _fail(str(exc))
-    cases = plan_cases(rng_seed, per_cell, nulls, open_set, pairs)
+    cases = plan_cases(rng_seed, per_cell, nulls, open_set, pairs, artefacts_per_cell=artefacts)
     console.print(f"benchmark of the gap diagnosis: {len(cases)} cases on scenario "
                   f"[bold]{s.name}[/] -> {out}")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -830,7 +845,9 @@ def diagnose_benchmark(
                   f"{fmt(res['null_correct_fraction'])}, open-set unexplained "
                   f"{fmt(res['open_set_correct_fraction'])} (and no wrong effect removing half "
                   f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), pairs both in top 3 "
-                  f"{fmt(res['pair_both_top3_fraction'])}; wrote {out / 'benchmark.json'}")
+                  f"{fmt(res['pair_both_top3_fraction'])}; top-1 per kind: "
+                  + ", ".join(f"{k} {fmt(v)}" for k, v in res["per_kind_top1"].items())
+                  + f"; wrote {out / 'benchmark.json'}")
 # --- end of twin diagnose ----------------------------------------------------------------------
 
 

@@ -19,11 +19,24 @@ For each candidate:
    that were significant on the calibration part, before and after adding the effect; the
    reduction 1 − G_after/G_before.
 
-Selection is greedy forward: the candidate with the largest held-out reduction is added while
-its gain ΔG = G_before − G_after is significant: ΔG exceeds the χ²_k(1 − α) quantile (k fitted
+3. **Regions it makes worse.** A region (channel × band, phase, segment, …: a
+   :attr:`Region.key` over all hours) is *made worse* when its held-out Σ t² over its m usable
+   statistics rises by more than the χ²_m(1 − α) quantile once the candidate is added (more than
+   a whole region of the twin's own spread would hold) and by at least ``WORSE_FRACTION`` (10 %)
+   of its Σ t² before (a smaller relative rise in a region far beyond the spread is within the
+   error of taking the response from one seed) (:func:`worse_regions`). The rise outside
+   the statistics S (inside S it is already in G_after) is the candidate's *penalty*; its net
+   gain is ΔG − penalty and its net reduction (ΔG − penalty)/G_before.
+4. **At the edge of its grid.** A fitted value, or an end of its interval, on the first or last
+   grid value is flagged ``"low"``/``"high"`` (``"both"``: the interval spans the whole grid, the
+   data do not bound it): the true value may lie beyond the range tried (:func:`grid_edge`). A
+   zero end of a grid without negative values is a physical floor (a magnitude), not flagged.
+
+Selection is greedy forward: the candidate with the largest net held-out reduction is added
+while its net gain is significant: it exceeds the χ²_k(1 − α) quantile (k fitted
 parameters) plus three standard deviations of ΔG's noise, 2·√(Σ d_j²) with d_j the effect's
 change of t_j (if the residual were noise ε_j, ΔG = Σ 2ε_j d_j − d_j² has that spread), and it
-removes at least ``min_gain`` of the gap. Later candidates are fitted on top of the effects
+removes at least ``min_gain`` of the gap net of its penalty. Later candidates are fitted on top of the effects
 already added, their responses added to them (the effects' responses are taken as additive).
 
 The verdict: "no significant gap" when no statistic is significant on the calibration part after
@@ -36,7 +49,8 @@ seed of the twin is not exactly the recording's; that is reported in ``residual`
 significant but small remainder, not as an unexplained gap.
 
 The ranking lists the added effects in the order they were added, then the others by their
-held-out reduction in the last round.
+net held-out reduction in the last round. ``worse_regions`` of the summary compares the twin
+with all the added effects to the twin as it is.
 """
 
 from __future__ import annotations
@@ -57,24 +71,29 @@ NO_GAP, EXPLAINED, UNEXPLAINED = "no significant gap", "explained", "unexplained
 class ParamAxis:
     """One parameter of a candidate: name (with its unit, e.g. ``rise_K``), the grid values at
     which the response was simulated (ascending, including the value that turns it off where
-    there is one), and whether it is discrete (no interpolation between grid values)."""
+    there is one), whether it is discrete (no interpolation between grid values), and whether
+    the grid is closed: it lists every value the parameter can take (the mains frequency and
+    its harmonics), so that a fit on its first or last value is not "at the edge"."""
 
     name: str
     values: tuple[float, ...]
     discrete: bool = False
+    closed: bool = False
 
 
 @dataclass
 class CandidateResponse:
     """The simulated response of one candidate effect.
 
-    name: effect name; params: its axes; delta: {"cal": array, "heldout": array}, each of shape
-    (*[len(a.values) for a in params], n) with the change of every statistic on the grid.
+    name: candidate name; params: its axes; delta: {"cal": array, "heldout": array}, each of
+    shape (*[len(a.values) for a in params], n) with the change of every statistic on the grid;
+    kind: "physical effect" (simulated) or "signal artefact" (applied to a simulated recording).
     """
 
     name: str
     params: list[ParamAxis]
     delta: dict[str, np.ndarray]
+    kind: str = "physical effect"
 
     def __post_init__(self) -> None:
         shape = tuple(len(a.values) for a in self.params)
@@ -82,6 +101,63 @@ class CandidateResponse:
             if d.shape[:-1] != shape:
                 raise ValueError(f"{self.name}: {part} response has shape {d.shape}; expected "
                                  f"{shape} + (n,) for the grids of {[a.name for a in self.params]}")
+
+
+def grid_edge(axis: ParamAxis, value: float, interval: tuple[float, float]) -> str | None:
+    """Whether a fit sits on the edge of the grid it was searched on: "low" | "high" when the
+    value or its interval reaches the first | last grid value, "both" when the interval reaches
+    both, None inside. A zero first value of a grid without negative values (a magnitude: a
+    torque, a mass, a spread) is a physical floor, not an edge."""
+    v = np.asarray(axis.values, float)
+    lo_g, hi_g = float(v.min()), float(v.max())
+    if hi_g == lo_g:
+        return None
+    tol = 1e-9 * (hi_g - lo_g)
+    if axis.closed:
+        spans = interval[0] <= lo_g + tol and interval[1] >= hi_g - tol
+        return "both" if spans else None
+    floor = lo_g == 0.0
+    low = not floor and min(value, interval[0]) <= lo_g + tol
+    high = max(value, interval[1]) >= hi_g - tol
+    return "both" if low and high else "low" if low else "high" if high else None
+
+
+#: The least relative rise of a region's Σ t² that makes it "worse" (with the χ² criterion).
+WORSE_FRACTION = 0.1
+
+
+def worse_regions(z_before: np.ndarray, z_after: np.ndarray, regions: list,
+                  alpha: float) -> list[dict]:
+    """The regions whose held-out Σ t² over their m usable statistics rises by more than the
+    χ²_m(1 − α) quantile and by at least :data:`WORSE_FRACTION` of its value from ``z_before``
+    to ``z_after`` ((n,) each; ``regions`` (n,)), worst first: domain, channel, family, bin,
+    n_statistics, heldout_gap_before/after (mean t²),
+    increase (of Σ t²) and threshold (the quantile)."""
+    acc: dict[tuple, list[float]] = {}
+    for j, r in enumerate(regions):
+        if np.isfinite(z_before[j]) and np.isfinite(z_after[j]):
+            a = acc.setdefault(r.key, [0, 0.0, 0.0])
+            a[0] += 1
+            a[1] += float(z_before[j]) ** 2
+            a[2] += float(z_after[j]) ** 2
+    out = []
+    for key, (m, sb, sa) in acc.items():
+        thr = float(stats.chi2.ppf(1.0 - alpha, m))
+        if sa - sb > thr and sa - sb >= WORSE_FRACTION * sb:
+            out.append({"domain": key[0], "channel": key[1], "family": key[2], "bin": key[3],
+                        "n_statistics": m, "heldout_gap_before": sb / m, "heldout_gap_after": sa / m,
+                        "increase": sa - sb, "threshold": thr})
+    return sorted(out, key=lambda d: -d["increase"])
+
+
+def _penalty(z_before, z_after, regions, select, worse: list[dict]) -> float:
+    """The rise of Σ t² in the ``worse`` regions over the statistics outside ``select``."""
+    keys = {(w["domain"], w["channel"], w["family"], w["bin"]) for w in worse}
+    if not keys:
+        return 0.0
+    m = np.array([r.key in keys for r in regions]) & ~select & np.isfinite(z_before) \
+        & np.isfinite(z_after)
+    return max(0.0, float(np.sum(z_after[m] ** 2 - z_before[m] ** 2)))
 
 
 @dataclass
@@ -98,6 +174,11 @@ class Fit:
     gain_threshold: float
     delta_cal: np.ndarray = field(repr=False)
     delta_heldout: np.ndarray = field(repr=False)
+    grid: dict[str, tuple[float, float]] = field(default_factory=dict)
+    at_grid_edge: dict[str, str | None] = field(default_factory=dict)
+    worse: list[dict] = field(default_factory=list)
+    penalty: float = 0.0
+    kind: str = "physical effect"
 
     @property
     def reduction(self) -> float:
@@ -107,15 +188,28 @@ class Fit:
     def gain(self) -> float:
         return self.heldout_before - self.heldout_after
 
+    @property
+    def net_gain(self) -> float:
+        """The gain less the rise of the gap in the regions it makes worse, outside S."""
+        return self.gain - self.penalty
+
+    @property
+    def net_reduction(self) -> float:
+        return self.net_gain / self.heldout_before if self.heldout_before > 0 else 0.0
+
     def significant(self, min_gain: float) -> bool:
-        return self.gain > self.gain_threshold and self.reduction >= min_gain
+        return self.net_gain > self.gain_threshold and self.net_reduction >= min_gain
 
     def as_dict(self, min_gain: float) -> dict:
-        return {"effect": self.name, "params": self.params,
+        return {"effect": self.name, "kind": self.kind, "params": self.params,
                 "interval": {k: list(v) for k, v in self.interval.items()},
+                "grid": {k: list(v) for k, v in self.grid.items()},
+                "at_grid_edge": self.at_grid_edge,
                 "calibration_chi2": self.cal_chi2,
                 "heldout_gap_before": self.heldout_before, "heldout_gap_after": self.heldout_after,
                 "heldout_reduction": self.reduction, "gain": self.gain,
+                "worse_regions": self.worse, "worse_penalty": self.penalty,
+                "net_reduction": self.net_reduction,
                 "gain_threshold": self.gain_threshold, "significant": self.significant(min_gain)}
 
 
@@ -147,11 +241,13 @@ def _interpolator(params: list[ParamAxis], delta: np.ndarray):
 
 def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
                   sd: dict[str, np.ndarray], select: np.ndarray, alpha: float,
-                  n_fine: int = 61) -> Fit:
+                  n_fine: int = 61, regions: list | None = None) -> Fit:
     """Fit ``cand`` on top of the current model.
 
     z_cal, z_ho: (n,) standardised differences of the real parts from the current model;
-    sd: {"cal", "heldout"} (n,) prediction standard deviations; select: (n,) the statistics S.
+    sd: {"cal", "heldout"} (n,) prediction standard deviations; select: (n,) the statistics S;
+    regions: (n,) the statistics' regions (for the regions the candidate makes worse; none
+    looked for without them).
     """
     fine = _fine_axes(cand.params, n_fine)
     grid = np.stack(np.meshgrid(*fine, indexing="ij"), axis=-1).reshape(-1, len(fine)) \
@@ -194,10 +290,20 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
     after = float(np.sum((z_ho[sel] - dt) ** 2))
     noise = 2.0 * float(np.sqrt(np.sum(dt ** 2)))
     threshold = float(stats.chi2.ppf(1.0 - alpha, max(len(cand.params), 1))) + 3.0 * noise
-    return Fit(name=cand.name, params={a.name: float(v) for a, v in zip(cand.params, p_best, strict=True)},
+    params = {a.name: float(v) for a, v in zip(cand.params, p_best, strict=True)}
+    worse, penalty = [], 0.0
+    if regions is not None:
+        z_after = z_ho - d_ho / sd["heldout"]
+        worse = worse_regions(z_ho, z_after, regions, alpha)
+        penalty = _penalty(z_ho, z_after, regions, select, worse)
+    return Fit(name=cand.name, params=params,
                interval=interval, cal_chi2=float(chi2[best]), heldout_before=before,
                heldout_after=after, gain_noise_sd=noise, gain_threshold=threshold,
-               delta_cal=d_cal, delta_heldout=d_ho)
+               delta_cal=d_cal, delta_heldout=d_ho,
+               grid={a.name: (float(min(a.values)), float(max(a.values))) for a in cand.params},
+               at_grid_edge={a.name: grid_edge(a, params[a.name], interval[a.name])
+                             for a in cand.params},
+               worse=worse, penalty=penalty, kind=cand.kind)
 
 
 def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
@@ -233,7 +339,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     sig_keys = {r.key for r, s in zip(regions, select, strict=True) if s}
     if n_sel == 0 or g_before <= crit:
         out.update(verdict=NO_GAP, ranking=[], added=[], heldout_gap_after=g_before,
-                   heldout_shrink=0.0, regions=_regions(regions, z0, z0, select, sig_keys, gaps_cal),
+                   heldout_shrink=0.0, worse_regions=[], regions=_regions(regions, z0, z0, select, sig_keys, gaps_cal),
                    hours=_hours(regions, z0, z0, select), residual={"significant": False})
         return out, {"before": z0["heldout"], "after": z0["heldout"]}
     delta = {p: np.zeros_like(z0[p]) for p in z0}
@@ -242,10 +348,11 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     added: list[Fit] = []
     ranking: list[dict] = []
     for step in range(max_effects):
-        fits = [fit_candidate(c, z["cal"], z["heldout"], sd, select, alpha) for c in remaining]
+        fits = [fit_candidate(c, z["cal"], z["heldout"], sd, select, alpha, regions=regions)
+                for c in remaining]
         if not fits:
             break
-        fits.sort(key=lambda f: -f.reduction)
+        fits.sort(key=lambda f: -f.net_reduction)
         best = fits[0]
         ranking = [{**f.as_dict(min_gain), "round": step + 1} for f in fits]
         if not best.significant(min_gain):
@@ -266,6 +373,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
         added=[{**f.as_dict(min_gain), "step": i + 1} for i, f in enumerate(added)],
         heldout_gap_after=g_after,
         heldout_shrink=shrink, explained_fraction=explained_fraction,
+        worse_regions=worse_regions(z0["heldout"], z["heldout"], regions, alpha),
         regions=_regions(regions, z0, z, select, sig_keys, gaps_cal),
         hours=_hours(regions, z0, z, select),
         residual={"significant": bool(residual_sig), "heldout_gap": g_after, "critical": crit,

@@ -2,22 +2,29 @@
 
 Maps show log10 of the mean t² of the statistics in each cell (1 = the twin's own spread):
 channel × frequency band (Phase I), error motion × stroke segment (Phase II), channel ×
-operating phase, and the gap per operating hours; plus the candidates' held-out reductions.
+operating phase, and the gap per operating hours; plus the candidates' held-out reductions. On
+the "after" maps, cells holding a region the added effects made worse
+(:func:`analysis.diagnosis.attribution.worse_regions`) are outlined.
+
+``index.html`` is rendered by the Jinja2 template ``templates/diagnosis.html.j2`` (autoescaped;
+the style sheet is the campaign report's, ``analysis/report/templates/style.css.j2``); its
+words and numbers come from :mod:`analysis.diagnosis.wording`.
 """
 
 from __future__ import annotations
 
-import html
-import json
 from pathlib import Path
 
+import jinja2
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
 
 from analysis.dataset import DOFS  # noqa: E402
+from analysis.diagnosis import wording as w  # noqa: E402
 from analysis.diagnosis.signature import (  # noqa: E402
     OPERATING_PHASES,
     PHASE1_BANDS_HZ,
@@ -25,6 +32,29 @@ from analysis.diagnosis.signature import (  # noqa: E402
     PHASE2_CHANNELS,
     Region,
     _band_labels,
+)
+from analysis.files import write_text  # noqa: E402
+
+_ENV = jinja2.Environment(
+    loader=jinja2.ChoiceLoader([jinja2.PackageLoader("analysis.diagnosis", "templates"),
+                                jinja2.PackageLoader("analysis.report", "templates")]),
+    autoescape=True, undefined=jinja2.StrictUndefined, keep_trailing_newline=True)
+
+#: The rules behind the flags, as the report states them.
+RULES = (
+    "t² of a statistic: its squared distance from the twin's seed mean in units of the twin's "
+    "seed-to-seed spread; 1 is typical of the twin itself. The gap is Σ t² over the statistics "
+    "significant on the calibration part; every before/after figure is on the held-out part.",
+    "Interval: where the calibration Σ t² stays within max(1, reduced χ²) of its minimum. It does "
+    "not include the error of taking the effect's response from one seed of the twin.",
+    "At the edge of the tried range: the fitted value or an end of its interval lies on the "
+    "first or last value of the grid the effect was simulated on, so the true value may lie "
+    "beyond it (a zero amplitude is a physical floor and is not flagged).",
+    "Region made worse: a region (channel × band, operating phase, stroke segment, feature; all "
+    "hours) whose held-out Σ t² over its m statistics rises by more than the χ²_m quantile at "
+    "1 − α once the effect is added. Its rise outside the significant statistics is subtracted "
+    "from the candidate's gain (net reduction), which ranks the candidates and must pass the "
+    "selection test.",
 )
 
 
@@ -51,12 +81,28 @@ def _map(ax, m: np.ndarray, rows, cols, title: str, vmax: float):
     return im
 
 
-def _pair(path: Path, before: np.ndarray, after: np.ndarray, rows, cols, what: str) -> None:
+def _worse_cells(worse: list[dict], rows, cols, pick) -> list[tuple[int, int]]:
+    """(row, column) indices of the map cells holding a region made worse."""
+    out = set()
+    for d in worse:
+        rc = pick(Region(d["domain"], d["channel"], d["family"], d["bin"]))
+        if rc is not None and rc[0] in rows and rc[1] in cols:
+            out.add((rows.index(rc[0]), cols.index(rc[1])))
+    return sorted(out)
+
+
+def _pair(path: Path, before: np.ndarray, after: np.ndarray, rows, cols, what: str,
+          worse_cells: list[tuple[int, int]] = ()) -> None:
     finite = np.concatenate([before[np.isfinite(before)], after[np.isfinite(after)], [10.0]])
     vmax = float(np.log10(np.max(finite)))
     fig, axes = plt.subplots(1, 2, figsize=(11, 0.35 * len(rows) + 2.2), constrained_layout=True)
     _map(axes[0], before, rows, cols, f"{what}: before (held-out)", vmax)
-    im = _map(axes[1], after, rows, cols, f"{what}: after adding the effects (held-out)", vmax)
+    title = f"{what}: after adding the effects (held-out)"
+    if worse_cells:
+        title += "\noutlined: made worse"
+    im = _map(axes[1], after, rows, cols, title, vmax)
+    for i, j in worse_cells:
+        axes[1].add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="cyan", lw=2))
     fig.colorbar(im, ax=axes, label="log10 mean t²  (0 = twin's own spread)")
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -70,6 +116,7 @@ def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     z_b, z_a = t_heldout["before"], t_heldout["after"]
+    worse = result.get("worse_regions", [])
     pngs = []
 
     bands = _band_labels(PHASE1_BANDS_HZ)
@@ -78,7 +125,8 @@ def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
         p = out_dir / "gap_phase1_channel_band.png"
         _pair(p, _cells(z_b, regions, list(PHASE1_CHANNELS), bands, pick1),
               _cells(z_a, regions, list(PHASE1_CHANNELS), bands, pick1),
-              list(PHASE1_CHANNELS), bands, "Phase I channel × band")
+              list(PHASE1_CHANNELS), bands, "Phase I channel × band",
+              _worse_cells(worse, list(PHASE1_CHANNELS), bands, pick1))
         pngs.append(p)
 
     segs = sorted({r.bin for r in regions if r.family == "position"}, key=lambda b: float(b.split("-")[0]))
@@ -94,7 +142,7 @@ def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
             return None
         p = out_dir / "gap_phase2_position_error_motion.png"
         _pair(p, _cells(z_b, regions, rows, segs, pick2), _cells(z_a, regions, rows, segs, pick2),
-              rows, segs, "Phase II error motion × stroke segment")
+              rows, segs, "Phase II error motion × stroke segment", _worse_cells(worse, rows, segs, pick2))
         pngs.append(p)
 
     ch_rows = [f"P1 {c}" for c in PHASE1_CHANNELS] + [f"P2 {c}" for c in PHASE2_CHANNELS]
@@ -109,7 +157,7 @@ def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
         return None
     p = out_dir / "gap_operating_phase.png"
     _pair(p, _cells(z_b, regions, ch_rows, cols, pick3), _cells(z_a, regions, ch_rows, cols, pick3),
-          ch_rows, cols, "channel × operating phase")
+          ch_rows, cols, "channel × operating phase", _worse_cells(worse, ch_rows, cols, pick3))
     pngs.append(p)
 
     hours = result.get("hours", [])
@@ -127,38 +175,91 @@ def write_diagnosis_report(out_dir: Path, result: dict, regions: list[Region],
     axes[0].set_xlabel("hours")
     if ranking:
         names = [r["effect"] for r in ranking]
-        red = [100 * r["heldout_reduction"] for r in ranking]
+        red = [100 * r.get("net_reduction", r["heldout_reduction"]) for r in ranking]
         colors = ["tab:green" if r["significant"] else "tab:gray" for r in ranking]
         axes[1].barh(range(len(names)), red, color=colors)
         axes[1].set_yticks(range(len(names)), names, fontsize=7)
         axes[1].invert_yaxis()
-        axes[1].set_xlabel("held-out gap reduction, % (green: significant)")
-    axes[1].set_title("candidates, first round", fontsize=9)
+        axes[1].set_xlabel("net held-out gap reduction, % (green: passes the test)")
+    axes[1].set_title("candidates (added ones first, then the last round)", fontsize=9)
     p = out_dir / "gap_hours_and_ranking.png"
     fig.savefig(p, dpi=110)
     plt.close(fig)
     pngs.append(p)
 
-    rows_html = "".join(
-        f"<tr><td>{i + 1}</td><td>{html.escape(a['effect'])}</td><td>{html.escape(json.dumps(a['params']))}</td>"
-        f"<td>{html.escape(json.dumps(a['interval']))}</td><td>{100 * a['heldout_reduction']:.0f} %</td></tr>"
-        for i, a in enumerate(result.get("added", [])))
-    reg_html = "".join(
-        f"<tr><td>{html.escape(' '.join([r['domain'], r['channel'], r['family'], r['bin']]))}</td>"
-        f"<td>{r['calibration_gap']:.1f}</td><td>{r['heldout_gap_before']:.1f}</td>"
-        f"<td>{r['heldout_gap_after']:.1f}</td></tr>"
-        for r in result.get("regions", [])[:15] if r["significant"])
-    imgs = "".join(f'<h2>{html.escape(q.stem.replace("_", " "))}</h2><img src="{q.name}">' for q in pngs)
-    (out_dir / "index.html").write_text(
-        "<!doctype html><html><head><meta charset='utf-8'><title>Gap diagnosis</title></head><body>"
-        f"<h1>Gap diagnosis: {html.escape(result['verdict'])}</h1>"
-        f"<p>Held-out gap {result['heldout_gap_before']:.1f} → {result['heldout_gap_after']:.1f} "
-        f"(critical {result['heldout_gap_critical']:.1f}; shrink {100 * result['heldout_shrink']:.0f} %), "
-        f"{result['n_significant_calibration']} of {result['n_statistics']} statistics significant on "
-        "the calibration part.</p>"
-        "<h2>Effects added</h2><table border=1><tr><th>step</th><th>effect</th><th>parameters</th>"
-        f"<th>interval</th><th>held-out reduction</th></tr>{rows_html}</table>"
-        "<h2>Regions (significant, by calibration gap; mean t²)</h2><table border=1><tr><th>region</th>"
-        f"<th>calibration</th><th>held-out before</th><th>held-out after</th></tr>{reg_html}</table>"
-        f"{imgs}</body></html>")
+    write_text(out_dir / "index.html", render_page(result, pngs))
     return pngs
+
+
+#: The least held-out reduction of a candidate whose edge flags the ranking table shows.
+NOTE_FROM = 0.01
+
+_CAPTIONS = {
+    "gap_phase1_channel_band": "Phase I: channel × frequency band, before and after adding the effects.",
+    "gap_phase2_position_error_motion": "Phase II: error motion × stroke segment (and the E_XX "
+                                        "shift between sessions), before and after.",
+    "gap_operating_phase": "Every channel × operating phase (RMS) and level, before and after.",
+    "gap_hours_and_ranking": "Left: the held-out gap per operating hours. Right: the candidates' "
+                             "net held-out reduction in the last round.",
+}
+
+
+def _worse_text(regions: list[dict]) -> str:
+    if not regions:
+        return ""
+    more = f" and {len(regions) - 2} more" if len(regions) > 2 else ""
+    return f"{len(regions)}: " + "; ".join(w.region(r) for r in regions[:2]) + more
+
+
+def page_context(result: dict, pngs: list[Path]) -> dict:
+    """What ``index.html`` shows, as plain strings (the template only lays them out)."""
+    verdict = result["verdict"]
+    cls = {"explained": "verdict-explained", "no significant gap": "verdict-none"}.get(
+        verdict, "verdict-unexplained")
+    facts = [f"recording {result.get('recording', '–')}", f"scenario {result.get('scenario', '–')}",
+             f"{result.get('seeds', len(result.get('twin_seeds', [])))} twin seeds",
+             f"α = {w.number(result.get('alpha', 0.01), 2)}",
+             f"held-out gap {w.gap_number(result['heldout_gap_before'])} → "
+             f"{w.gap_number(result['heldout_gap_after'])} (the spread allows "
+             f"{w.gap_number(result['heldout_gap_critical'])}; shrink {w.percent(result['heldout_shrink'])})"]
+    title_of = lambda e: result.get("library", {}).get(e, {}).get("title", e)  # noqa: E731
+    added = [{"step": a.get("step", i + 1), "title": title_of(a["effect"]), "effect": a["effect"],
+              "kind": w.kind(result, a["effect"]), "words": w.owner_phrase(result, a),
+              "reduction": w.percent(a["heldout_reduction"]),
+              "worse": _worse_text(a.get("worse_regions", [])),
+              "params": w.parameters(result, a)}
+             for i, a in enumerate(result.get("added", []))]
+    ranking = []
+    for i, r in enumerate(result.get("ranking", [])):
+        pars = w.parameters(result, r)
+        ranking.append({
+            "rank": i + 1, "title": title_of(r["effect"]), "effect": r["effect"],
+            "kind": w.kind(result, r["effect"]),
+            "fit": "; ".join(f"{p['label']} {p['value']} ({p['interval']})" for p in pars),
+            # Edge notes where the candidate removes something: a candidate fitted to nothing
+            # (its amplitude at zero) sits on an edge of the others' grids without meaning.
+            "notes": [f"{p['label']}: {p['note']}" for p in pars
+                      if p["note"] and r["heldout_reduction"] >= NOTE_FROM],
+            "reduction": w.percent(r["heldout_reduction"]),
+            "worse": (_worse_text(r.get("worse_regions", []))
+                      + (f" (−{w.gap_number(r['worse_penalty'])})" if r.get("worse_penalty") else "")),
+            "net": w.percent(r.get("net_reduction", r["heldout_reduction"])),
+            "passes": "yes" if r["significant"] else "no"})
+    worse = [{"region": w.region(r), "n": r["n_statistics"],
+              "before": w.gap_number(r["heldout_gap_before"]), "after": w.gap_number(r["heldout_gap_after"]),
+              "increase": w.gap_number(r["increase"]), "threshold": w.gap_number(r["threshold"])}
+             for r in result.get("worse_regions", [])]
+    regions = [{"region": w.region(r), "calibration": w.gap_number(r["calibration_gap"]),
+                "before": w.gap_number(r["heldout_gap_before"]), "after": w.gap_number(r["heldout_gap_after"])}
+               for r in [r for r in result.get("regions", []) if r["significant"]][:15]]
+    figures = [{"link": q.name, "alt": q.stem.replace("_", " "),
+                "caption": _CAPTIONS.get(q.stem, q.stem.replace("_", " "))} for q in pngs]
+    return {"title": f"Gap diagnosis: {verdict}", "verdict": verdict, "verdict_class": cls,
+            "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
+            "facts": facts, "added": added, "ranking": ranking,
+            "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}
+
+
+def render_page(result: dict, pngs: list[Path]) -> str:
+    """``index.html`` of the diagnosis ``result`` with the figures ``pngs`` (same directory)."""
+    return _ENV.get_template("diagnosis.html.j2").render(**page_context(result, pngs))

@@ -363,14 +363,34 @@ def _phase2(m: Measurements, part: str, b: _Builder) -> None:
                   Region("phase2", dof, "lag", f"{lo * 1e3:.0f}-{hi * 1e3:.0f} mm"))
 
 
-def signature(path, part: str) -> Signature:
+def signature(path, part: str, domains: tuple[str, ...] = ("phase1", "phase2")) -> Signature:
     """The signature of one part ("cal" or "heldout") of the recording ``path`` (a
-    ``measurements.h5``). Raises :class:`SignatureError` / :class:`analysis.dataset.DatasetError`
-    naming the file and item when the recording cannot be used."""
+    ``measurements.h5``); ``domains`` limits it to the statistics of "phase1" and/or "phase2"
+    (the others left out, e.g. to recompute only what an artefact on one domain changes). Raises
+    :class:`SignatureError` / :class:`analysis.dataset.DatasetError` naming the file and item
+    when the recording cannot be used."""
     b = _Builder()
     with open_measurements(path) as m:
-        _phase1(m, part, b)
-        _phase2(m, part, b)
+        if "phase1" in domains:
+            _phase1(m, part, b)
+        if "phase2" in domains:
+            _phase2(m, part, b)
     if not b.values:
         raise SignatureError(f"{path}: no Phase I capture and no Phase II session; expected at least one")
     return b.build()
+
+
+def update_signature(base: Signature, path, part: str, domains: tuple[str, ...]) -> Signature:
+    """The signature of ``path`` computed only for ``domains``, the other statistics taken from
+    ``base`` (the signature of a recording ``path`` differs from only in those domains, e.g. the
+    same recording with an artefact on Phase I channels)."""
+    new = signature(path, part, domains)
+    mask = np.array([r.domain in domains for r in base.regions])
+    if int(mask.sum()) != new.values.size or any(
+            a.key != b.key for a, b in zip([r for r, k in zip(base.regions, mask, strict=True) if k],
+                                           new.regions, strict=True)):
+        raise SignatureError(f"{path}: its {'/'.join(domains)} statistics are laid out unlike "
+                             "those of the recording it was derived from")
+    values = base.values.copy()
+    values[mask] = new.values
+    return Signature(values, base.regions)

@@ -30,7 +30,9 @@ class Param:
     none, e.g. a cogging order); discrete: no interpolation between grid values; log: draw
     log-uniformly in the benchmark; factor: scenario units per parameter unit (e.g. 1e-6 for a
     scale error in ppm on a dimensionless key); signed: the range applies to |value|, the sign
-    is drawn too."""
+    is drawn too. label, unit, digits: how a person reads it (the diagnosis report: "cogging
+    torque 0.033 N·m"): a short label in words, the unit as printed ("" for a ratio) and the
+    significant digits shown; an integer-valued discrete parameter (an order) is printed whole."""
 
     name: str
     keys: tuple[str, ...]
@@ -43,6 +45,15 @@ class Param:
     log: bool = False
     factor: float = 1.0
     signed: bool = False
+    label: str = ""
+    unit: str = ""
+    digits: int = 2
+
+    def display(self) -> dict[str, Any]:
+        """The display entry of the parameter (what the report reads, analysis never imports
+        the twin): label, unit, digits, and the fit grid's ends."""
+        return {"label": self.label or self.name, "unit": self.unit, "digits": self.digits,
+                "grid": [float(self.grid[0]), float(self.grid[-1])]}
 
 
 @dataclass(frozen=True)

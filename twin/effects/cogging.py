@@ -19,9 +19,10 @@ EFFECT = Effect(
     name="cogging",
     title="motor cogging torque",
     params=(Param("torque_Nm", ("effects.cogging_Nm",), "add", low=0.03, high=0.15,
-                  grid=(0.0, 0.03, 0.07, 0.15)),
+                  grid=(0.0, 0.03, 0.07, 0.15), label="cogging torque", unit="N·m"),
             Param("per_rev", ("effects.cogging_per_rev",), "set", low=4, high=24,
-                  grid=(4.0, 6.0, 12.0, 18.0, 24.0), off=None, discrete=True)),
+                  grid=(4.0, 6.0, 12.0, 18.0, 24.0), off=None, discrete=True,
+                  label="cogging order", unit="per revolution")),
     source="PM motor cogging, period LCM(slots, poles) per revolution (Zhu & Howe 2000)",
     amplitude="torque_Nm",
 )

@@ -10,7 +10,13 @@ Cases (:func:`plan_cases`, every draw from ``rng_seed``):
 - ``null``: the nominal twin with another seed;
 - ``open_set``: an effect (upper half of its range) removed from the diagnosis's library for
   that case;
-- ``pair``: two effects at once.
+- ``pair``: two effects at once;
+- ``artefact``: a signal artefact (:mod:`analysis.diagnosis.artefacts`) on the recording of the
+  nominal twin with the case's seed: each artefact (gain, noise, mains line, order line, bias
+  drift, time offset, clipping) at two magnitudes, its target drawn among the artefact's
+  targets, ``artefacts_per_cell`` cases per artefact and magnitude; the recording is the twin's
+  campaign post-processed (``measurements.h5`` rewritten), the diagnosis sees only its
+  signature.
 
 Every case has its own seed (10 000 + case number), different from the twin's seeds. The
 diagnosis sees only the signatures computed from each recording's ``measurements.h5``; the
@@ -25,7 +31,10 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
   wrong effect may be added, but not presented as the explanation: that would take 90 % of the
   gap); ``open_set_no_wrong_effect_fraction``, stricter: and no wrong effect added that removes
   ``HIGH_SCORE`` (50 %) or more of the held-out gap;
-- ``pair_both_top3_fraction``: pair cases with both effects among the first three of the ranking.
+- ``pair_both_top3_fraction``: pair cases with both effects among the first three of the ranking;
+- ``per_kind_top1``: top-1 accuracy per kind of candidate ("physical effect": the single cases,
+  "signal artefact": the artefact cases, whose first added candidate must be the injected
+  artefact on its target), with ``per_kind_median_heldout_shrink``; ``per_artefact_top1``.
 """
 
 from __future__ import annotations
@@ -34,17 +43,20 @@ import csv
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from analysis.diagnosis.artefacts import ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
 from analysis.files import write_json
 from twin.effects import LIBRARY
 from twin.harness.gap_runner import (
     DEFAULT_SEEDS,
+    artefact_cached,
+    artefact_signatures,
     build_ensemble,
     diagnose_signatures,
     evaluate_all,
@@ -59,28 +71,33 @@ CASE_SEED0 = 10_000
 
 @dataclass
 class Case:
-    """One benchmark case: id, kind (single | null | open_set | pair), injected effects
-    {name: {param: value}}, magnitude (single cases), seed, and the library the diagnosis may
-    use."""
+    """One benchmark case: id, kind (single | null | open_set | pair | artefact), injected
+    effects {name: {param: value}}, magnitude (single and artefact cases), seed, the library
+    the diagnosis may use (None: every candidate, effects and artefacts), and the signal
+    artefacts applied to the recording {candidate: {param: value}}."""
 
     id: str
     kind: str
     effects: dict[str, dict[str, float]]
     magnitude: str
     seed: int
-    library: list[str]
+    library: list[str] | None
+    artefacts: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_set: int = 5,
-               pairs: int = 5, library: list[str] | None = None) -> list[Case]:
-    """The benchmark's cases (deterministic in ``rng_seed``)."""
+               pairs: int = 5, library: list[str] | None = None,
+               artefacts_per_cell: int = 1) -> list[Case]:
+    """The benchmark's cases (deterministic in ``rng_seed``; the artefact cases come last and
+    draw after the others, so adding them changes no other case)."""
     lib = list(LIBRARY) if library is None else list(library)
     rng = np.random.default_rng(rng_seed)
     cases: list[Case] = []
 
-    def add(kind, effects, magnitude="", library=lib):
+    def add(kind, effects, magnitude="", library=None, artefacts=None):
         n = len(cases)
-        cases.append(Case(f"{kind}-{n:03d}", kind, effects, magnitude, CASE_SEED0 + n, list(library)))
+        cases.append(Case(f"{kind}-{n:03d}", kind, effects, magnitude, CASE_SEED0 + n,
+                          None if library is None else list(library), dict(artefacts or {})))
 
     for name in lib:
         for mag in ("low", "high"):
@@ -92,10 +109,18 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
         # The upper half of the range: the gap is clearly there (check 1 covers both
         # magnitudes), the question is only whether the diagnosis invents an explanation.
         add("open_set", {str(name): LIBRARY[str(name)].draw(rng, "high")}, "high",
-            [n for n in lib if n != name])
+            [n for n in lib if n != name] + list(ARTEFACTS))
     for _ in range(pairs):
         a, b = (str(n) for n in rng.choice(lib, 2, replace=False))
         add("pair", {a: LIBRARY[a].draw(rng, "high"), b: LIBRARY[b].draw(rng, "high")}, "high")
+    kinds: dict[str, list[str]] = {}
+    for name, art in ARTEFACTS.items():
+        kinds.setdefault(art.artefact, []).append(name)
+    for names in kinds.values():
+        for mag in ("low", "high"):
+            for _ in range(artefacts_per_cell):
+                name = str(rng.choice(names))
+                add("artefact", {}, mag, artefacts={name: ARTEFACTS[name].draw(rng, mag)})
     return cases
 
 
@@ -103,8 +128,9 @@ def _score_case(case: Case, res: dict) -> dict:
     ranking = [r["effect"] for r in res["ranking"]]
     added = res["added"]
     top = next((r for r in res["regions"] if r["significant"]), None)
-    row = {"id": case.id, "kind": case.kind, "injected": sorted(case.effects),
-           "values": case.effects, "magnitude": case.magnitude, "seed": case.seed,
+    row = {"id": case.id, "kind": case.kind, "injected": sorted(case.effects) + list(case.artefacts),
+           "values": {**case.effects, **case.artefacts}, "magnitude": case.magnitude, "seed": case.seed,
+           "added_kinds": [a.get("kind", KIND_EFFECT) for a in added],
            "verdict": res["verdict"], "ranking": ranking[:3],
            "added": [a["effect"] for a in added],
            "fitted": {a["effect"]: a["params"] for a in added},
@@ -115,6 +141,8 @@ def _score_case(case: Case, res: dict) -> dict:
            "top_region": ([top["domain"], top["channel"], top["family"], top["bin"]] if top else None)}
     if case.kind == "single":
         row["correct"] = bool(added and added[0]["effect"] == next(iter(case.effects)))
+    elif case.kind == "artefact":
+        row["correct"] = bool(added and added[0]["effect"] == next(iter(case.artefacts)))
     elif case.kind == "null":
         row["correct"] = res["verdict"] == NO_GAP
     elif case.kind == "open_set":
@@ -134,7 +162,7 @@ def _fit_errors(singles: list[dict]) -> dict[str, float]:
         name = r["injected"][0]
         if not r["correct"]:
             continue
-        for p in LIBRARY[name].params:
+        for p in (LIBRARY[name] if name in LIBRARY else ARTEFACTS[name]).params:
             if p.discrete:
                 continue
             true, fit = r["values"][name][p.name], r["fitted"][name][p.name]
@@ -161,7 +189,17 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     ens = build_ensemble(nominal, cache, seeds, workers, None, prog("twin and candidates"))
     t_ens = time.perf_counter() - t0
     reals = [with_seed(with_effects(nominal, c.effects), c.seed) for c in cases]
-    sigs = evaluate_all(reals, cache, workers, prog("recordings"))
+    plain = [i for i, c in enumerate(cases) if not c.artefacts]
+    post = [i for i, c in enumerate(cases) if c.artefacts]
+    sigs: list = [None] * len(cases)
+    for i, sg in zip(plain, evaluate_all([reals[i] for i in plain], cache, workers, prog("recordings")),
+                     strict=True):
+        sigs[i] = sg
+    # Recordings with artefacts: the twin's campaign (kept once simulated), post-processed.
+    todo = [i for i in post if not artefact_cached(reals[i], [cases[i].artefacts], cache)]
+    evaluate_all([reals[i] for i in todo], cache, workers, prog("recordings to post-process"), keep=True)
+    for i in post:
+        sigs[i] = artefact_signatures(reals[i], [cases[i].artefacts], cache, 1, keep_campaign=False)[1][0]
     t_real = time.perf_counter() - t0 - t_ens
     rows = []
     for case, sig in zip(cases, sigs, strict=True):
@@ -169,6 +207,8 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
         rows.append(_score_case(case, res))
     t_all = time.perf_counter() - t0
     singles = [r for r in rows if r["kind"] == "single"]
+    arts = [r for r in rows if r["kind"] == "artefact"]
+    med = lambda rs: float(np.median([r["heldout_shrink"] for r in rs])) if rs else None  # noqa: E731
     summary = {
         "scenario": nominal.name, "twin_seeds": ens.seeds, "alpha": alpha,
         "n_cases": len(rows),
@@ -180,7 +220,12 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                                                              if r["kind"] == "open_set"]))
                                               if any(r["kind"] == "open_set" for r in rows) else None),
         "pair_both_top3_fraction": _fraction(rows, "pair"),
-        "fitted_relative_error": _fit_errors(singles),
+        "per_kind_top1": {KIND_EFFECT: _fraction(rows, "single"), KIND_ARTEFACT: _fraction(rows, "artefact")},
+        "per_kind_median_heldout_shrink": {KIND_EFFECT: med(singles), KIND_ARTEFACT: med(arts)},
+        "per_artefact_top1": {k: float(np.mean([r["correct"] for r in arts
+                                                if ARTEFACTS[r["injected"][0]].artefact == k]))
+                              for k in sorted({ARTEFACTS[r["injected"][0]].artefact for r in arts})},
+        "fitted_relative_error": _fit_errors(singles + arts),
         "per_effect_top1": {name: float(np.mean([r["correct"] for r in singles if r["injected"] == [name]]))
                             for name in sorted({r["injected"][0] for r in singles})},
         "wall_time_s": {"twin_and_candidates": t_ens, "recordings": t_real,

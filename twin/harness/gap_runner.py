@@ -39,10 +39,19 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.diagnosis import artefacts as art
 from analysis.diagnosis import attribution, layout
+from analysis.diagnosis.artefacts import ARTEFACT_VERSION, ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT
 from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
 from analysis.diagnosis.gap_report import write_diagnosis_report
-from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, signature
+from analysis.diagnosis.signature import (
+    PARTS,
+    SIGNATURE_VERSION,
+    Region,
+    Signature,
+    signature,
+    update_signature,
+)
 from analysis.files import atomic_write, write_json, write_text
 from twin.campaign import simulate_campaigns_batched
 from twin.effects import LIBRARY, Effect
@@ -237,7 +246,171 @@ def responses(library: list[str], points, grid_sigs: list[dict[str, Signature]],
                 delta[p][gp.index] = np.mean([grid_sigs[i][p].values - nominal[k][p].values
                                               for k, i in enumerate(idx)], axis=0)
         axes = [ParamAxis(p.name, tuple(p.grid), p.discrete) for p in eff.params]
-        out.append(CandidateResponse(name, axes, delta))
+        out.append(CandidateResponse(name, axes, delta, kind=KIND_EFFECT))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Signal artefacts: post-processed copies of a simulated recording (no simulation)
+
+
+def _spec_key(artefacts: dict[str, dict[str, float]], seed: int) -> str:
+    text = json.dumps([ARTEFACT_VERSION, SIGNATURE_VERSION, int(seed), artefacts], sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def _artefact_batch(h5: str, specs: list[str], paths: list[str], base_path: str, seed: int) -> None:
+    """Worker: the signatures of the recording ``h5`` with each spec (JSON {name: values})
+    applied, the statistics of untouched domains taken from the base signature."""
+    from threadpoolctl import threadpool_limits
+
+    base = load_signatures(base_path)
+    with threadpool_limits(1):
+        for spec_json, path in zip(specs, paths, strict=True):
+            spec = json.loads(spec_json)
+            domains = tuple(sorted({d for n in spec for d in ARTEFACTS[n].target.domains}))
+            tmp = Path(path).with_suffix(".tmp.h5")
+            art.apply(Path(h5), tmp, spec, seed)
+            try:
+                arrays = {p: update_signature(base[p], tmp, p, domains).values for p in PARTS}
+            finally:
+                tmp.unlink(missing_ok=True)
+            arrays["regions"] = np.array(_regions_json(base["cal"].regions))
+            atomic_write(Path(path), lambda t, a=arrays: _save_npz(t, a))
+
+
+def artefact_cached(base: Scenario, specs: list[dict[str, dict[str, float]]], cache: Path) -> bool:
+    """Whether :func:`artefact_signatures` of these specs would read them all from the cache."""
+    adir = Path(cache) / _key(base) / "artefacts"
+    return (adir / f"base-{_spec_key({}, base.seed)}.npz").exists() and all(
+        (adir / f"{_spec_key(sp, base.seed)}.npz").exists() for sp in specs)
+
+
+def artefact_signatures(base: Scenario, specs: list[dict[str, dict[str, float]]], cache: Path,
+                        workers: int = 1, keep_campaign: bool = True,
+                        on_progress: Callable[[int, int], None] | None = None
+                        ) -> tuple[dict[str, Signature], list[dict[str, Signature]]]:
+    """The signatures of the campaign of ``base`` as simulated (the base) and post-processed
+    with each of ``specs`` ({artefact candidate: {param: value}}, applied in order; random
+    draws from ``base.seed``), cached in ``cache/<key of base>/artefacts/``. The campaign is
+    simulated only when a spec is not cached and its files are not kept in the cache; with
+    ``keep_campaign`` they stay there for later specs."""
+    d = Path(cache) / _key(base)
+    h5 = d / "campaign" / "measurements.h5"
+    adir = d / "artefacts"
+    adir.mkdir(parents=True, exist_ok=True)
+    base_path = adir / f"base-{_spec_key({}, base.seed)}.npz"
+    paths = [adir / f"{_spec_key(sp, base.seed)}.npz" for sp in specs]
+    todo = [i for i, p in enumerate(paths) if not p.exists()]
+    if todo or not base_path.exists():
+        if not h5.exists():
+            simulate_campaigns_batched([base], [d / "campaign"])
+        sigs = {p: signature(h5, p) for p in PARTS}
+        arrays = {"cal": sigs["cal"].values, "heldout": sigs["heldout"].values,
+                  "regions": np.array(_regions_json(sigs["cal"].regions))}
+        atomic_write(base_path, lambda t, a=arrays: _save_npz(t, a))
+    uniq: dict[str, tuple[str, str]] = {}
+    for i in todo:
+        uniq.setdefault(str(paths[i]), (json.dumps(specs[i]), str(paths[i])))
+    jobs = list(uniq.values())
+    n_tasks = max(1, min(workers, len(jobs)))
+    chunks = [jobs[k::n_tasks] for k in range(n_tasks)] if jobs else []
+    done = len(specs) - len(jobs)
+    if on_progress:
+        on_progress(done, len(specs))
+    if len(chunks) <= 1:
+        for ch in chunks:
+            _artefact_batch(str(h5), [c[0] for c in ch], [c[1] for c in ch], str(base_path), base.seed)
+    else:
+        with ProcessPoolExecutor(max_workers=len(chunks), mp_context=get_context("spawn")) as pool:
+            futs = [pool.submit(_artefact_batch, str(h5), [c[0] for c in ch], [c[1] for c in ch],
+                                str(base_path), base.seed) for ch in chunks]
+            for fut in as_completed(futs):
+                fut.result()
+    if on_progress:
+        on_progress(len(specs), len(specs))
+    if not keep_campaign:
+        shutil.rmtree(d / "campaign", ignore_errors=True)
+    return load_signatures(str(base_path)), [load_signatures(str(p)) for p in paths]
+
+
+def artefact_grid(name: str) -> list[tuple[tuple[int, ...], dict[str, float]]]:
+    """Every point of an artefact candidate's parameter grid: (index, values)."""
+    a = ARTEFACTS[name]
+    out = []
+    for index in np.ndindex(*[len(p.grid) for p in a.params]):
+        out.append((tuple(int(i) for i in index),
+                    {p.name: float(p.grid[i]) for p, i in zip(a.params, index, strict=True)}))
+    return out
+
+
+def _simulate_kept(payloads: list[str], dirs: list[str]) -> None:
+    """Worker: simulate campaigns (batched rollouts) into ``dirs`` (their files kept)."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        simulate_campaigns_batched([from_dict(json.loads(p)) for p in payloads], [Path(d) for d in dirs])
+
+
+def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int) -> None:
+    """Simulate the campaigns of ``scenarios`` whose files are not kept in the cache
+    (``cache/<key>/campaign``), in batches of up to ``BATCH`` on ``workers`` processes."""
+    todo = [s for s in scenarios if not (Path(cache) / _key(s) / "campaign" / "measurements.h5").exists()]
+    if not todo:
+        return
+    size = max(1, min(BATCH, -(-len(todo) // max(workers, 1))))
+    batches = [todo[k:k + size] for k in range(0, len(todo), size)]
+    args = [([s.to_json() for s in b], [str(Path(cache) / _key(s) / "campaign") for s in b]) for b in batches]
+    if workers <= 1 or len(batches) <= 1:
+        for a in args:
+            _simulate_kept(*a)
+        return
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        for fut in as_completed([pool.submit(_simulate_kept, *a) for a in args]):
+            fut.result()
+
+
+def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, workers: int = 1,
+                       on_progress: Callable[[int, int], None] | None = None
+                       ) -> list[CandidateResponse]:
+    """The artefact candidates' responses: the change of every statistic when each grid point
+    is applied to the campaign of the twin's first seed, against that campaign; for a
+    ``seed_dependent`` artefact, the mean of that change over every seed of ``seeded``."""
+    n_bases = max([len(seeded) if ARTEFACTS[n].seed_dependent else 1 for n in names] + [1])
+    plans: list[tuple[list, list]] = []
+    for k in range(n_bases):
+        specs, where = [], []
+        for name in names:
+            if k > 0 and not ARTEFACTS[name].seed_dependent:
+                continue
+            for index, values in artefact_grid(name):
+                if not ARTEFACTS[name].is_off(values):
+                    where.append((name, index))
+                    specs.append({name: values})
+        plans.append((specs, where))
+    # The seeds' campaigns simulated together where their post-processed signatures are missing.
+    ensure_campaigns([seeded[k] for k in range(1, n_bases) if not artefact_cached(seeded[k], plans[k][0], cache)],
+                     cache, workers)
+    sums: dict[str, dict[str, np.ndarray]] = {}
+    for k, (specs, where) in enumerate(plans):
+        # The first seed's campaign stays in the cache (the artefact grid of a later version is
+        # post-processed from it); the others only serve the seed-dependent artefacts.
+        base_sig, sigs = artefact_signatures(seeded[k], specs, cache, workers, keep_campaign=k == 0,
+                                             on_progress=on_progress)
+        n = base_sig["cal"].values.size
+        for name in names:
+            if k == 0 or ARTEFACTS[name].seed_dependent:
+                sums.setdefault(name, {p: np.zeros(tuple(len(q.grid) for q in ARTEFACTS[name].params) + (n,))
+                                       for p in PARTS})
+        for (name, index), sig in zip(where, sigs, strict=True):
+            for p in PARTS:
+                sums[name][p][index] += sig[p].values - base_sig[p].values
+    out = []
+    for name in names:
+        k = n_bases if ARTEFACTS[name].seed_dependent else 1
+        out.append(CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed)
+                                            for q in ARTEFACTS[name].params],
+                                     {p: sums[name][p] / k for p in PARTS}, kind=KIND_ARTEFACT))
     return out
 
 
@@ -256,18 +429,32 @@ class TwinEnsemble:
     candidates: list[CandidateResponse]
 
 
+def candidate_names() -> list[str]:
+    """Every candidate: the library's physical effects, then the signal artefacts."""
+    return list(LIBRARY) + list(ARTEFACTS)
+
+
 def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
                    workers: int | None = None, library: list[str] | None = None,
                    on_progress: Callable[[int, int], None] | None = None) -> TwinEnsemble:
-    """Simulate the twin's spread and the candidates' responses (cached)."""
-    library = list(LIBRARY) if library is None else list(library)
+    """Simulate the twin's spread and the candidates' responses (cached): the physical effects
+    by simulation, the signal artefacts by post-processing the first seed's campaign."""
+    library = candidate_names() if library is None else list(library)
+    unknown = [n for n in library if n not in LIBRARY and n not in ARTEFACTS]
+    if unknown:
+        raise ValueError(f"unknown candidate(s) {unknown}; the candidates are "
+                         f"{', '.join(candidate_names())}")
+    effects = [n for n in library if n in LIBRARY]
+    artefacts = [n for n in library if n in ARTEFACTS]
     workers = workers or os.cpu_count() or 1
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
-    cand_scen, points = candidate_scenarios(seeded, library)
+    cand_scen, points = candidate_scenarios(seeded, effects)
     sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress)
     twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
-    cands = responses(library, points, sigs[len(seeded):], sigs[:len(seeded)])
+    cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
+    if artefacts:
+        cands += artefact_responses(artefacts, seeded, cache, workers)
     return TwinEnsemble(nominal, seed_list, twin, cands)
 
 
@@ -296,6 +483,18 @@ def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
     return attribution.diagnose(real, ens.twin, cands, alpha=alpha)
 
 
+def library_json(names: list[str]) -> dict:
+    """The library's entry of ``diagnosis.json``: per candidate its kind ("physical effect" |
+    "signal artefact"), title, source, (artefacts) the phrase in the owner's words and, per
+    parameter, the prior range (low, high) and how the report prints it (label, unit, digits,
+    the fit grid's ends: :meth:`twin.effects.base.Param.display`)."""
+    return {n: ({"kind": KIND_EFFECT, "title": LIBRARY[n].title, "source": LIBRARY[n].source,
+                 "params": {p.name: {"low": p.low, "high": p.high, **p.display()}
+                            for p in LIBRARY[n].params}}
+                if n in LIBRARY else art.library_entry(ARTEFACTS[n]))
+            for n in names}
+
+
 def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   library: list[str] | None = None, plots: bool = True,
@@ -310,10 +509,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
-              "library": {c.name: {"title": LIBRARY[c.name].title, "source": LIBRARY[c.name].source,
-                                   "params": {p.name: {"low": p.low, "high": p.high}
-                                              for p in LIBRARY[c.name].params}}
-                          for c in ens.candidates},
+              "library": library_json([c.name for c in ens.candidates]),
               **result}
     write_json(out / "diagnosis.json", result, nan_as_null=True)
     if plots:

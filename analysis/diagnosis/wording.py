@@ -1,0 +1,239 @@
+"""The diagnosis in a person's words: fitted parameters with their units and sensible digits,
+regions as places on the machine, a fit at the edge of its grid said as such, and the
+one-paragraph answer at the top of the report.
+
+Everything here reads the JSON-able result of :func:`analysis.diagnosis.attribution.diagnose`
+as written to ``diagnosis.json``: how a parameter is printed (label, unit, significant digits,
+the ends of its fit grid) comes from the result's ``library`` entry, which the twin writes from
+its effect definitions (one source; this module never imports the twin). A parameter without
+such an entry is printed by its name, without a unit, to 3 significant digits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: A thin space that does not break: the thousands separator of large gaps ("527 764").
+THIN = "\u202f"
+#: The typographic minus sign.
+MINUS = "\u2212"
+
+_PHASE_WORDS = {"phase1": "Phase I", "phase2": "Phase II"}
+
+
+def number(v: float, digits: int = 3) -> str:
+    """``v`` to ``digits`` significant digits, positional (never 1e+03), trailing zeros and a
+    trailing point dropped, a typographic minus: 0.0325 → "0.033" (2), 292.9 → "290" (2),
+    −5000 → "−5000", 0.3 → "0.3". NaN/inf → "–"."""
+    if v is None or not math.isfinite(v):
+        return "–"
+    if v == 0:
+        return "0"
+    s = np.format_float_positional(float(v), precision=max(1, int(digits)), unique=False,
+                                   fractional=False, trim="-")
+    return s.replace("-", MINUS)
+
+
+def gap_number(v: float) -> str:
+    """A gap (a sum or mean of t²): whole and grouped by thousands at 100 and above
+    ("527 764"), else 3 significant digits ("13.6")."""
+    if v is None or not math.isfinite(v):
+        return "–"
+    if abs(v) >= 100:
+        return f"{v:,.0f}".replace(",", THIN).replace("-", MINUS)
+    return number(v, 3)
+
+
+def percent(fraction: float) -> str:
+    """0.3769 → "38 %"."""
+    if fraction is None or not math.isfinite(fraction):
+        return "–"
+    pc = round(100 * fraction)
+    return f"{pc:.0f} %".replace("-", MINUS) if pc != 0 else "0 %"
+
+
+def spec(result: dict, effect: str, param: str) -> dict:
+    """How ``effect``'s ``param`` is printed: label, unit, digits (and grid, when known)."""
+    entry = result.get("library", {}).get(effect, {}).get("params", {}).get(param, {})
+    return {"label": entry.get("label", param), "unit": entry.get("unit", ""),
+            "digits": int(entry.get("digits", 3)), "grid": entry.get("grid")}
+
+
+def with_unit(text: str, unit: str) -> str:
+    """ "0.033" + "N·m" → "0.033 N·m"; a ratio "×" is written against the number ("0.3×")."""
+    if not unit:
+        return text
+    return f"{text}{unit}" if unit == "×" else f"{text} {unit}"
+
+
+def value(v: float, sp: dict) -> str:
+    """A parameter's value with its unit: "0.033 N·m", "18 per revolution"."""
+    return with_unit(number(v, sp["digits"]), sp["unit"])
+
+
+def span(lo: float, hi: float, sp: dict) -> str:
+    """A range with its unit once: "0.025–0.035 N·m"."""
+    return with_unit(f"{number(lo, sp['digits'])}–{number(hi, sp['digits'])}", sp["unit"])
+
+
+def edge_note(edge: str | None, grid: list[float] | None, sp: dict) -> str:
+    """What a fit at the edge of its grid means ("" inside): "at the lower edge of the tried
+    range 0.3–1×: the true value may lie beyond"."""
+    if not edge:
+        return ""
+    tried = f" {span(grid[0], grid[1], sp)}" if grid else ""
+    if edge == "both":
+        return f"the interval spans the whole tried range{tried}: the data do not bound it"
+    side = "lower" if edge == "low" else "upper"
+    return f"at the {side} edge of the tried range{tried}: the true value may lie beyond"
+
+
+def parameters(result: dict, fit: dict) -> list[dict]:
+    """One row per fitted parameter of ``fit`` (an entry of ``added`` or ``ranking``): label,
+    value, interval, note (the edge). The parameter's digits, or up to 3 more where its
+    interval needs them to show its width (0.102–0.103 N·m, not 0.1–0.1 N·m)."""
+    rows = []
+    for name, v in fit["params"].items():
+        sp = spec(result, fit["effect"], name)
+        lo, hi = fit.get("interval", {}).get(name, (float("nan"), float("nan")))
+        base = sp["digits"]
+        while lo != hi and number(lo, sp["digits"]) == number(hi, sp["digits"]) \
+                and sp["digits"] < base + 3:
+            sp = {**sp, "digits": sp["digits"] + 1}
+        grid = fit.get("grid", {}).get(name) or sp["grid"]
+        rows.append({"label": sp["label"], "value": value(v, sp), "interval": span(lo, hi, sp),
+                     "note": edge_note(fit.get("at_grid_edge", {}).get(name), grid, sp)})
+    return rows
+
+
+def fit_phrase(result: dict, fit: dict) -> str:
+    """The fit in one phrase: "cogging torque 0.033 N·m (0.025–0.035 N·m), cogging order 18 per
+    revolution (12–18 per revolution)"."""
+    return ", ".join(f"{r['label']} {r['value']} ({r['interval']})" for r in parameters(result, fit))
+
+
+def region(r: dict) -> str:
+    """A region (domain, channel, family, bin) as a place on the machine: "Phase I torque,
+    30-60 Hz band", "Phase II acc_x RMS in the transients", "Phase II error motion E_AX,
+    stroke 18-84 mm"."""
+    dom = _PHASE_WORDS.get(r["domain"], r["domain"])
+    ch, fam, b = r["channel"], r["family"], r["bin"]
+    if fam == "band":
+        if " @" in b:
+            band, speed = b.split(" @", 1)
+            return f"{dom} {ch}, {band} band at {speed}"
+        return f"{dom} {ch}, {b} band"
+    if fam == "phase":
+        return f"{dom} {ch} RMS in the {b} phase"
+    if fam == "level":
+        return f"{dom} {ch} {b}" if b == "dwell mean" else f"{dom} mean |{ch}| in the {b} phase"
+    if fam == "feature":
+        return f"{dom} feature {b}"
+    if fam == "position":
+        return f"{dom} error motion {ch}, stroke {b}"
+    if fam == "lag":
+        return f"{dom} {ch} shift between sessions, stroke {b}"
+    return f"{dom} {ch} {fam} {b}"
+
+
+def _title(result: dict, effect: str) -> str:
+    return result.get("library", {}).get(effect, {}).get("title", effect)
+
+
+def kind(result: dict, effect: str) -> str:
+    """The candidate's kind as the library entry states it: "physical effect" (simulated by
+    the twin) or "signal artefact" (applied to the recording's channels); "physical effect"
+    when the entry does not say (results written before artefacts existed)."""
+    return result.get("library", {}).get(effect, {}).get("kind", "physical effect")
+
+
+def owner_phrase(result: dict, fit: dict) -> str:
+    """The fit in the owner's words: an artefact's ``phrase`` (library entry) with each
+    ``{param}`` replaced by its fitted value and unit ("a 50 Hz line of 0.029 m/s² on acc1 and
+    acc2 at every speed: electrical pickup"); for a candidate without a phrase, its title and
+    :func:`fit_phrase`. The kind follows in brackets."""
+    entry = result.get("library", {}).get(fit["effect"], {})
+    phrase = entry.get("phrase")
+    if phrase:
+        vals = {n: value(v, spec(result, fit["effect"], n)) for n, v in fit["params"].items()}
+        text = phrase.format(**vals)
+        iv = fit.get("interval", {})
+        rows = [r for n, r in zip(fit["params"], parameters(result, fit), strict=True)
+                if n in iv and iv[n][0] != iv[n][1]]
+        if rows:
+            text += " (" + "; ".join(f"{r['label']} {r['interval']}" for r in rows) + ")"
+    else:
+        text = f"{_title(result, fit['effect'])}: {fit_phrase(result, fit)}"
+    return f"{text} [{kind(result, fit['effect'])}]"
+
+
+def _places(rows: list[dict], k: int = 3) -> str:
+    names = [region(r) for r in rows[:k]]
+    if len(names) <= 1:
+        return "".join(names)
+    return "; ".join(names[:-1]) + " and " + names[-1]
+
+
+def answer(result: dict) -> str:
+    """The report's opening paragraph, from the result alone: where the recording differs from
+    the twin, what explains it, how sure, how much of the gap it removes, what is left."""
+    return " ".join(f"{head}: {text}" if head else text for head, text in answer_parts(result))
+
+
+def answer_parts(result: dict) -> list[tuple[str, str]]:
+    """:func:`answer` as (heading, sentence) pairs ("Where", "What", "How sure", "How much",
+    "What is left"; an empty heading when there is no gap), for the page to set the headings
+    in bold."""
+    n, k = result["n_statistics"], result["n_significant_calibration"]
+    g0, g1 = result["heldout_gap_before"], result["heldout_gap_after"]
+    crit = result["heldout_gap_critical"]
+    alpha = result.get("alpha", 0.01)
+    if result["verdict"] == "no significant gap":
+        return [("", f"The recording is within the twin's seed-to-seed spread: {k} of {n} statistics "
+                f"differ significantly on the calibration part (Holm, α = {number(alpha, 2)}), "
+                f"and the held-out gap {gap_number(g0)} does not exceed what the spread allows "
+                f"({gap_number(crit)}). Nothing needs to be added to the twin.")]
+    sig = [r for r in result.get("regions", []) if r.get("significant")]
+    hours = sorted(result.get("hours", []), key=lambda h: -(h["heldout_gap_before"] or 0))
+    when = f", worst at {number(hours[0]['hours'], 6)} h of operation" if hours else ""
+    out = [("Where", f"the recording differs from the twin beyond its seed-to-seed spread in {k} of "
+           f"{n} statistics (Holm, α = {number(alpha, 2)}), most in {_places(sig)}{when}.")]
+    added = result.get("added", [])
+    if added:
+        what = "; then ".join(owner_phrase(result, a) for a in added)
+        out.append(("What", f"{what}."))
+        sure = ", ".join(f"{_title(result, a['effect'])} gains {number(a['gain'] / a['gain_threshold'], 2)}× "
+                         "its significance threshold" for a in added if a.get("gain_threshold"))
+        edges = [f"{r['label']} is {r['note']}" for a in added for r in parameters(result, a) if r["note"]]
+        out.append(("How sure", f"{sure} on the held-out part"
+                    + (f"; but {'; '.join(edges)}" if edges else "") + "."))
+        out.append(("How much", f"the added candidates remove {percent(result['heldout_shrink'])} of the "
+                   f"held-out gap ({gap_number(g0)} → {gap_number(g1)}; the twin's own spread "
+                   f"allows {gap_number(crit)})."))
+    else:
+        best = (result.get("ranking") or [None])[0]
+        if best:
+            out.append(("What", "no candidate (physical effect or signal artefact) explains it; the "
+                       f"best, {owner_phrase(result, best)}, would remove "
+                       f"{percent(best.get('net_reduction', best['heldout_reduction']))} of the "
+                       "held-out gap, which does not pass the selection test."))
+        else:
+            out.append(("What", "no candidate effect was tried."))
+        out.append(("How much", f"nothing is removed (held-out gap {gap_number(g0)}; the twin's "
+                    f"own spread allows {gap_number(crit)})."))
+    residual = result.get("residual", {})
+    if result["verdict"] == "explained":
+        left = ("nothing beyond the spread." if not residual.get("significant") else
+                f"a small remainder ({percent(1 - result['heldout_shrink'])} of the "
+                f"gap), still beyond the spread mostly in {_places(residual.get('top_regions', []), 2)}.")
+    else:
+        left = (f"unexplained, {percent(g1 / g0 if g0 else 0.0)} of the gap, "
+                f"mostly in {_places(residual.get('top_regions', []) or sig)}.")
+    worse = result.get("worse_regions", [])
+    if worse:
+        left += (f" The added effects make {len(worse)} region{'s' if len(worse) > 1 else ''} worse "
+                 f"than the twin as it is: {_places(worse)}.")
+    out.append(("What is left", left))
+    return out

@@ -1,0 +1,149 @@
+"""Signal artefacts (issue 15, deliverable 1c): each transform on synthetic arrays, exactly, and
+their application to a recording in the dataset format.
+
+The end-to-end check (a twin recording with a 50 Hz line on the Phase I accelerometers is
+diagnosed as that artefact) lives in tests/test_diagnosis.py, on the benchmark's cache.
+"""
+
+from __future__ import annotations
+
+import h5py
+import numpy as np
+import pytest
+
+from analysis.diagnosis import artefacts as a
+from analysis.diagnosis.attribution import ParamAxis, grid_edge
+
+FS = 10_000.0
+
+
+def _peak_hz(x: np.ndarray, fs: float) -> float:
+    spec = np.abs(np.fft.rfft(x * np.hanning(x.size)))
+    f = np.fft.rfftfreq(x.size, 1.0 / fs)
+    return float(f[np.argmax(spec)])
+
+
+def test_gain_multiplies_the_channel():
+    x = np.random.default_rng(0).normal(size=(1000, 3))
+    np.testing.assert_array_equal(a.gain(x, 10.0), x * 1.1)
+    np.testing.assert_array_equal(a.gain(x, -20.0), x * 0.8)
+
+
+def test_fixed_line_stays_put_while_the_order_line_follows_the_speed():
+    """Two cruises, 100 and 250 rad/s (15.9 and 39.8 Hz of rotation), 1 s each: the 50 Hz line
+    is at 50 Hz in both; the order-2 line at 2·f_rot in each (31.8 and 79.6 Hz, within the
+    1 Hz resolution)."""
+    n = int(FS)
+    speed = np.concatenate([np.full(n, 100.0), np.full(n, 250.0)])
+    angle = a.shaft_angle(speed, FS)
+    np.testing.assert_allclose(angle[n - 1], 100.0 * (n - 1) / FS, rtol=1e-12)
+    zero = np.zeros(2 * n)
+    fixed = a.fixed_line(zero, FS, 0.05, 50.0)
+    order = a.order_line(zero, angle, 0.05, 2.0)
+    for seg, w in ((slice(0, n), 100.0), (slice(n, 2 * n), 250.0)):
+        assert _peak_hz(fixed[seg], FS) == pytest.approx(50.0, abs=1.0)
+        assert _peak_hz(order[seg], FS) == pytest.approx(2 * w / (2 * np.pi), abs=1.0)
+    np.testing.assert_allclose(np.abs(fixed).max(), 0.05, rtol=1e-3)
+    # On every column of a triaxial channel alike.
+    tri = a.fixed_line(np.zeros((100, 3)), FS, 0.05, 50.0)
+    np.testing.assert_array_equal(tri[:, 0], tri[:, 2])
+
+
+def test_clipping_clips_and_leaves_the_rest():
+    x = np.linspace(-5.0, 5.0, 101)
+    y = a.clip(x, 2.0)
+    assert y.max() == 2.0 and y.min() == -2.0
+    inside = np.abs(x) <= 2.0
+    np.testing.assert_array_equal(y[inside], x[inside])
+    np.testing.assert_array_equal(a.clip(x, 0.0), x)  # 0: no clipping
+
+
+def test_delay_shifts_by_the_stated_samples():
+    x = np.arange(10.0)
+    np.testing.assert_array_equal(a.delay(x, 3), [0, 0, 0, 0, 1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(a.delay(x, -2), [2, 3, 4, 5, 6, 7, 8, 9, 9, 9])
+    x2 = np.column_stack([x, -x])
+    np.testing.assert_array_equal(a.delay(x2, 3)[3:], x2[:-3])
+
+
+def test_bias_drift_is_linear_in_hours():
+    x = np.zeros(5)
+    np.testing.assert_allclose(a.bias_drift(x, 500.0, 0.2), 0.1, rtol=1e-12)
+    np.testing.assert_array_equal(a.bias_drift(x, 0.0, 0.2), 0.0)
+
+
+def test_noise_rms_and_seed():
+    x = np.zeros(200_000)
+    y1 = a.white_noise(x, 0.02, a.rng_for(11, "noise:acc1"))
+    y2 = a.white_noise(x, 0.02, a.rng_for(11, "noise:acc1"))
+    y3 = a.white_noise(x, 0.02, a.rng_for(12, "noise:acc1"))
+    np.testing.assert_array_equal(y1, y2)  # every draw from the scenario's seed
+    assert not np.array_equal(y1, y3)
+    assert np.std(y1) == pytest.approx(0.02, rel=0.01)
+
+
+def test_candidates_have_ranges_grids_and_words():
+    kinds = {c.artefact for c in a.ARTEFACTS.values()}
+    assert kinds == {"gain", "noise", "mains_line", "order_line", "bias_drift", "time_offset", "clipping"}
+    for c in a.ARTEFACTS.values():
+        for p in c.params:
+            assert list(p.grid) == sorted(p.grid), (c.name, p.name)
+            assert p.label and p.digits >= 1 and p.low <= p.high
+            if p.off is not None:
+                assert p.off in p.grid, (c.name, p.name)
+        vals = {p.name: p.grid[-1] for p in c.params}
+        c.phrase.format(**{k: str(v) for k, v in vals.items()})  # every placeholder is a parameter
+        assert not c.is_off(vals)
+    assert "electrical pickup" in a.ARTEFACTS["mains_line:acc"].phrase
+    assert "following the speed" in a.ARTEFACTS["order_line:acc"].phrase
+
+
+def test_mains_frequency_is_a_closed_grid():
+    freq = ParamAxis("frequency_hz", (50.0, 60.0, 100.0), discrete=True, closed=True)
+    assert grid_edge(freq, 50.0, (50.0, 50.0)) is None
+    assert grid_edge(freq, 60.0, (50.0, 100.0)) == "both"
+
+
+def _recording(path):
+    rng = np.random.default_rng(1)
+    with h5py.File(path, "w") as f:
+        for i, hours in enumerate((0.0, 500.0)):
+            g = f.create_group(f"phase1/c{i:06d}")
+            g.attrs.update(fs_hz=FS, hours=hours, sample=i)
+            g["speed"] = np.full(2000, 100.0, np.float32)
+            g["torque"] = rng.normal(size=2000).astype(np.float32)
+            g["acc1"] = rng.normal(size=(2000, 3)).astype(np.float32)
+            g["acc2"] = rng.normal(size=(2000, 3)).astype(np.float32)
+        s = f.create_group("phase2/s0000")
+        s.attrs["hours"] = 1000.0
+        r = s.create_group("r0000")
+        r["imu_acc"] = np.zeros((300, 3), np.float32)
+        r["imu_acc"].attrs["fs_hz"] = 1613.0
+    return path
+
+
+def test_apply_writes_a_post_processed_copy(tmp_path):
+    src = _recording(tmp_path / "m.h5")
+    dst = a.apply(src, tmp_path / "out" / "m.h5", {"gain:acc1": {"error_pct": 10.0},
+                                                  "bias_drift:imu_acc": {"rate_per_kh": 0.2},
+                                                  "mains_line:acc": {"amplitude": 0.0, "frequency_hz": 50.0}}, 5)
+    with h5py.File(src) as f0, h5py.File(dst) as f1:
+        for c in ("c000000", "c000001"):
+            x0, x1 = f0[f"phase1/{c}/acc1"][...], f1[f"phase1/{c}/acc1"][...]
+            assert x1.dtype == np.float32
+            np.testing.assert_allclose(x1, x0.astype(float) * 1.1, rtol=1e-6)
+            np.testing.assert_array_equal(f1[f"phase1/{c}/acc2"][...], f0[f"phase1/{c}/acc2"][...])
+        np.testing.assert_allclose(f1["phase2/s0000/r0000/imu_acc"][...], 0.2, rtol=1e-6)
+
+
+def test_apply_refuses_unknown_candidates_and_missing_channels(tmp_path):
+    src = _recording(tmp_path / "m.h5")
+    with pytest.raises(a.ArtefactError, match="unknown signal artefact 'hum:acc1'; the candidates are gain:speed"):
+        a.apply(src, tmp_path / "x.h5", {"hum:acc1": {"amplitude": 1.0}}, 0)
+    with pytest.raises(a.ArtefactError, match=r"artefact gain:acc1: parameters \['gain'\]; expected \['error_pct'\]"):
+        a.apply(src, tmp_path / "x.h5", {"gain:acc1": {"gain": 1.1}}, 0)
+    with h5py.File(src, "a") as f:
+        del f["phase2/s0000/r0000/imu_acc"]
+    with pytest.raises(a.ArtefactError,
+                       match="/phase2/s0000/r0000/imu_acc is missing; artefact noise:imu_acc acts on it"):
+        a.apply(src, tmp_path / "x.h5", {"noise:imu_acc": {"rms": 0.01}}, 0)

@@ -1,0 +1,283 @@
+"""The diagnosis report a person reads (issue 15, deliverable 7): parameters printed with their
+units and digits, a fit at the edge of its grid flagged, regions made worse by a candidate
+listed and counted against it, the plain-words answer, and the page itself. Synthetic
+signatures and result dicts only: no simulation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analysis.diagnosis import attribution as at
+from analysis.diagnosis import gap
+from analysis.diagnosis import wording as w
+from analysis.diagnosis.gap_report import render_page
+from analysis.diagnosis.signature import Region, Signature
+
+# ---------------------------------------------------------------------------------------------
+# Numbers and parameters
+
+
+@pytest.mark.parametrize(("v", "digits", "text"), [
+    (0.0325, 2, "0.033"), (292.89322133638706, 2, "290"), (175.0, 3, "175"), (80.0, 3, "80"),
+    (-5000.0, 2, "\u22125000"), (0.3, 2, "0.3"), (1.433259848174763, 2, "1.4"), (0.0, 2, "0"),
+    (12345.6, 2, "12000"), (1e-5, 2, "0.00001"), (float("nan"), 2, "–")])
+def test_number_significant_digits_positional(v, digits, text):
+    assert w.number(v, digits) == text
+
+
+def test_gap_numbers_and_percent():
+    assert w.gap_number(527763.567) == "527\u202f764"
+    assert w.gap_number(13.2767) == "13.3"
+    assert w.percent(0.37692) == "38 %"
+    assert w.percent(-0.001) == "0 %"  # not "−0 %"
+    assert w.percent(-0.126) == "\u221213 %"
+
+
+LIBRARY = {
+    "servo_dynamics": {"title": "servo loop dynamics (following error)", "params": {
+        "bandwidth_factor": {"low": 0.35, "high": 0.75, "label": "servo bandwidth factor",
+                             "unit": "×", "digits": 2, "grid": [0.3, 1.0]}}},
+    "base_resonance": {"title": "structural resonance of the base", "params": {
+        "frequency_hz": {"low": 80.0, "high": 450.0, "label": "base resonance frequency", "unit": "Hz",
+                         "digits": 3, "grid": [80.0, 450.0]},
+        "modal_mass_kg": {"low": 300.0, "high": 3000.0, "label": "modal mass of the base", "unit": "kg",
+                          "digits": 2, "grid": [0.0, 3000.0]}}},
+}
+SERVO = {"effect": "servo_dynamics", "params": {"bandwidth_factor": 0.3},
+         "interval": {"bandwidth_factor": [0.3, 0.3]}, "grid": {"bandwidth_factor": [0.3, 1.0]},
+         "at_grid_edge": {"bandwidth_factor": "low"}}
+BASE = {"effect": "base_resonance", "params": {"frequency_hz": 175.0, "modal_mass_kg": 292.89322133638706},
+        "interval": {"frequency_hz": [175.0, 175.0], "modal_mass_kg": [241.3, 344.47]},
+        "grid": {"frequency_hz": [80.0, 450.0], "modal_mass_kg": [0.0, 3000.0]},
+        "at_grid_edge": {"frequency_hz": None, "modal_mass_kg": None}}
+
+
+def test_parameters_with_units_digits_and_edge_note():
+    res = {"library": LIBRARY}
+    assert w.parameters(res, BASE) == [
+        {"label": "base resonance frequency", "value": "175 Hz", "interval": "175–175 Hz", "note": ""},
+        {"label": "modal mass of the base", "value": "290 kg", "interval": "240–340 kg", "note": ""}]
+    assert w.parameters(res, SERVO) == [
+        {"label": "servo bandwidth factor", "value": "0.3×", "interval": "0.3–0.3×",
+         "note": "at the lower edge of the tried range 0.3–1×: the true value may lie beyond"}]
+    # More digits where the interval needs them to show its width.
+    cog = {"library": {"cogging": {"params": {"torque_Nm": {"label": "cogging torque", "unit": "N·m",
+                                                             "digits": 2}}}}}
+    fit = {"effect": "cogging", "params": {"torque_Nm": 0.1031}, "interval": {"torque_Nm": [0.1024, 0.1036]}}
+    assert w.parameters(cog, fit)[0]["value"] == "0.103 N·m"
+    assert w.parameters(cog, fit)[0]["interval"] == "0.102–0.104 N·m"
+    # No display entry: the name, no unit, 3 digits.
+    assert w.parameters({}, SERVO)[0]["value"] == "0.3"
+    assert w.parameters({}, SERVO)[0]["label"] == "bandwidth_factor"
+    assert w.edge_note("both", [80.0, 450.0], w.spec(res, "base_resonance", "frequency_hz")) == \
+        "the interval spans the whole tried range 80–450 Hz: the data do not bound it"
+
+
+def test_every_library_parameter_has_words_and_units():
+    """One source: the effect definitions carry label, unit and digits, and the twin writes them
+    into the result's library entry (which the report reads)."""
+    from twin.effects import LIBRARY as LIB
+    from twin.harness.gap_runner import library_json
+
+    lib = library_json(list(LIB))
+    for name, eff in LIB.items():
+        for p in eff.params:
+            d = lib[name]["params"][p.name]
+            assert d["label"] and d["label"] != p.name, (name, p.name)
+            assert d["unit"] or p.name == "bandwidth_factor", (name, p.name)
+            assert d["grid"] == [p.grid[0], p.grid[-1]]
+    assert lib["cogging"]["params"]["torque_Nm"] == {
+        "low": 0.03, "high": 0.15, "label": "cogging torque", "unit": "N·m", "digits": 2, "grid": [0.0, 0.15]}
+
+
+def test_region_in_words():
+    assert w.region({"domain": "phase1", "channel": "torque", "family": "band", "bin": "30-60 Hz"}) == \
+        "Phase I torque, 30-60 Hz band"
+    assert w.region({"domain": "phase2", "channel": "acc_x", "family": "band",
+                     "bin": "250-400 Hz @100 mm/s"}) == "Phase II acc_x, 250-400 Hz band at 100 mm/s"
+    assert w.region({"domain": "phase1", "channel": "speed", "family": "phase", "bin": "transient"}) == \
+        "Phase I speed RMS in the transient phase"
+    assert w.region({"domain": "phase1", "channel": "torque", "family": "level", "bin": "reversal"}) == \
+        "Phase I mean |torque| in the reversal phase"
+    assert w.region({"domain": "phase2", "channel": "acc_z", "family": "level", "bin": "dwell mean"}) == \
+        "Phase II acc_z dwell mean"
+    assert w.region({"domain": "phase1", "channel": "torque", "family": "level", "bin": "dwell"}) == \
+        "Phase I mean |torque| in the dwell phase"
+    assert w.region({"domain": "phase2", "channel": "E_AX", "family": "position", "bin": "18-84 mm"}) == \
+        "Phase II error motion E_AX, stroke 18-84 mm"
+    assert w.region({"domain": "phase2", "channel": "E_XX", "family": "lag", "bin": "22-86 mm"}) == \
+        "Phase II E_XX shift between sessions, stroke 22-86 mm"
+
+
+# ---------------------------------------------------------------------------------------------
+# The edge of the grid
+
+
+def test_grid_edge_rule():
+    servo = at.ParamAxis("bandwidth_factor", (0.3, 0.45, 0.6, 0.8, 1.0))
+    assert at.grid_edge(servo, 0.3, (0.3, 0.3)) == "low"
+    assert at.grid_edge(servo, 0.6, (0.45, 0.8)) is None
+    assert at.grid_edge(servo, 0.9, (0.8, 1.0)) == "high"
+    assert at.grid_edge(servo, 0.6, (0.3, 1.0)) == "both"
+    torque = at.ParamAxis("torque_Nm", (0.0, 0.03, 0.07, 0.15))
+    assert at.grid_edge(torque, 0.0, (0.0, 0.01)) is None  # a zero amplitude is a floor
+    assert at.grid_edge(torque, 0.15, (0.14, 0.15)) == "high"
+    pitch = at.ParamAxis("pitch_urad", (-5000.0, 0.0, 5000.0))
+    assert at.grid_edge(pitch, -5000.0, (-5000.0, -4000.0)) == "low"  # signed: no floor at 0
+    freq = at.ParamAxis("frequency_hz", (80.0, 125.0, 175.0), discrete=True)
+    assert at.grid_edge(freq, 125.0, (80.0, 175.0)) == "both"
+
+
+def _signatures(gaps_t: dict[str, float], n_hours: int = 10, seeds: int = 8):
+    """Twin seeds (N(0, 1)) and a recording whose t is exactly ``gaps_t`` per channel of a
+    Phase I band region, in both parts. Returns (real, twin, regions, sd)."""
+    rng = np.random.default_rng(3)
+    regions = [Region("phase1", ch, "band", "10-30 Hz", float(h)) for ch in gaps_t for h in range(n_hours)]
+    n = len(regions)
+    twin = {p: [Signature(rng.normal(0.0, 1.0, n), regions) for _ in range(seeds)] for p in ("cal", "heldout")}
+    real, sd = {}, {}
+    for p in twin:
+        sp = gap.spread(twin[p])
+        t = np.repeat([gaps_t[ch] for ch in gaps_t], n_hours)
+        real[p] = Signature(sp.mean + t * sp.sd, regions)
+        sd[p] = sp.sd
+    return real, twin, regions, sd
+
+
+def _response(name, sd, per_channel: dict[str, float], grid=(0.0, 10.0), n_hours=10):
+    """A candidate whose response is linear in its parameter p: p·k_ch standard deviations on
+    channel ch."""
+    k = np.repeat(list(per_channel.values()), n_hours)
+    delta = {p: np.stack([v * k * sd[p] for v in grid]) for p in sd}
+    return at.CandidateResponse(name, [at.ParamAxis("p", tuple(grid))], delta)
+
+
+def test_fit_beyond_the_grid_is_flagged_high():
+    """The recording needs p = 20 (t = 10 at 0.5 σ per unit), the grid stops at 10."""
+    real, twin, regions, sd = _signatures({"torque": 10.0})
+    cand = _response("c", sd, {"torque": 0.5})
+    res, _ = at.diagnose(real, twin, [cand])
+    fit = res["ranking"][0]
+    assert fit["params"] == {"p": 10.0}
+    assert fit["at_grid_edge"] == {"p": "high"}
+    assert fit["grid"] == {"p": [0.0, 10.0]}
+
+
+# ---------------------------------------------------------------------------------------------
+# Regions made worse
+
+
+def test_worse_regions_rule():
+    """Worse: the rise of Σ t² exceeds χ²_m(0.99) (m = 4: 13.28) and 10 % of Σ t² before."""
+    regs = [Region("phase1", ch, "band", "10-30 Hz", float(h)) for ch in ("a", "b", "c") for h in range(4)]
+    before = np.array([1.0] * 4 + [1.0] * 4 + [np.sqrt(250.0)] * 4)
+    after = np.array([3.0] * 4 + [np.sqrt(3.75)] * 4 + [np.sqrt(255.0)] * 4)
+    out = at.worse_regions(before, after, regs, 0.01)
+    # a: 4 → 36 (worse); b: 4 → 15, rise 11 < 13.28; c: 1000 → 1020, rise 20 but 2 % < 10 %.
+    assert [(r["channel"], r["n_statistics"]) for r in out] == [("a", 4)]
+    assert out[0]["increase"] == pytest.approx(32.0)
+    assert out[0]["threshold"] == pytest.approx(13.2767, abs=1e-4)
+    assert out[0]["heldout_gap_before"] == pytest.approx(1.0)
+    assert out[0]["heldout_gap_after"] == pytest.approx(9.0)
+    assert at.worse_regions(before, before, regs, 0.01) == []
+
+
+def test_region_made_worse_counts_against_the_candidate():
+    """'harm' removes more of the gap on the significant statistics (torque) than 'good' but
+    pushes speed, which the twin matched, beyond its spread: ranked below 'good'."""
+    real, twin, regions, sd = _signatures({"torque": 10.0, "speed": 0.0})
+    good = _response("good", sd, {"torque": 0.8, "speed": 0.0})
+    harm = _response("harm", sd, {"torque": 1.0, "speed": 0.3})
+    res, t = at.diagnose(real, twin, [harm, good], max_effects=1)
+    by = {r["effect"]: r for r in res["ranking"]}
+    assert [r["effect"] for r in res["ranking"]] == ["good", "harm"]
+    assert by["harm"]["heldout_reduction"] > by["good"]["heldout_reduction"]
+    # harm: p = 9.17 (fine grid), torque residual 0.83, speed t = −2.75 on 10 statistics.
+    assert by["harm"]["params"]["p"] == pytest.approx(9.1667, abs=1e-3)
+    assert [(r["channel"], r["n_statistics"]) for r in by["harm"]["worse_regions"]] == [("speed", 10)]
+    assert by["harm"]["worse_penalty"] == pytest.approx(75.63, abs=0.05)
+    assert by["harm"]["net_reduction"] == pytest.approx(0.9174, abs=1e-3)
+    assert by["good"]["worse_regions"] == [] and by["good"]["net_reduction"] == pytest.approx(0.96)
+    assert [a["effect"] for a in res["added"]] == ["good"]
+    assert res["worse_regions"] == []
+    # Added alone, harm is selected and its worse region is reported for the whole diagnosis.
+    res2, _ = at.diagnose(real, twin, [harm], max_effects=1)
+    assert [(r["channel"], r["family"]) for r in res2["worse_regions"]] == [("speed", "band")]
+
+
+# ---------------------------------------------------------------------------------------------
+# The answer and the page
+
+RESULT = {
+    "recording": "runs/lab", "scenario": "bench", "seeds": 8, "alpha": 0.01,
+    "library": {**LIBRARY, "evil": {"title": "<b>bold</b> effect", "params": {}}},
+    "n_statistics": 910, "n_significant_calibration": 120,
+    "heldout_gap_before": 5000.0, "heldout_gap_after": 1500.0, "heldout_gap_critical": 150.0,
+    "heldout_shrink": 0.7, "verdict": "unexplained gap remains",
+    "regions": [{"domain": "phase1", "channel": "acc1_x", "family": "band", "bin": "150-200 Hz",
+                 "calibration_gap": 300.0, "heldout_gap_before": 280.0, "heldout_gap_after": 20.0,
+                 "significant": True},
+                {"domain": "phase2", "channel": "acc_x", "family": "phase", "bin": "transient",
+                 "calibration_gap": 90.0, "heldout_gap_before": 80.0, "heldout_gap_after": 70.0,
+                 "significant": True}],
+    "hours": [{"hours": 100.0, "heldout_gap_before": 40.0, "heldout_gap_after": 10.0},
+              {"hours": 300.0, "heldout_gap_before": 60.0, "heldout_gap_after": 20.0}],
+    "added": [{**BASE, "heldout_reduction": 0.6, "gain": 3000.0, "gain_threshold": 100.0,
+               "worse_regions": [], "step": 1},
+              {**SERVO, "heldout_reduction": 0.25, "gain": 500.0, "gain_threshold": 50.0, "step": 2,
+               "worse_regions": [{"domain": "phase1", "channel": "speed", "family": "phase",
+                                  "bin": "transient", "n_statistics": 4, "heldout_gap_before": 2.0,
+                                  "heldout_gap_after": 30.0, "increase": 112.0, "threshold": 13.3}]}],
+    "ranking": [],
+    "residual": {"significant": True, "top_regions": [
+        {"domain": "phase2", "channel": "acc_x", "family": "phase", "bin": "transient"}]},
+    "worse_regions": [{"domain": "phase1", "channel": "speed", "family": "phase", "bin": "transient",
+                       "n_statistics": 4, "heldout_gap_before": 2.0, "heldout_gap_after": 30.0,
+                       "increase": 112.0, "threshold": 13.3}],
+}
+RESULT["ranking"] = [{**a, "round": a["step"], "significant": True, "net_reduction": a["heldout_reduction"],
+                      "worse_penalty": 0.0} for a in RESULT["added"]] + [
+    {"effect": "evil", "params": {}, "interval": {}, "heldout_reduction": 0.0, "net_reduction": 0.0,
+     "significant": False, "round": 2, "worse_regions": []}]
+
+
+def test_answer_paragraph():
+    assert w.answer(RESULT) == (
+        "Where: the recording differs from the twin beyond its seed-to-seed spread in 120 of 910 "
+        "statistics (Holm, α = 0.01), most in Phase I acc1_x, 150-200 Hz band and Phase II acc_x RMS "
+        "in the transient phase, worst at 300 h of operation. "
+        "What: structural resonance of the base: base resonance frequency 175 Hz (175–175 Hz), modal "
+        "mass of the base 290 kg (240–340 kg) [physical effect]; then servo loop dynamics (following "
+        "error): servo bandwidth factor 0.3× (0.3–0.3×) [physical effect]. "
+        "How sure: structural resonance of the base gains 30× its significance threshold, servo loop "
+        "dynamics (following error) gains 10× its significance threshold on the held-out part; but "
+        "servo bandwidth factor is at the lower edge of the tried range 0.3–1×: the "
+        "true value may lie beyond. "
+        "How much: the added candidates remove 70 % of the held-out gap (5\u202f000 → 1\u202f500; the twin's "
+        "own spread allows 150). "
+        "What is left: unexplained, 30 % of the gap, mostly in Phase II acc_x RMS in the transient "
+        "phase. The added effects make 1 region worse than the twin as it is: Phase I speed RMS in "
+        "the transient phase.")
+
+
+def test_answer_no_gap():
+    res = {**RESULT, "verdict": "no significant gap", "n_significant_calibration": 0,
+           "heldout_gap_before": 12.0, "heldout_gap_critical": 20.1}
+    assert w.answer(res) == (
+        "The recording is within the twin's seed-to-seed spread: 0 of 910 statistics differ "
+        "significantly on the calibration part (Holm, α = 0.01), and the held-out gap 12 does not "
+        "exceed what the spread allows (20.1). Nothing needs to be added to the twin.")
+
+
+def test_page_has_units_flags_and_no_json(tmp_path):
+    html = render_page(RESULT, [tmp_path / "gap_operating_phase.png"])
+    assert "Gap diagnosis" in html
+    assert '{"' not in html and "292.89" not in html  # no JSON, no raw floats
+    assert "<td class=\"num\">290 kg</td><td class=\"num\">240–340 kg</td>" in html
+    assert "at the lower edge of the tried range 0.3–1×: the true value may lie beyond" in html
+    assert "<td>Phase I speed RMS in the transient phase</td><td class=\"num\">4</td>" in html
+    assert "<strong>What is left:</strong> unexplained" in html
+    assert "&lt;b&gt;bold&lt;/b&gt; effect" in html and "<b>bold</b>" not in html  # autoescaped
+    assert '<img src="gap_operating_phase.png"' in html
+    assert "border-collapse: collapse" in html  # the campaign report's style sheet
