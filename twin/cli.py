@@ -732,14 +732,15 @@ def _print_diagnosis(res: dict) -> None:
                             if a.get("at_grid_edge", {}).get(k) else "")
                          for k, v in a["params"].items())
         kind = res.get("library", {}).get(a["effect"], {}).get("kind", "physical effect")
-        out.print(f"{'effect' if kind == 'physical effect' else 'artefact'} {i + 1}: "
+        word = {"physical effect": "effect", "parameter": "parameter"}.get(kind, "artefact")
+        out.print(f"{word} {i + 1}: "
                   f"[bold]{a['effect']}[/] ({kind}; {pars}): held-out gap "
                   f"{a['heldout_gap_before']:.1f} -> {a['heldout_gap_after']:.1f} "
                   f"(-{100 * a['heldout_reduction']:.0f} %, gain {a['gain']:.1f} > {a['gain_threshold']:.1f})")
         out.print(f"  in words: {owner_phrase(res, a)}", markup=False, highlight=False)
     if res["ranking"] and not res["added"]:
         best = res["ranking"][0]
-        out.print(f"no candidate (physical effect or signal artefact) reduces the held-out gap "
+        out.print(f"no candidate (physical effect, twin parameter or signal artefact) reduces the held-out gap "
                   f"significantly (best: {best['effect']}, {best.get('kind', 'physical effect')}, "
                   f"-{100 * best['heldout_reduction']:.0f} %)")
     if res["verdict"] != "no significant gap":
@@ -766,18 +767,26 @@ def diagnose(
     alpha: float = typer.Option(0.01, "--alpha", min=1e-9, max=0.5, help="family-wise error rate"),
     workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
     cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
+    kinds: str = typer.Option("physical,artefact", "--kinds", help=(
+        "kinds of candidate, comma-separated: physical (the effect library), parameter (twin "
+        "parameters set wrong: 60 more simulations, docs/gap-diagnosis.md), artefact (signal "
+        "artefacts)")),
 ) -> None:
-    """Where the twin and the recording differ, which effect of the library explains it, and how
-    far the gap shrinks once it is added (held-out data). Writes OUT/diagnosis.json and
-    OUT/report/ (gap maps before and after)."""
+    """Where the twin and the recording differ, which candidate explains it (a physical effect
+    of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
+    once it is added (held-out data). Writes OUT/diagnosis.json and OUT/report/ (gap maps
+    before and after)."""
     _require("diagnose", "sim")
     from analysis.dataset import DatasetError
-    from twin.harness.gap_runner import run_diagnosis
+    from twin.harness.gap_runner import KINDS, run_diagnosis
 
     try:
         s = load(scenario, overrides)
     except ScenarioError as exc:
         _fail(str(exc))
+    kind_list = [k.strip() for k in kinds.split(",") if k.strip()]
+    if not kind_list or any(k not in KINDS for k in kind_list):
+        _fail(f"--kinds {kinds}: allowed a comma-separated list of {', '.join(KINDS)}")
     if not (real_dir / "measurements.h5").is_file():
         _fail(f"{real_dir}: no measurements.h5; expected a recording in the dataset format "
               "(docs/dataset-format.md)")
@@ -791,7 +800,8 @@ def diagnose(
         cb = _progress_callback(progress, {})
         try:
             res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
-                                cache=cache, on_progress=lambda d, n: cb("simulations", d, n))
+                                cache=cache, on_progress=lambda d, n: cb("simulations", d, n),
+                                kinds=kind_list)
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

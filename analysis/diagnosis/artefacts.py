@@ -50,6 +50,7 @@ import numpy as np
 
 KIND_EFFECT = "physical effect"
 KIND_ARTEFACT = "signal artefact"
+KIND_PARAMETER = "parameter"  # a twin parameter set wrong (twin/effects/parameters.py)
 #: Bump when a transform or a candidate's grid changes: the harness caches artefact signatures
 #: on it.
 ARTEFACT_VERSION = 1

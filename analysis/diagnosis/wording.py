@@ -55,10 +55,20 @@ def percent(fraction: float) -> str:
 
 
 def spec(result: dict, effect: str, param: str) -> dict:
-    """How ``effect``'s ``param`` is printed: label, unit, digits (and grid, when known)."""
-    entry = result.get("library", {}).get(effect, {}).get("params", {}).get(param, {})
+    """How ``effect``'s ``param`` is printed: label, unit, digits (and grid, when known). A twin
+    parameter's factor is printed as the absolute value of its (first) key: the quantity, its
+    unit and digits, the grid times the nominal value (``scale``: what multiplies a fitted
+    factor; 1 for every other parameter)."""
+    lib = result.get("library", {}).get(effect, {})
+    entry = lib.get("params", {}).get(param, {})
+    nominal = lib.get("nominal") if lib.get("kind") == "parameter" else None
+    if nominal:
+        grid = entry.get("grid")
+        return {"label": lib.get("quantity", param), "unit": lib.get("unit", ""),
+                "digits": int(lib.get("digits", 3)), "scale": float(nominal[0]),
+                "grid": [g * float(nominal[0]) for g in grid] if grid else None}
     return {"label": entry.get("label", param), "unit": entry.get("unit", ""),
-            "digits": int(entry.get("digits", 3)), "grid": entry.get("grid")}
+            "digits": int(entry.get("digits", 3)), "grid": entry.get("grid"), "scale": 1.0}
 
 
 def with_unit(text: str, unit: str) -> str:
@@ -98,11 +108,13 @@ def parameters(result: dict, fit: dict) -> list[dict]:
     for name, v in fit["params"].items():
         sp = spec(result, fit["effect"], name)
         lo, hi = fit.get("interval", {}).get(name, (float("nan"), float("nan")))
+        v, lo, hi = v * sp["scale"], lo * sp["scale"], hi * sp["scale"]
         base = sp["digits"]
         while lo != hi and number(lo, sp["digits"]) == number(hi, sp["digits"]) \
                 and sp["digits"] < base + 3:
             sp = {**sp, "digits": sp["digits"] + 1}
-        grid = fit.get("grid", {}).get(name) or sp["grid"]
+        grid = fit.get("grid", {}).get(name)
+        grid = [g * sp["scale"] for g in grid] if grid else sp["grid"]
         rows.append({"label": sp["label"], "value": value(v, sp), "interval": span(lo, hi, sp),
                      "note": edge_note(fit.get("at_grid_edge", {}).get(name), grid, sp)})
     return rows
@@ -144,19 +156,52 @@ def _title(result: dict, effect: str) -> str:
 
 def kind(result: dict, effect: str) -> str:
     """The candidate's kind as the library entry states it: "physical effect" (simulated by
-    the twin) or "signal artefact" (applied to the recording's channels); "physical effect"
-    when the entry does not say (results written before artefacts existed)."""
+    the twin), "parameter" (a twin parameter set wrong, simulated) or "signal artefact"
+    (applied to the recording's channels); "physical effect" when the entry does not say
+    (results written before artefacts existed)."""
     return result.get("library", {}).get(effect, {}).get("kind", "physical effect")
+
+
+def parameter_phrase(result: dict, fit: dict) -> str | None:
+    """A twin parameter's fit in the owner's words, from the nominal value of the scenario the
+    diagnosis ran with: "carriage mass 165 kg, not 120 kg (interval 158–171 kg)"; keys moved
+    alike are joined ("guide block stiffness (vertical, lateral) 390 and 260 N/µm, not 300 and
+    200 N/µm"). None for another kind or without the nominal value."""
+    entry = result.get("library", {}).get(fit["effect"], {})
+    nominal = entry.get("nominal")
+    if entry.get("kind") != "parameter" or not nominal or len(fit["params"]) != 1:
+        return None
+    (name, f), = fit["params"].items()
+    sp = spec(result, fit["effect"], name)
+    iv = fit.get("interval", {}).get(name)
+    sp = {**sp, "digits": max(sp["digits"], _digits_for(f))}
+    both = lambda vals: with_unit(" and ".join(number(x, sp["digits"]) for x in vals), sp["unit"])  # noqa: E731
+    text = f"{sp['label']} {both([f * n for n in nominal])}, not {both(nominal)}"
+    if iv is not None and iv[0] != iv[1]:
+        text += (f" (interval {parameters(result, fit)[0]['interval']})" if len(nominal) == 1 else
+                 f" (interval {number(iv[0], 2)}–{number(iv[1], 2)}× the scenario's)")
+    return text
+
+
+def _digits_for(factor: float) -> int:
+    """Digits enough to tell a fitted factor from 1 (a 3 % mis-setting is not "120 kg, not 120
+    kg"): 3, or more for a factor within 1 %."""
+    dev = abs(factor - 1.0)
+    return 3 if dev >= 0.01 or dev == 0 else min(6, 3 + int(math.ceil(-math.log10(dev / 0.01))))
 
 
 def owner_phrase(result: dict, fit: dict) -> str:
     """The fit in the owner's words: an artefact's ``phrase`` (library entry) with each
     ``{param}`` replaced by its fitted value and unit ("a 50 Hz line of 0.029 m/s² on acc1 and
-    acc2 at every speed: electrical pickup"); for a candidate without a phrase, its title and
-    :func:`fit_phrase`. The kind follows in brackets."""
+    acc2 at every speed: electrical pickup"); a twin parameter's fitted and nominal values
+    (:func:`parameter_phrase`); for another candidate, its title and :func:`fit_phrase`. The
+    kind follows in brackets."""
     entry = result.get("library", {}).get(fit["effect"], {})
     phrase = entry.get("phrase")
-    if phrase:
+    as_parameter = parameter_phrase(result, fit)
+    if as_parameter:
+        text = as_parameter
+    elif phrase:
         vals = {n: value(v, spec(result, fit["effect"], n)) for n, v in fit["params"].items()}
         text = phrase.format(**vals)
         iv = fit.get("interval", {})
@@ -215,7 +260,7 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
     else:
         best = (result.get("ranking") or [None])[0]
         if best:
-            out.append(("What", "no candidate (physical effect or signal artefact) explains it; the "
+            out.append(("What", "no candidate (physical effect, twin parameter or signal artefact) explains it; the "
                        f"best, {owner_phrase(result, best)}, would remove "
                        f"{percent(best.get('net_reduction', best['heldout_reduction']))} of the "
                        "held-out gap, which does not pass the selection test."))

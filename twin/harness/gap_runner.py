@@ -41,7 +41,13 @@ import numpy as np
 
 from analysis.diagnosis import artefacts as art
 from analysis.diagnosis import attribution, layout
-from analysis.diagnosis.artefacts import ARTEFACT_VERSION, ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT
+from analysis.diagnosis.artefacts import (
+    ARTEFACT_VERSION,
+    ARTEFACTS,
+    KIND_ARTEFACT,
+    KIND_EFFECT,
+    KIND_PARAMETER,
+)
 from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
 from analysis.diagnosis.gap_report import write_diagnosis_report
 from analysis.diagnosis.signature import (
@@ -55,11 +61,26 @@ from analysis.diagnosis.signature import (
 from analysis.files import atomic_write, write_json, write_text
 from twin.campaign import simulate_campaigns_batched
 from twin.effects import LIBRARY, Effect
+from twin.effects import parameters as twin_parameters
+from twin.effects.parameters import PARAMETERS
 from twin.scenario import Scenario, from_dict
 
 DEFAULT_SEEDS = 8
 BATCH = 6  # campaigns simulated together (batched rollouts) in one task
 SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
+
+#: The candidates simulated by the twin: the library's physical effects and the twin parameters
+#: (both are scenario changes, :class:`twin.effects.base.Effect`).
+SIMULATED: dict[str, Effect] = {**LIBRARY, **PARAMETERS}
+#: The kinds of candidate as ``--kinds`` names them.
+KINDS = {"physical": KIND_EFFECT, "parameter": KIND_PARAMETER, "artefact": KIND_ARTEFACT}
+#: The kinds a diagnosis tries unless told otherwise (docs/gap-diagnosis.md: the cost of each).
+DEFAULT_KINDS = ("physical", "artefact")
+
+
+def kind_of(name: str) -> str:
+    """The kind of a candidate by its name."""
+    return KIND_PARAMETER if name in PARAMETERS else KIND_EFFECT if name in LIBRARY else KIND_ARTEFACT
 
 
 def twin_seeds(s: Scenario, k: int) -> list[int]:
@@ -74,11 +95,12 @@ def with_seed(s: Scenario, seed: int) -> Scenario:
 
 
 def with_effects(s: Scenario, effects: dict[str, dict[str, float]]) -> Scenario:
-    """The scenario with the library's effects {name: {param: value}} added."""
+    """The scenario with the library's effects or twin parameters {name: {param: value}}
+    added."""
     for name, values in effects.items():
-        if name not in LIBRARY:
-            raise ValueError(f"unknown effect {name!r}; the library has {', '.join(LIBRARY)}")
-        s = LIBRARY[name].apply(s, values)
+        if name not in SIMULATED:
+            raise ValueError(f"unknown effect {name!r}; the library has {', '.join(SIMULATED)}")
+        s = SIMULATED[name].apply(s, values)
     return s
 
 
@@ -216,7 +238,7 @@ def candidate_scenarios(seeded: list[Scenario], library: list[str]
     scen: list[Scenario] = []
     points: list[tuple[GridPoint, list[int]]] = []
     for name in library:
-        eff = LIBRARY[name]
+        eff = SIMULATED[name]
         bases = seeded if eff.random else seeded[:1]
         for gp in grid_points(eff):
             idx: list[int] = []
@@ -235,7 +257,7 @@ def responses(library: list[str], points, grid_sigs: list[dict[str, Signature]],
     used."""
     out = []
     for name in library:
-        eff = LIBRARY[name]
+        eff = SIMULATED[name]
         shape = tuple(len(p.grid) for p in eff.params)
         n = nominal[0]["cal"].values.size
         delta = {p: np.zeros(shape + (n,)) for p in PARTS}
@@ -246,7 +268,7 @@ def responses(library: list[str], points, grid_sigs: list[dict[str, Signature]],
                 delta[p][gp.index] = np.mean([grid_sigs[i][p].values - nominal[k][p].values
                                               for k, i in enumerate(idx)], axis=0)
         axes = [ParamAxis(p.name, tuple(p.grid), p.discrete) for p in eff.params]
-        out.append(CandidateResponse(name, axes, delta, kind=KIND_EFFECT))
+        out.append(CandidateResponse(name, axes, delta, kind=kind_of(name)))
     return out
 
 
@@ -429,22 +451,30 @@ class TwinEnsemble:
     candidates: list[CandidateResponse]
 
 
-def candidate_names() -> list[str]:
-    """Every candidate: the library's physical effects, then the signal artefacts."""
-    return list(LIBRARY) + list(ARTEFACTS)
+def candidate_names(kinds: tuple[str, ...] | list[str] | None = None) -> list[str]:
+    """The candidates of ``kinds`` (names of :data:`KINDS`; default :data:`DEFAULT_KINDS`): the
+    library's physical effects, then the twin parameters, then the signal artefacts."""
+    kinds = DEFAULT_KINDS if kinds is None else tuple(kinds)
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise ValueError(f"unknown kind(s) of candidate {unknown}; the kinds are {', '.join(KINDS)}")
+    return ((list(LIBRARY) if "physical" in kinds else []) + (list(PARAMETERS) if "parameter" in kinds else [])
+            + (list(ARTEFACTS) if "artefact" in kinds else []))
 
 
 def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
                    workers: int | None = None, library: list[str] | None = None,
-                   on_progress: Callable[[int, int], None] | None = None) -> TwinEnsemble:
+                   on_progress: Callable[[int, int], None] | None = None,
+                   kinds: tuple[str, ...] | list[str] | None = None) -> TwinEnsemble:
     """Simulate the twin's spread and the candidates' responses (cached): the physical effects
-    by simulation, the signal artefacts by post-processing the first seed's campaign."""
-    library = candidate_names() if library is None else list(library)
-    unknown = [n for n in library if n not in LIBRARY and n not in ARTEFACTS]
+    and the twin parameters by simulation, the signal artefacts by post-processing the first
+    seed's campaign. ``library`` (candidate names) wins over ``kinds``."""
+    library = candidate_names(kinds) if library is None else list(library)
+    unknown = [n for n in library if n not in SIMULATED and n not in ARTEFACTS]
     if unknown:
         raise ValueError(f"unknown candidate(s) {unknown}; the candidates are "
-                         f"{', '.join(candidate_names())}")
-    effects = [n for n in library if n in LIBRARY]
+                         f"{', '.join(candidate_names(tuple(KINDS)))}")
+    effects = [n for n in library if n in SIMULATED]
     artefacts = [n for n in library if n in ARTEFACTS]
     workers = workers or os.cpu_count() or 1
     seed_list = twin_seeds(nominal, seeds)
@@ -483,22 +513,28 @@ def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
     return attribution.diagnose(real, ens.twin, cands, alpha=alpha)
 
 
-def library_json(names: list[str]) -> dict:
+def library_json(names: list[str], nominal: Scenario | None = None) -> dict:
     """The library's entry of ``diagnosis.json``: per candidate its kind ("physical effect" |
-    "signal artefact"), title, source, (artefacts) the phrase in the owner's words and, per
-    parameter, the prior range (low, high) and how the report prints it (label, unit, digits,
-    the fit grid's ends: :meth:`twin.effects.base.Param.display`)."""
-    return {n: ({"kind": KIND_EFFECT, "title": LIBRARY[n].title, "source": LIBRARY[n].source,
-                 "params": {p.name: {"low": p.low, "high": p.high, **p.display()}
-                            for p in LIBRARY[n].params}}
-                if n in LIBRARY else art.library_entry(ARTEFACTS[n]))
-            for n in names}
+    "parameter" | "signal artefact"), title, source, (artefacts) the phrase in the owner's
+    words, (twin parameters) the keys, quantity, unit and the value of each key in ``nominal``
+    and, per parameter, the prior range (low, high) and how the report prints it (label, unit,
+    digits, the fit grid's ends: :meth:`twin.effects.base.Param.display`)."""
+    def entry(n: str) -> dict:
+        if n in LIBRARY:
+            return {"kind": KIND_EFFECT, "title": LIBRARY[n].title, "source": LIBRARY[n].source,
+                    "params": {p.name: {"low": p.low, "high": p.high, **p.display()}
+                               for p in LIBRARY[n].params}}
+        if n in PARAMETERS:
+            return twin_parameters.library_entry(PARAMETERS[n], nominal)
+        return art.library_entry(ARTEFACTS[n])
+    return {n: entry(n) for n in names}
 
 
 def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   library: list[str] | None = None, plots: bool = True,
-                  on_progress: Callable[[int, int], None] | None = None) -> dict:
+                  on_progress: Callable[[int, int], None] | None = None,
+                  kinds: tuple[str, ...] | list[str] | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content."""
     out = Path(out)
@@ -506,10 +542,11 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     cache = Path(cache) if cache else out / "cache"
     check_layout(real_dir, nominal, cache)
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
-    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress)
+    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
-              "library": library_json([c.name for c in ens.candidates]),
+              "kinds": sorted({c.kind for c in ens.candidates}),
+              "library": library_json([c.name for c in ens.candidates], nominal),
               **result}
     write_json(out / "diagnosis.json", result, nan_as_null=True)
     if plots:
