@@ -821,6 +821,9 @@ def diagnose_benchmark(
     pairs: int = typer.Option(5, "--pairs", min=0),
     artefacts: int = typer.Option(1, "--artefacts", min=0,
                                   help="cases per signal artefact and magnitude (0: none)"),
+    parameters: int = typer.Option(0, "--parameters", min=0, help=(
+        "cases per twin parameter and magnitude (0: none); the diagnosis then tries the twin "
+        "parameters too")),
     rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
     seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the spread"),
     workers: int | None = typer.Option(None, "--workers", min=1),
@@ -834,7 +837,8 @@ def diagnose_benchmark(
         s = load(scenario)
     except ScenarioError as exc:
         _fail(str(exc))
-    cases = plan_cases(rng_seed, per_cell, nulls, open_set, pairs, artefacts_per_cell=artefacts)
+    cases = plan_cases(rng_seed, per_cell, nulls, open_set, pairs, artefacts_per_cell=artefacts,
+                       parameters_per_cell=parameters)
     console.print(f"benchmark of the gap diagnosis: {len(cases)} cases on scenario "
                   f"[bold]{s.name}[/] -> {out}")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -856,7 +860,7 @@ def diagnose_benchmark(
                   f"{fmt(res['open_set_correct_fraction'])} (and no wrong effect removing half "
                   f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), pairs both in top 3 "
                   f"{fmt(res['pair_both_top3_fraction'])}; top-1 per kind: "
-                  + ", ".join(f"{k} {fmt(v)}" for k, v in res["per_kind_top1"].items())
+                  + ", ".join(f"{k} {fmt(v)}" for k, v in res["per_kind_top1"].items() if v is not None)
                   + f"; wrote {out / 'benchmark.json'}")
 # --- end of twin diagnose ----------------------------------------------------------------------
 

@@ -125,6 +125,8 @@ _GRID = (0.6, 0.8, 1.0, 1.25, 1.6)
 _GRID_WIDE = (0.4, 0.7, 1.0, 1.6, 2.5)
 _GRID_NOISE = (0.5, 1.0, 2.0, 3.0, 4.0)
 _GRID_HIGH = (0.8, 1.0, 1.25, 1.5, 1.8)
+_GRID_SOFT = (0.35, 0.6, 0.8, 1.0, 1.25)
+_GRID_SERVO = (0.45, 0.7, 1.0, 1.3, 1.7)
 
 
 def _p(name: str, keys: tuple[str, ...], quantity: str, unit: str, low: float, high: float,
@@ -141,9 +143,9 @@ _ALL = (
     _p("axis.motor_inertia_kg_m2", ("axis.motor_inertia_kg_m2",), "motor and coupling inertia", "kg·m²",
        0.9, 1.6, _GRID_HIGH, "rotor inertia ±10 % plus coupling, encoder, brake (servo motor catalogues)"),
     _p("axis.nut_stiffness_N_per_um", ("axis.nut_stiffness_N_per_um",), "nut stiffness", "N/µm", 0.5, 1.1,
-       _GRID, "about 80 % of the catalogue value, less at a lighter preload (THK Ball Screw, nut rigidity)"),
+       _GRID_SOFT, "about 80 % of the catalogue value, less at a lighter preload (THK Ball Screw, nut rigidity)"),
     _p("axis.bearing_stiffness_N_per_um", ("axis.bearing_stiffness_N_per_um",), "support bearing stiffness",
-       "N/µm", 0.4, 1.1, _GRID_WIDE, "support bearings in their housing: 40–80 % of the catalogue (Weck & Brecher)"),
+       "N/µm", 0.4, 1.1, _GRID_SOFT, "support bearings in their housing: 40–80 % of the catalogue (Weck & Brecher)"),
     _p("axis.truck_stiffness", ("axis.truck_stiffness_vertical_N_per_um", "axis.truck_stiffness_lateral_N_per_um"),
        "guide block stiffness (vertical, lateral)", "N/µm", 0.6, 1.6, _GRID,
        "guide block preload class (THK/HIWIN linear guide catalogues)"),
@@ -156,9 +158,9 @@ _ALL = (
     _p("axis.torque_ripple_Nm", ("axis.torque_ripple_Nm",), "motor torque ripple", "N·m", 0.3, 3.0,
        (0.25, 0.5, 1.0, 2.0, 4.0), "ripple bounded, not stated, by motor data sheets (Jahns & Soong 1996)"),
     _p("axis.velocity_bandwidth_hz", ("axis.velocity_bandwidth_hz",), "velocity loop bandwidth", "Hz",
-       0.5, 1.6, _GRID, "drive tuning within about 2× of nominal (Ellis 2012, ch. 17)"),
+       0.5, 1.6, _GRID_SERVO, "drive tuning within about 2× of nominal (Ellis 2012, ch. 17)"),
     _p("axis.position_bandwidth_hz", ("axis.position_bandwidth_hz",), "position loop bandwidth", "Hz",
-       0.5, 1.6, _GRID, "drive tuning within about 2× of nominal (Ellis 2012, ch. 17)"),
+       0.5, 1.6, _GRID_SERVO, "drive tuning within about 2× of nominal (Ellis 2012, ch. 17)"),
     _p("sensors.nut_acc_noise_ug_per_rthz", ("sensors.nut_acc_noise_ug_per_rthz",),
        "nut accelerometers' noise floor", "µg/√Hz", 0.5, 4.0, _GRID_NOISE,
        "installed noise floor vs the data sheet's typical density"),

@@ -16,7 +16,12 @@ Cases (:func:`plan_cases`, every draw from ``rng_seed``):
   drift, time offset, clipping) at two magnitudes, its target drawn among the artefact's
   targets, ``artefacts_per_cell`` cases per artefact and magnitude; the recording is the twin's
   campaign post-processed (``measurements.h5`` rewritten), the diagnosis sees only its
-  signature.
+  signature;
+- ``parameter``: a twin parameter set wrong (:mod:`twin.effects.parameters`): the twin with one
+  key's factor drawn away from 1 by at least 15 % (side and log distance within the prior
+  range, "low" nearer 1, "high" farther), ``parameters_per_cell`` cases per candidate and
+  magnitude (none by default: ``--parameters``); the diagnosis then tries the twin
+  parameters too.
 
 Every case has its own seed (10 000 + case number), different from the twin's seeds. The
 diagnosis sees only the signatures computed from each recording's ``measurements.h5``; the
@@ -34,7 +39,8 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 - ``pair_both_top3_fraction``: pair cases with both effects among the first three of the ranking;
 - ``per_kind_top1``: top-1 accuracy per kind of candidate ("physical effect": the single cases,
   "signal artefact": the artefact cases, whose first added candidate must be the injected
-  artefact on its target), with ``per_kind_median_heldout_shrink``; ``per_artefact_top1``.
+  artefact on its target, "parameter": the parameter cases, the injected key first), with
+  ``per_kind_median_heldout_shrink``; ``per_artefact_top1``, ``per_parameter_top1``.
 """
 
 from __future__ import annotations
@@ -48,12 +54,14 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.diagnosis.artefacts import ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT
+from analysis.diagnosis.artefacts import ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT, KIND_PARAMETER
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
 from analysis.files import write_json
 from twin.effects import LIBRARY
+from twin.effects.parameters import PARAMETERS
 from twin.harness.gap_runner import (
+    DEFAULT_KINDS,
     DEFAULT_SEEDS,
     artefact_cached,
     artefact_signatures,
@@ -71,8 +79,8 @@ CASE_SEED0 = 10_000
 
 @dataclass
 class Case:
-    """One benchmark case: id, kind (single | null | open_set | pair | artefact), injected
-    effects {name: {param: value}}, magnitude (single and artefact cases), seed, the library
+    """One benchmark case: id, kind (single | null | open_set | pair | artefact | parameter),
+    injected effects or twin parameters {name: {param: value}}, magnitude (single and artefact cases), seed, the library
     the diagnosis may use (None: every candidate, effects and artefacts), and the signal
     artefacts applied to the recording {candidate: {param: value}}."""
 
@@ -87,9 +95,10 @@ class Case:
 
 def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_set: int = 5,
                pairs: int = 5, library: list[str] | None = None,
-               artefacts_per_cell: int = 1) -> list[Case]:
-    """The benchmark's cases (deterministic in ``rng_seed``; the artefact cases come last and
-    draw after the others, so adding them changes no other case)."""
+               artefacts_per_cell: int = 1, parameters_per_cell: int = 0) -> list[Case]:
+    """The benchmark's cases (deterministic in ``rng_seed``; the artefact cases, then the
+    parameter cases come last and draw after the others, so adding them changes no other
+    case)."""
     lib = list(LIBRARY) if library is None else list(library)
     rng = np.random.default_rng(rng_seed)
     cases: list[Case] = []
@@ -109,7 +118,7 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
         # The upper half of the range: the gap is clearly there (check 1 covers both
         # magnitudes), the question is only whether the diagnosis invents an explanation.
         add("open_set", {str(name): LIBRARY[str(name)].draw(rng, "high")}, "high",
-            [n for n in lib if n != name] + list(ARTEFACTS))
+            [n for n in lib if n != name] + list(ARTEFACTS) + list(PARAMETERS))
     for _ in range(pairs):
         a, b = (str(n) for n in rng.choice(lib, 2, replace=False))
         add("pair", {a: LIBRARY[a].draw(rng, "high"), b: LIBRARY[b].draw(rng, "high")}, "high")
@@ -121,6 +130,10 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
             for _ in range(artefacts_per_cell):
                 name = str(rng.choice(names))
                 add("artefact", {}, mag, artefacts={name: ARTEFACTS[name].draw(rng, mag)})
+    for name, par in PARAMETERS.items():
+        for mag in ("low", "high"):
+            for _ in range(parameters_per_cell):
+                add("parameter", {name: par.draw(rng, mag)}, mag)
     return cases
 
 
@@ -139,7 +152,7 @@ def _score_case(case: Case, res: dict) -> dict:
            "heldout_shrink": res["heldout_shrink"],
            "n_significant": res["n_significant_calibration"],
            "top_region": ([top["domain"], top["channel"], top["family"], top["bin"]] if top else None)}
-    if case.kind == "single":
+    if case.kind in ("single", "parameter"):
         row["correct"] = bool(added and added[0]["effect"] == next(iter(case.effects)))
     elif case.kind == "artefact":
         row["correct"] = bool(added and added[0]["effect"] == next(iter(case.artefacts)))
@@ -162,7 +175,7 @@ def _fit_errors(singles: list[dict]) -> dict[str, float]:
         name = r["injected"][0]
         if not r["correct"]:
             continue
-        for p in (LIBRARY[name] if name in LIBRARY else ARTEFACTS[name]).params:
+        for p in (LIBRARY.get(name) or PARAMETERS.get(name) or ARTEFACTS[name]).params:
             if p.discrete:
                 continue
             true, fit = r["values"][name][p.name], r["fitted"][name][p.name]
@@ -177,16 +190,22 @@ def _fraction(rows, kind) -> float | None:
 
 def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int = DEFAULT_SEEDS,
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
-                  on_progress: Callable[[str, int, int], None] | None = None) -> dict:
+                  on_progress: Callable[[str, int, int], None] | None = None,
+                  kinds: tuple[str, ...] | list[str] | None = None) -> dict:
     """Simulate, diagnose and score every case; writes OUT/benchmark.json and
-    OUT/benchmark_cases.csv and returns the summary."""
+    OUT/benchmark_cases.csv and returns the summary. ``kinds``: the kinds of candidate the
+    diagnosis tries (default :data:`DEFAULT_KINDS`, and "parameter" when there are parameter
+    cases)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
     workers = workers or os.cpu_count() or 1
     t0 = time.perf_counter()
     prog = (lambda what: (lambda d, n: on_progress(what, d, n))) if on_progress else (lambda what: None)
-    ens = build_ensemble(nominal, cache, seeds, workers, None, prog("twin and candidates"))
+    if kinds is None:
+        kinds = tuple(DEFAULT_KINDS) + (("parameter",) if any(c.kind == "parameter" for c in cases)
+                                         and "parameter" not in DEFAULT_KINDS else ())
+    ens = build_ensemble(nominal, cache, seeds, workers, None, prog("twin and candidates"), kinds)
     t_ens = time.perf_counter() - t0
     reals = [with_seed(with_effects(nominal, c.effects), c.seed) for c in cases]
     plain = [i for i, c in enumerate(cases) if not c.artefacts]
@@ -208,6 +227,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     t_all = time.perf_counter() - t0
     singles = [r for r in rows if r["kind"] == "single"]
     arts = [r for r in rows if r["kind"] == "artefact"]
+    pars = [r for r in rows if r["kind"] == "parameter"]
     med = lambda rs: float(np.median([r["heldout_shrink"] for r in rs])) if rs else None  # noqa: E731
     summary = {
         "scenario": nominal.name, "twin_seeds": ens.seeds, "alpha": alpha,
@@ -220,12 +240,17 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                                                              if r["kind"] == "open_set"]))
                                               if any(r["kind"] == "open_set" for r in rows) else None),
         "pair_both_top3_fraction": _fraction(rows, "pair"),
-        "per_kind_top1": {KIND_EFFECT: _fraction(rows, "single"), KIND_ARTEFACT: _fraction(rows, "artefact")},
-        "per_kind_median_heldout_shrink": {KIND_EFFECT: med(singles), KIND_ARTEFACT: med(arts)},
+        "kinds": sorted({c.kind for c in ens.candidates}),
+        "per_kind_top1": {KIND_EFFECT: _fraction(rows, "single"), KIND_ARTEFACT: _fraction(rows, "artefact"),
+                          KIND_PARAMETER: _fraction(rows, "parameter")},
+        "per_kind_median_heldout_shrink": {KIND_EFFECT: med(singles), KIND_ARTEFACT: med(arts),
+                                           KIND_PARAMETER: med(pars)},
+        "per_parameter_top1": {name: float(np.mean([r["correct"] for r in pars if r["injected"] == [name]]))
+                               for name in sorted({r["injected"][0] for r in pars})},
         "per_artefact_top1": {k: float(np.mean([r["correct"] for r in arts
                                                 if ARTEFACTS[r["injected"][0]].artefact == k]))
                               for k in sorted({ARTEFACTS[r["injected"][0]].artefact for r in arts})},
-        "fitted_relative_error": _fit_errors(singles + arts),
+        "fitted_relative_error": _fit_errors(singles + arts + pars),
         "per_effect_top1": {name: float(np.mean([r["correct"] for r in singles if r["injected"] == [name]]))
                             for name in sorted({r["injected"][0] for r in singles})},
         "wall_time_s": {"twin_and_candidates": t_ens, "recordings": t_real,

@@ -1,0 +1,198 @@
+"""Twin parameters as candidates of the gap diagnosis (issue 15, item 1(b)): a scenario key set
+wrong, fitted as a factor on a grid around 1 and ranked with the physical effects and the signal
+artefacts.
+
+The definitions and the words are checked without simulating. The diagnosis itself runs on
+scenarios/diagnose-bench.toml with a small candidate set (4 twin seeds; five twin parameters, the
+physical effects that absorbed a mis-set parameter before (servo dynamics, Stribeck friction,
+thermal growth) and the torque's gain and noise artefacts: 40 campaigns of 2 s, shared by the
+two tests through a module fixture): a recording of the twin with the carriage 35 % heavier
+names the carriage mass first, and a recording with Stribeck friction names the effect, not a
+parameter in its place. The full check (every candidate of the three kinds, 8 seeds) is
+``slow``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+from conftest import REPO, run_twin
+
+from analysis.diagnosis import wording as w
+
+BENCH_SCENARIO = REPO / "scenarios" / "diagnose-bench.toml"
+
+pytestmark = pytest.mark.timeout(1200)
+
+
+# ---------------------------------------------------------------------------------------------
+# Definitions and words (no simulation)
+
+
+def test_every_parameter_is_a_scale_around_one_on_real_keys():
+    from twin.config import get_dotted
+    from twin.effects.parameters import MIN_DEVIATION, PARAMETERS
+    from twin.scenario import load
+
+    s = load(BENCH_SCENARIO)
+    data = s.model_dump(mode="json")
+    assert len(PARAMETERS) >= 12
+    rng = np.random.default_rng(0)
+    for name, par in PARAMETERS.items():
+        f = par.factor
+        assert (len(par.params), f.name, f.mode, f.off) == (1, "factor", "scale", 1.0), name
+        assert 1.0 in f.grid and list(f.grid) == sorted(f.grid), name
+        # the prior inside the grid, around 1
+        assert f.grid[0] <= f.low < 1.0 < f.high <= f.grid[-1], name
+        for key in f.keys:
+            assert isinstance(get_dotted(data, key), float), (name, key)
+        assert par.quantity and par.unit and par.source, name
+        for mag in ("low", "high"):
+            v = par.draw(rng, mag)["factor"]
+            assert f.low <= v <= f.high and max(v, 1 / v) >= MIN_DEVIATION - 1e-12, (name, mag, v)
+        scaled = par.apply(s, {"factor": 1.5})
+        for key, nom in zip(f.keys, par.nominal(s), strict=True):
+            assert get_dotted(scaled.model_dump(mode="json"), key) == pytest.approx(1.5 * nom)
+        assert par.apply(s, {"factor": 1.0}) is s  # off: the scenario as it is
+
+
+def test_kinds_choose_the_candidates():
+    from analysis.diagnosis.artefacts import KIND_PARAMETER
+    from twin.effects import LIBRARY
+    from twin.effects.parameters import PARAMETERS
+    from twin.harness.gap_runner import DEFAULT_KINDS, candidate_names, kind_of
+
+    assert candidate_names(["parameter"]) == list(PARAMETERS)
+    everything = candidate_names(["physical", "parameter", "artefact"])
+    assert set(LIBRARY) | set(PARAMETERS) <= set(everything)
+    assert set(candidate_names()) == set(candidate_names(DEFAULT_KINDS))
+    assert kind_of("axis.carriage_mass_kg") == KIND_PARAMETER == "parameter"
+    with pytest.raises(ValueError, match="unknown kind"):
+        candidate_names(["parameters"])
+
+
+def _result():
+    from twin.harness.gap_runner import library_json
+    from twin.scenario import load
+
+    s = load(BENCH_SCENARIO)
+    return {"library": library_json(["axis.carriage_mass_kg", "axis.truck_stiffness", "cogging"], s)}
+
+
+def test_parameter_in_the_owners_words():
+    """The fitted value is nominal × factor, the nominal from the scenario the diagnosis ran
+    with; units on both; the interval in the quantity's unit; the kind named."""
+    res = _result()
+    entry = res["library"]["axis.carriage_mass_kg"]
+    assert entry["kind"] == "parameter" and entry["nominal"] == [120.0] and entry["unit"] == "kg"
+    fit = {"effect": "axis.carriage_mass_kg", "params": {"factor": 1.375},
+           "interval": {"factor": [1.3167, 1.425]}, "grid": {"factor": [0.6, 1.6]},
+           "at_grid_edge": {"factor": None}}
+    assert w.owner_phrase(res, fit) == "carriage mass 165 kg, not 120 kg (interval 158–171 kg) [parameter]"
+    assert w.parameters(res, fit) == [{"label": "carriage mass", "value": "165 kg",
+                                       "interval": "158–171 kg", "note": ""}]
+    edge = {**fit, "params": {"factor": 1.6}, "interval": {"factor": [1.55, 1.6]},
+            "at_grid_edge": {"factor": "high"}}
+    assert w.parameters(res, edge)[0]["note"] == \
+        "at the upper edge of the tried range 72–192 kg: the true value may lie beyond"
+    # two keys moved alike: both values, the interval as the factor
+    two = {"effect": "axis.truck_stiffness", "params": {"factor": 1.3}, "interval": {"factor": [1.2, 1.4]}}
+    assert w.owner_phrase(res, two) == ("guide block stiffness (vertical, lateral) 390 and 260 N/µm, "
+                                        "not 300 and 200 N/µm (interval 1.2–1.4× the scenario's) [parameter]")
+    # a small mis-setting keeps the digits that tell it from the nominal
+    small = {**fit, "params": {"factor": 1.004}, "interval": {"factor": [1.004, 1.004]}}
+    assert w.owner_phrase(res, small) == "carriage mass 120.5 kg, not 120 kg [parameter]"
+
+
+# ---------------------------------------------------------------------------------------------
+# The diagnosis of twin recordings (small candidate set)
+
+SMALL = ["axis.carriage_mass_kg", "axis.nut_stiffness_N_per_um", "axis.rail_friction_N",
+         "axis.velocity_bandwidth_hz", "axis.no_load_torque_Nm",
+         "servo_dynamics", "stribeck_friction", "thermal_growth",
+         "gain:torque", "noise:torque"]
+
+
+@pytest.fixture(scope="module")
+def small_ensemble(tmp_path_factory):
+    """The twin's spread (4 seeds) and the responses of :data:`SMALL` on diagnose-bench."""
+    from twin.harness.gap_runner import build_ensemble
+    from twin.scenario import load
+
+    cache = tmp_path_factory.mktemp("param-cache")
+    s = load(BENCH_SCENARIO)
+    return s, cache, build_ensemble(s, cache, seeds=4, workers=2, library=SMALL)
+
+
+def _diagnose(tmp_path, small_ensemble, *sets):
+    from analysis.diagnosis.signature import PARTS, signature
+    from twin.harness.gap_runner import diagnose_signatures, library_json
+
+    s, _, ens = small_ensemble
+    rec = tmp_path / "real"
+    proc = run_twin("simulate", str(BENCH_SCENARIO), "-o", str(rec), "--workers", "1",
+                    "--set", "seed=777", *[x for v in sets for x in ("--set", v)])
+    assert proc.returncode == 0, proc.stderr
+    (rec / "truth.h5").unlink()
+    real = {p: signature(rec / "measurements.h5", p) for p in PARTS}
+    res, _ = diagnose_signatures(real, ens, None)
+    res["library"] = library_json([c.name for c in ens.candidates], s)
+    return res
+
+
+def test_a_heavier_carriage_is_named_as_the_parameter(tmp_path, small_ensemble):
+    """The twin with the carriage 35 % heavier (162 kg, nominal 120 kg): the carriage mass is
+    the first added candidate, kind "parameter", above every physical effect and artefact; its
+    fitted mass within 8 % of the truth; the words carry fitted and nominal masses in kg."""
+    res = _diagnose(tmp_path, small_ensemble, "axis.carriage_mass_kg=162")
+    first = res["added"][0]
+    print(json.dumps({k: first[k] for k in ("effect", "params", "interval", "heldout_reduction")}),
+          [(r["effect"], round(r["net_reduction"], 3)) for r in res["ranking"][:5]], res["verdict"])
+    assert first["effect"] == "axis.carriage_mass_kg" and first["kind"] == "parameter"
+    assert res["ranking"][0]["effect"] == "axis.carriage_mass_kg"
+    mass = 120.0 * first["params"]["factor"]
+    assert mass == pytest.approx(162.0, rel=0.08)
+    assert first["heldout_reduction"] >= 0.6
+    said = w.owner_phrase(res, first)
+    m = re.fullmatch(r"carriage mass (\d+) kg, not 120 kg(?: \(interval (\d+)–(\d+) kg\))? \[parameter\]", said)
+    assert m, said
+    assert math.isclose(float(m.group(1)), mass, rel_tol=0.01)
+    assert "parameter" in w.answer(res)
+
+
+def test_a_physical_effect_is_not_taken_for_a_parameter(tmp_path, small_ensemble):
+    """The twin with Stribeck friction (90 N excess, v_s 3 mm/s): Stribeck friction is added
+    first, and no twin parameter is added in its place (the rail friction, the nut drag and the
+    loop bandwidth compete for the same torque at the reversals)."""
+    res = _diagnose(tmp_path, small_ensemble, "effects.stribeck_excess_N=90", "effects.stribeck_velocity_mm_s=3")
+    print([(r["effect"], r["kind"], round(r["net_reduction"], 3), r["significant"]) for r in res["ranking"][:5]],
+          res["verdict"])
+    assert res["added"] and res["added"][0]["effect"] == "stribeck_friction"
+    assert not any(a["kind"] == "parameter" for a in res["added"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("sets", "name", "truth"), [
+    (("axis.carriage_mass_kg=162",), "axis.carriage_mass_kg", 1.35),
+    (("axis.nut_stiffness_N_per_um=240",), "axis.nut_stiffness_N_per_um", 0.6)])
+def test_mis_set_parameter_against_every_candidate(tmp_path, sets, name, truth):
+    """The full check: `twin diagnose --kinds physical,parameter,artefact` (8 seeds, every
+    candidate of the three kinds): the mis-set parameter first, within 10 % of the truth."""
+    rec = tmp_path / "real"
+    proc = run_twin("simulate", str(BENCH_SCENARIO), "-o", str(rec), "--workers", "1",
+                    "--set", "seed=777", *[x for v in sets for x in ("--set", v)])
+    assert proc.returncode == 0, proc.stderr
+    out = tmp_path / "diag"
+    proc = run_twin("diagnose", str(rec), "--scenario", str(BENCH_SCENARIO), "-o", str(out),
+                    "--kinds", "physical,parameter,artefact", "--workers", "2")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    res = json.loads((out / "diagnosis.json").read_text())
+    first = res["added"][0]
+    assert first["effect"] == name and first["kind"] == "parameter"
+    assert first["params"]["factor"] == pytest.approx(truth, rel=0.1)
+    assert f"parameter 1: {name} (parameter;" in " ".join(proc.stdout.split())
+    assert "[parameter]" in (out / "report" / "index.html").read_text()
