@@ -7,8 +7,9 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
    layout differs (captures per sample, sessions, runs, channels, sampling rates:
    :mod:`analysis.diagnosis.layout`);
 2. simulates the scenario with ``seeds`` seeds (the twin's spread);
-3. simulates each candidate effect of the library on its parameter grid with the first of those
-   seeds (common random numbers: its response is the difference to that seed's nominal run;
+3. simulates each candidate effect of the library, and each twin parameter
+   (:mod:`twin.effects.parameters`, with ``kinds`` including "parameter"), on its parameter grid
+   with the first of those seeds (common random numbers: its response is the difference to that seed's nominal run;
    an effect with random draws of its own, like the origin of each session, with every seed,
    its response averaged);
 4. computes the signature (both parts) of every simulation and of the recording, and runs
