@@ -158,7 +158,8 @@ def test_a_heavier_carriage_is_named_as_the_parameter(tmp_path, small_ensemble):
     assert mass == pytest.approx(162.0, rel=0.08)
     assert first["heldout_reduction"] >= 0.6
     said = w.owner_phrase(res, first)
-    m = re.fullmatch(r"carriage mass ([\d.]+) kg, not 120 kg(?: \(interval ([\d.]+)–([\d.]+) kg\))? \[parameter\]", said)
+    m = re.fullmatch(r"carriage mass ([\d.]+) kg, not 120 kg"
+                     r"(?: \(interval ([\d.]+)–([\d.]+) kg\))? \[parameter\]", said)
     assert m, said
     assert math.isclose(float(m.group(1)), mass, rel_tol=0.01)
     assert "parameter" in w.answer(res)
