@@ -197,3 +197,18 @@ def test_mis_set_parameter_against_every_candidate(tmp_path, sets, name, truth):
     assert first["params"]["factor"] == pytest.approx(truth, rel=0.1)
     assert f"parameter 1: {name} (parameter;" in " ".join(proc.stdout.split())
     assert "[parameter]" in (out / "report" / "index.html").read_text()
+
+
+def test_benchmark_plan_adds_parameter_cases_last():
+    """`--parameters 1`: one case per twin parameter and magnitude after every other case,
+    which stay as they were (the plan is drawn from its seed)."""
+    from twin.effects.parameters import PARAMETERS
+    from twin.harness.gap_benchmark import plan_cases
+
+    base = plan_cases(2026)
+    more = plan_cases(2026, parameters_per_cell=1)
+    assert more[:len(base)] == base
+    extra = more[len(base):]
+    assert len(extra) == 2 * len(PARAMETERS) and {c.kind for c in extra} == {"parameter"}
+    assert {(next(iter(c.effects)), c.magnitude) for c in extra} == {
+        (n, m) for n in PARAMETERS for m in ("low", "high")}
