@@ -232,3 +232,30 @@ def test_benchmark_with_parameter_cases(tmp_path):
     # a mis-set parameter the diagnosis names is fitted to within 10 % (median per parameter)
     errs = {k: v for k, v in res["fitted_relative_error"].items() if k.startswith(("axis.", "sensors."))}
     assert errs and all(v <= 0.1 for k, v in errs.items() if not k.startswith("axis.torque_ripple")), errs
+
+
+def test_candidates_the_data_do_not_tell_apart_are_named_with_the_added_one():
+    """Two candidates with the same signature (springs in series: the nut's and the bearings'
+    stiffness) both remove the gap: the added one lists the other in ``alternatives`` and the
+    words say so; a candidate whose signature differs (it also moves the speed, which the twin
+    matched) is not listed."""
+    from test_diagnosis_report import _response, _signatures
+
+    from analysis.diagnosis import attribution as at
+
+    real, twin, regions, sd = _signatures({"torque": 10.0, "speed": 0.0})
+    nut = _response("nut", sd, {"torque": 1.0, "speed": 0.0})
+    bearing = _response("bearing", sd, {"torque": 0.97, "speed": 0.0})
+    other = _response("other", sd, {"torque": 1.0, "speed": 0.3})
+    res, _ = at.diagnose(real, twin, [other, bearing, nut], max_effects=1)
+    first = res["added"][0]
+    assert first["effect"] in ("nut", "bearing")
+    alts = [a["effect"] for a in first["alternatives"]]
+    assert alts == [{"nut": "bearing", "bearing": "nut"}[first["effect"]]]
+    assert first["alternatives"][0]["gain_difference"] <= max(
+        at.TIE_SIGMAS * first["alternatives"][0]["difference_sd"], at.TIE_FRACTION * first["heldout_gap_before"])
+    said = w.added_phrase({"library": {}}, first)
+    assert ", not told apart from " in said and alts[0] in said
+    # alone, nothing to tell apart
+    res1, _ = at.diagnose(real, twin, [nut, other], max_effects=1)
+    assert res1["added"][0]["effect"] == "nut" and res1["added"][0]["alternatives"] == []

@@ -710,7 +710,7 @@ def _progress_callback(progress: Progress, tasks: dict):
 
 
 def _print_diagnosis(res: dict) -> None:
-    from analysis.diagnosis.wording import owner_phrase
+    from analysis.diagnosis.wording import added_phrase
 
     out = Console(width=max(110, Console().width))
     out.print(f"[bold]{res['verdict']}[/]: {res['n_significant_calibration']} of "
@@ -737,7 +737,7 @@ def _print_diagnosis(res: dict) -> None:
                   f"[bold]{a['effect']}[/] ({kind}; {pars}): held-out gap "
                   f"{a['heldout_gap_before']:.1f} -> {a['heldout_gap_after']:.1f} "
                   f"(-{100 * a['heldout_reduction']:.0f} %, gain {a['gain']:.1f} > {a['gain_threshold']:.1f})")
-        out.print(f"  in words: {owner_phrase(res, a)}", markup=False, highlight=False)
+        out.print(f"  in words: {added_phrase(res, a)}", markup=False, highlight=False)
     if res["ranking"] and not res["added"]:
         best = res["ranking"][0]
         out.print(f"no candidate (physical effect, twin parameter or signal artefact) reduces the held-out gap "

@@ -48,6 +48,13 @@ within a few per cent stays statistically significant because the effect's respo
 seed of the twin is not exactly the recording's; that is reported in ``residual`` as a
 significant but small remainder, not as an unexplained gap.
 
+**Not told apart.** Another candidate of the same round that passes the test too and whose net
+gain falls short of the added one's by no more than ``TIE_SIGMAS`` (3) standard deviations of
+the difference of the two gains if the residual were noise (2·√Σ(d_a − d_b)², as for the gain
+test) or by no more than ``TIE_FRACTION`` (1 %) of the gap before (the error of taking the
+responses from one seed) is listed in the added entry's ``alternatives``: the data do not tell
+them apart (springs in series, a constant against a viscous drag at one speed).
+
 The ranking lists the added effects in the order they were added, then the others by their
 net held-out reduction in the last round. ``worse_regions`` of the summary compares the twin
 with all the added effects to the twin as it is.
@@ -124,6 +131,10 @@ def grid_edge(axis: ParamAxis, value: float, interval: tuple[float, float]) -> s
 
 #: The least relative rise of a region's Σ t² that makes it "worse" (with the χ² criterion).
 WORSE_FRACTION = 0.1
+#: Two candidates are not told apart when their net gains differ by no more than this many
+#: standard deviations of the difference, or by no more than this fraction of the gap.
+TIE_SIGMAS = 3.0
+TIE_FRACTION = 0.01
 
 
 def worse_regions(z_before: np.ndarray, z_after: np.ndarray, regions: list,
@@ -179,6 +190,7 @@ class Fit:
     worse: list[dict] = field(default_factory=list)
     penalty: float = 0.0
     kind: str = "physical effect"
+    alternatives: list[dict] = field(default_factory=list)
 
     @property
     def reduction(self) -> float:
@@ -210,7 +222,30 @@ class Fit:
                 "heldout_reduction": self.reduction, "gain": self.gain,
                 "worse_regions": self.worse, "worse_penalty": self.penalty,
                 "net_reduction": self.net_reduction,
-                "gain_threshold": self.gain_threshold, "significant": self.significant(min_gain)}
+                "gain_threshold": self.gain_threshold, "significant": self.significant(min_gain),
+                "alternatives": self.alternatives}
+
+
+def alternatives(best: Fit, fits: list[Fit], sel: np.ndarray, sd_ho: np.ndarray,
+                 min_gain: float) -> list[dict]:
+    """The candidates of ``fits`` (one round, ``best`` among them) the data do not tell apart
+    from ``best``: they pass the test and their net gain falls short of best's by at most
+    :data:`TIE_SIGMAS` standard deviations of the difference of the gains (2·√Σ(d_a − d_b)²
+    over the statistics ``sel``, d the change of held-out t) or by at most :data:`TIE_FRACTION`
+    of the gap before. Each: effect, kind, params, interval, net_reduction, gain_difference,
+    difference_sd."""
+    out = []
+    for f in fits:
+        if f is best or not f.significant(min_gain):
+            continue
+        dd = (best.delta_heldout - f.delta_heldout)[sel] / sd_ho[sel]
+        sd = 2.0 * float(np.sqrt(np.sum(dd ** 2)))
+        diff = best.net_gain - f.net_gain
+        if diff <= max(TIE_SIGMAS * sd, TIE_FRACTION * best.heldout_before):
+            out.append({"effect": f.name, "kind": f.kind, "params": f.params,
+                        "interval": {k: list(v) for k, v in f.interval.items()},
+                        "net_reduction": f.net_reduction, "gain_difference": diff, "difference_sd": sd})
+    return out
 
 
 def _fine_axes(params: list[ParamAxis], n_fine: int) -> list[np.ndarray]:
@@ -357,6 +392,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
         ranking = [{**f.as_dict(min_gain), "round": step + 1} for f in fits]
         if not best.significant(min_gain):
             break
+        best.alternatives = alternatives(best, fits, select & np.isfinite(z["heldout"]), sd["heldout"], min_gain)
         added.append(best)
         delta = {"cal": delta["cal"] + best.delta_cal, "heldout": delta["heldout"] + best.delta_heldout}
         z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}

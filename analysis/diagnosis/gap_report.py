@@ -224,7 +224,7 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
              f"{w.gap_number(result['heldout_gap_critical'])}; shrink {w.percent(result['heldout_shrink'])})"]
     title_of = lambda e: result.get("library", {}).get(e, {}).get("title", e)  # noqa: E731
     added = [{"step": a.get("step", i + 1), "title": title_of(a["effect"]), "effect": a["effect"],
-              "kind": w.kind(result, a["effect"]), "words": w.owner_phrase(result, a),
+              "kind": w.kind(result, a["effect"]), "words": w.added_phrase(result, a),
               "reduction": w.percent(a["heldout_reduction"]),
               "worse": _worse_text(a.get("worse_regions", [])),
               "params": w.parameters(result, a)}

@@ -214,6 +214,18 @@ def owner_phrase(result: dict, fit: dict) -> str:
     return f"{text} [{kind(result, fit['effect'])}]"
 
 
+def added_phrase(result: dict, fit: dict) -> str:
+    """:func:`owner_phrase` of an added candidate, followed by the candidates the data do not
+    tell apart from it (its ``alternatives``): "support bearing stiffness 350 N/µm, not 750
+    N/µm (…) [parameter], not told apart from nut stiffness 270 N/µm, not 400 N/µm (…)
+    [parameter]"."""
+    text = owner_phrase(result, fit)
+    alts = fit.get("alternatives") or []
+    if alts:
+        text += ", not told apart from " + " or ".join(owner_phrase(result, a) for a in alts)
+    return text
+
+
 def _places(rows: list[dict], k: int = 3) -> str:
     names = [region(r) for r in rows[:k]]
     if len(names) <= 1:
@@ -247,7 +259,7 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
            f"{n} statistics (Holm, α = {number(alpha, 2)}), most in {_places(sig)}{when}.")]
     added = result.get("added", [])
     if added:
-        what = "; then ".join(owner_phrase(result, a) for a in added)
+        what = "; then ".join(added_phrase(result, a) for a in added)
         out.append(("What", f"{what}."))
         sure = ", ".join(f"{_title(result, a['effect'])} gains {number(a['gain'] / a['gain_threshold'], 2)}× "
                          "its significance threshold" for a in added if a.get("gain_threshold"))

@@ -40,7 +40,9 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 - ``per_kind_top1``: top-1 accuracy per kind of candidate ("physical effect": the single cases,
   "signal artefact": the artefact cases, whose first added candidate must be the injected
   artefact on its target, "parameter": the parameter cases, the injected key first), with
-  ``per_kind_median_heldout_shrink``; ``per_artefact_top1``, ``per_parameter_top1``.
+  ``per_kind_median_heldout_shrink``; ``per_kind_top1_or_not_told_apart`` (the injected one
+  first or among the ``alternatives`` of the first: candidates the data do not tell apart from
+  it); ``per_artefact_top1``, ``per_parameter_top1``.
 """
 
 from __future__ import annotations
@@ -156,13 +158,18 @@ def _score_case(case: Case, res: dict) -> dict:
         row["correct"] = bool(added and added[0]["effect"] == next(iter(case.effects)))
     elif case.kind == "artefact":
         row["correct"] = bool(added and added[0]["effect"] == next(iter(case.artefacts)))
-    elif case.kind == "null":
+    if case.kind in ("single", "parameter", "artefact"):
+        # the injected candidate first, or among those the data do not tell apart from the first
+        injected = next(iter(case.artefacts or case.effects))
+        row["alternatives"] = [a["effect"] for a in (added[0].get("alternatives", []) if added else [])]
+        row["correct_or_not_told_apart"] = bool(row["correct"] or injected in row["alternatives"])
+    if case.kind == "null":
         row["correct"] = res["verdict"] == NO_GAP
     elif case.kind == "open_set":
         row["correct"] = res["verdict"] == UNEXPLAINED
         row["no_wrong_effect"] = row["correct"] and not any(
             a["heldout_reduction"] >= HIGH_SCORE for a in added)
-    else:
+    elif case.kind == "pair":
         row["correct"] = bool(res["verdict"] != NO_GAP and set(case.effects) <= set(ranking[:3]))
     return row
 
@@ -245,6 +252,9 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                           KIND_PARAMETER: _fraction(rows, "parameter")},
         "per_kind_median_heldout_shrink": {KIND_EFFECT: med(singles), KIND_ARTEFACT: med(arts),
                                            KIND_PARAMETER: med(pars)},
+        "per_kind_top1_or_not_told_apart": {
+            kind: (float(np.mean([r["correct_or_not_told_apart"] for r in rs])) if rs else None)
+            for kind, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars))},
         "per_parameter_top1": {name: float(np.mean([r["correct"] for r in pars if r["injected"] == [name]]))
                                for name in sorted({r["injected"][0] for r in pars})},
         "per_artefact_top1": {k: float(np.mean([r["correct"] for r in arts
