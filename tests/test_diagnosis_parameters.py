@@ -176,11 +176,18 @@ def test_a_physical_effect_is_not_taken_for_a_parameter(tmp_path, small_ensemble
     assert not any(a["kind"] == "parameter" for a in res["added"])
 
 
+@pytest.fixture(scope="module")
+def full_cache(tmp_path_factory):
+    """One simulation cache for the full checks (the twin's 8 seeds and every candidate's grid:
+    152 campaigns, about 10 min on two loaded cores, docs/gap-diagnosis.md)."""
+    return tmp_path_factory.mktemp("full-cache")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(("sets", "name", "truth"), [
     (("axis.carriage_mass_kg=162",), "axis.carriage_mass_kg", 1.35),
     (("axis.nut_stiffness_N_per_um=240",), "axis.nut_stiffness_N_per_um", 0.6)])
-def test_mis_set_parameter_against_every_candidate(tmp_path, sets, name, truth):
+def test_mis_set_parameter_against_every_candidate(tmp_path, full_cache, sets, name, truth):
     """The full check: `twin diagnose --kinds physical,parameter,artefact` (8 seeds, every
     candidate of the three kinds): the mis-set parameter first, within 10 % of the truth."""
     rec = tmp_path / "real"
@@ -189,7 +196,7 @@ def test_mis_set_parameter_against_every_candidate(tmp_path, sets, name, truth):
     assert proc.returncode == 0, proc.stderr
     out = tmp_path / "diag"
     proc = run_twin("diagnose", str(rec), "--scenario", str(BENCH_SCENARIO), "-o", str(out),
-                    "--kinds", "physical,parameter,artefact", "--workers", "2")
+                    "--kinds", "physical,parameter,artefact", "--workers", "2", "--cache", str(full_cache))
     assert proc.returncode == 0, proc.stderr[-3000:]
     res = json.loads((out / "diagnosis.json").read_text())
     first = res["added"][0]

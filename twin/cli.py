@@ -767,10 +767,10 @@ def diagnose(
     alpha: float = typer.Option(0.01, "--alpha", min=1e-9, max=0.5, help="family-wise error rate"),
     workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
     cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
-    kinds: str = typer.Option("physical,artefact", "--kinds", help=(
+    kinds: str | None = typer.Option(None, "--kinds", help=(
         "kinds of candidate, comma-separated: physical (the effect library), parameter (twin "
         "parameters set wrong: 60 more simulations, docs/gap-diagnosis.md), artefact (signal "
-        "artefacts)")),
+        "artefacts); default physical,artefact")),
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
@@ -778,12 +778,13 @@ def diagnose(
     before and after)."""
     _require("diagnose", "sim")
     from analysis.dataset import DatasetError
-    from twin.harness.gap_runner import KINDS, run_diagnosis
+    from twin.harness.gap_runner import DEFAULT_KINDS, KINDS, run_diagnosis
 
     try:
         s = load(scenario, overrides)
     except ScenarioError as exc:
         _fail(str(exc))
+    kinds = ",".join(DEFAULT_KINDS) if kinds is None else kinds
     kind_list = [k.strip() for k in kinds.split(",") if k.strip()]
     if not kind_list or any(k not in KINDS for k in kind_list):
         _fail(f"--kinds {kinds}: allowed a comma-separated list of {', '.join(KINDS)}")
