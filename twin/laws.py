@@ -182,8 +182,17 @@ def law_from_section(section: dict[str, Any]) -> Any:
     entry = registry.get(KIND, section["law"])
     kw = {k: section[k] for k in parameters(entry.factory) if k in section}
     try:
-        return entry.factory(**kw)
+        law = entry.factory(**kw)
     except TypeError as exc:
         raise ValueError(f"law = {section['law']!r}: cannot be made from [degradation] "
                          f"({exc}); its parameters: {', '.join(parameters(entry.factory)) or 'none'}"
                          ) from None
+    missing = [m for m in _METHODS if not callable(getattr(law, m, None))]
+    if missing:
+        raise ValueError(f"law = {section['law']!r} is a {type(law).__name__} without "
+                         f"{', '.join(missing)}; expected a degradation law with "
+                         f"{', '.join(_METHODS)} (twin.laws)")
+    return law
+
+
+_METHODS = ("preload_fraction", "backlash", "injected_onset_hours")

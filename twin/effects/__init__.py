@@ -41,7 +41,15 @@ def _effect(obj, spec: str) -> Effect:
 def candidates() -> dict[str, Effect]:
     """Every registered effect by name: the built-ins in the library's order, then the installed
     ones (entry points)."""
-    return {name: _effect(e.factory, name) for name, e in registry.entries(KIND).items()}
+    out = {}
+    for name, e in registry.entries(KIND).items():
+        effect = _effect(e.factory, name)
+        if effect.name != name:
+            raise registry.RegistryError(
+                f"gap-diagnosis candidate {name!r} ({e.source}) is an Effect named "
+                f"{effect.name!r}; expected the name it is registered under")
+        out[name] = effect
+    return out
 
 
 def candidate(spec: str) -> Effect:

@@ -450,7 +450,9 @@ def resolve_library(library: list[str] | None) -> tuple[dict[str, Effect], list[
         try:
             eff = candidate(spec)
         except RegistryError as exc:
-            raise ValueError(f"unknown candidate {spec!r} ({exc}); the candidates are "
+            if ":" in spec and spec.split(":")[0] not in {n.split(":")[0] for n in ARTEFACTS}:
+                raise ValueError(str(exc)) from None  # module:NAME that cannot be used: why
+            raise ValueError(f"unknown candidate {spec!r}; the candidates are "
                              f"{', '.join(candidate_names())}, or module:NAME of an Effect") from None
         effects[eff.name] = eff
     return effects, artefacts
