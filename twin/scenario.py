@@ -121,7 +121,8 @@ class DegradationConfig(_Section):
     model_config = ConfigDict(extra="allow", validate_assignment=True)
 
     law: str = Field(default_factory=laws.default_name, description=(
-        "a registered degradation law (wear, table, or an installed one) or module:Class"))
+        "a registered degradation law (twin.laws: built-in or installed; default: the "
+        "registered default) or module:Class"))
     onset_hours: float = Field(2500.0, ge=0)
     interference_um: float = Field(4.0, gt=0, le=100)
     wear_rate_um_per_kh: float = Field(1.4, ge=0, le=1000)
