@@ -766,6 +766,10 @@ def diagnose(
     alpha: float = typer.Option(0.01, "--alpha", min=1e-9, max=0.5, help="family-wise error rate"),
     workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
     cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
+    candidates: list[str] = typer.Option(
+        [], "--candidate", help="a candidate the diagnosis may add (repeatable; default: every "
+                                "registered effect and signal artefact): a name or module:NAME "
+                                "of an Effect"),
 ) -> None:
     """Where the twin and the recording differ, which effect of the library explains it, and how
     far the gap shrinks once it is added (held-out data). Writes OUT/diagnosis.json and
@@ -791,7 +795,8 @@ def diagnose(
         cb = _progress_callback(progress, {})
         try:
             res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
-                                cache=cache, on_progress=lambda d, n: cb("simulations", d, n))
+                                cache=cache, library=list(candidates) or None,
+                                on_progress=lambda d, n: cb("simulations", d, n))
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

@@ -33,7 +33,7 @@ import os
 import shutil
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -53,8 +53,9 @@ from analysis.diagnosis.signature import (
     update_signature,
 )
 from analysis.files import atomic_write, write_json, write_text
+from analysis.registry import RegistryError
 from twin.campaign import simulate_campaigns_batched
-from twin.effects import LIBRARY, Effect
+from twin.effects import Effect, candidate, candidates
 from twin.scenario import Scenario, from_dict
 
 DEFAULT_SEEDS = 8
@@ -74,11 +75,10 @@ def with_seed(s: Scenario, seed: int) -> Scenario:
 
 
 def with_effects(s: Scenario, effects: dict[str, dict[str, float]]) -> Scenario:
-    """The scenario with the library's effects {name: {param: value}} added."""
+    """The scenario with the effects {name or module:NAME: {param: value}} added (registered
+    candidates: :func:`twin.effects.candidate`)."""
     for name, values in effects.items():
-        if name not in LIBRARY:
-            raise ValueError(f"unknown effect {name!r}; the library has {', '.join(LIBRARY)}")
-        s = LIBRARY[name].apply(s, values)
+        s = candidate(name).apply(s, values)
     return s
 
 
@@ -207,7 +207,7 @@ def grid_points(effect: Effect) -> list[GridPoint]:
     return out
 
 
-def candidate_scenarios(seeded: list[Scenario], library: list[str]
+def candidate_scenarios(seeded: list[Scenario], library: dict[str, Effect]
                         ) -> tuple[list[Scenario], list[tuple[GridPoint, list[int]]]]:
     """The scenarios to simulate for the candidates' responses: one per grid point where the
     effect is present, with the first twin seed (all seeds for a random effect). Returns
@@ -215,8 +215,7 @@ def candidate_scenarios(seeded: list[Scenario], library: list[str]
     is the nominal twin)])."""
     scen: list[Scenario] = []
     points: list[tuple[GridPoint, list[int]]] = []
-    for name in library:
-        eff = LIBRARY[name]
+    for eff in library.values():
         bases = seeded if eff.random else seeded[:1]
         for gp in grid_points(eff):
             idx: list[int] = []
@@ -228,14 +227,13 @@ def candidate_scenarios(seeded: list[Scenario], library: list[str]
     return scen, points
 
 
-def responses(library: list[str], points, grid_sigs: list[dict[str, Signature]],
+def responses(library: dict[str, Effect], points, grid_sigs: list[dict[str, Signature]],
               nominal: list[dict[str, Signature]]) -> list[CandidateResponse]:
     """The candidates' response arrays (grid shape + (n,)): the change of every statistic
     against the same seed's nominal twin (common random numbers), averaged over the seeds
     used."""
     out = []
-    for name in library:
-        eff = LIBRARY[name]
+    for name, eff in library.items():
         shape = tuple(len(p.grid) for p in eff.params)
         n = nominal[0]["cal"].values.size
         delta = {p: np.zeros(shape + (n,)) for p in PARTS}
@@ -420,18 +418,44 @@ def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, wo
 
 @dataclass
 class TwinEnsemble:
-    """What the diagnosis simulated for one nominal scenario: the seeds' signatures and the
-    candidates' responses (reusable for every recording of that scenario)."""
+    """What the diagnosis simulated for one nominal scenario: the seeds' signatures, the
+    candidates' responses (reusable for every recording of that scenario) and the effects
+    among them by name."""
 
     nominal: Scenario
     seeds: list[int]
     twin: dict[str, list[Signature]]
     candidates: list[CandidateResponse]
+    effects: dict[str, Effect] = field(default_factory=dict)
 
 
 def candidate_names() -> list[str]:
-    """Every candidate: the library's physical effects, then the signal artefacts."""
-    return list(LIBRARY) + list(ARTEFACTS)
+    """Every candidate: the registered physical effects (built-in, then installed:
+    :func:`twin.effects.candidates`), then the signal artefacts."""
+    return list(candidates()) + list(ARTEFACTS)
+
+
+def resolve_library(library: list[str] | None) -> tuple[dict[str, Effect], list[str]]:
+    """(the effects by name, the signal artefacts) of a list of candidates: names of signal
+    artefacts, registered effects or ``module:NAME`` of an Effect; None: every candidate. An
+    unknown one raises ValueError naming it and the candidates."""
+    if library is None:
+        return candidates(), list(ARTEFACTS)
+    effects: dict[str, Effect] = {}
+    artefacts: list[str] = []
+    for spec in library:
+        if spec in ARTEFACTS:
+            artefacts.append(spec)
+            continue
+        try:
+            eff = candidate(spec)
+        except RegistryError as exc:
+            if ":" in spec and spec.split(":")[0] not in {n.split(":")[0] for n in ARTEFACTS}:
+                raise ValueError(str(exc)) from None  # module:NAME that cannot be used: why
+            raise ValueError(f"unknown candidate {spec!r}; the candidates are "
+                             f"{', '.join(candidate_names())}, or module:NAME of an Effect") from None
+        effects[eff.name] = eff
+    return effects, artefacts
 
 
 def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
@@ -439,13 +463,7 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
                    on_progress: Callable[[int, int], None] | None = None) -> TwinEnsemble:
     """Simulate the twin's spread and the candidates' responses (cached): the physical effects
     by simulation, the signal artefacts by post-processing the first seed's campaign."""
-    library = candidate_names() if library is None else list(library)
-    unknown = [n for n in library if n not in LIBRARY and n not in ARTEFACTS]
-    if unknown:
-        raise ValueError(f"unknown candidate(s) {unknown}; the candidates are "
-                         f"{', '.join(candidate_names())}")
-    effects = [n for n in library if n in LIBRARY]
-    artefacts = [n for n in library if n in ARTEFACTS]
+    effects, artefacts = resolve_library(library)
     workers = workers or os.cpu_count() or 1
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
@@ -455,7 +473,7 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
     if artefacts:
         cands += artefact_responses(artefacts, seeded, cache, workers)
-    return TwinEnsemble(nominal, seed_list, twin, cands)
+    return TwinEnsemble(nominal, seed_list, twin, cands, effects)
 
 
 def check_layout(real_dir: Path, nominal: Scenario, cache: Path) -> None:
@@ -478,20 +496,25 @@ def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
                         library: list[str] | None = None, alpha: float = 0.01
                         ) -> tuple[dict, dict[str, np.ndarray]]:
     """The diagnosis of a recording's signatures against an ensemble; ``library`` restricts
-    the candidates (the blind benchmark's open-set cases)."""
+    the candidates (the blind benchmark's open-set cases; names or ``module:NAME``)."""
+    if library is not None:
+        effects, artefacts = resolve_library(library)
+        library = [*effects, *artefacts]
     cands = [c for c in ens.candidates if library is None or c.name in library]
     return attribution.diagnose(real, ens.twin, cands, alpha=alpha)
 
 
-def library_json(names: list[str]) -> dict:
+def library_json(names: list[str], effects: dict[str, Effect] | None = None) -> dict:
     """The library's entry of ``diagnosis.json``: per candidate its kind ("physical effect" |
     "signal artefact"), title, source, (artefacts) the phrase in the owner's words and, per
     parameter, the prior range (low, high) and how the report prints it (label, unit, digits,
-    the fit grid's ends: :meth:`twin.effects.base.Param.display`)."""
-    return {n: ({"kind": KIND_EFFECT, "title": LIBRARY[n].title, "source": LIBRARY[n].source,
+    the fit grid's ends: :meth:`twin.effects.base.Param.display`). ``effects``: the effects by
+    name (default: the registered ones)."""
+    effects = candidates() if effects is None else effects
+    return {n: ({"kind": KIND_EFFECT, "title": effects[n].title, "source": effects[n].source,
                  "params": {p.name: {"low": p.low, "high": p.high, **p.display()}
-                            for p in LIBRARY[n].params}}
-                if n in LIBRARY else art.library_entry(ARTEFACTS[n]))
+                            for p in effects[n].params}}
+                if n in effects else art.library_entry(ARTEFACTS[n]))
             for n in names}
 
 
@@ -504,12 +527,13 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
+    resolve_library(library)  # an unknown candidate stops before anything is simulated
     check_layout(real_dir, nominal, cache)
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
-              "library": library_json([c.name for c in ens.candidates]),
+              "library": library_json([c.name for c in ens.candidates], ens.effects),
               **result}
     write_json(out / "diagnosis.json", result, nan_as_null=True)
     if plots:
