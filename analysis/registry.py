@@ -22,6 +22,11 @@ Kinds and what their objects must be (contracts: docs/developer-guide.md):
 - ``backlash_estimators``: an unfitted estimator with ``fit(reference)`` and
   ``estimate(session)`` returning a :class:`analysis.phase2.backlash.SessionBacklash`, e.g. a
   subclass of :class:`analysis.phase2.backlash.BacklashEstimator`.
+
+Other layers add kinds of their own with :func:`define_kind` (this module imports none of them):
+the twin defines ``degradation_laws`` (``twin.laws``: the laws of a scenario's ``[degradation]``
+section) and ``gap_candidates`` (``twin.effects.base``: the effects the gap diagnosis can add),
+each with its entry-point group ``ballscrew_twin.<kind>`` and the modules holding its built-ins.
 """
 
 from __future__ import annotations
@@ -35,8 +40,8 @@ from dataclasses import dataclass
 from importlib.metadata import entry_points
 from typing import Any
 
-__all__ = ["KINDS", "Entry", "RegistryError", "create", "default", "entries", "entry_of", "get", "label",
-           "names", "register", "style"]
+__all__ = ["KINDS", "Entry", "RegistryError", "create", "default", "define_kind", "entries", "entry_of",
+           "get", "label", "names", "register", "style"]
 
 #: kind -> (entry-point group, modules holding the in-tree registrations, what it is called).
 KINDS: dict[str, tuple[str, tuple[str, ...], str]] = {
@@ -78,6 +83,28 @@ _REGISTERED: dict[str, dict[str, Entry]] = {k: {} for k in KINDS}
 _LOADED: set[str] = set()
 
 
+def define_kind(kind: str, group: str, modules: tuple[str, ...] | list[str], what: str) -> None:
+    """Add a kind of method: its entry-point ``group`` (``ballscrew_twin.<kind>``), the
+    ``modules`` holding its in-tree registrations (imported on first use) and ``what`` one of
+    them is called in messages ("degradation law"). Called by the layer that owns the kind,
+    before its first :func:`register`; defining it again the same way does nothing, another way
+    raises :class:`RegistryError`."""
+    if not isinstance(kind, str) or not _NAME.match(kind):
+        raise RegistryError(f"define_kind: kind {kind!r}; expected letters, digits, '_' or '-', "
+                            "starting with a letter")
+    if group != f"ballscrew_twin.{kind}":
+        raise RegistryError(f"define_kind: group {group!r} of kind {kind!r}; expected "
+                            f"'ballscrew_twin.{kind}'")
+    spec = (group, tuple(modules), what)
+    if kind in KINDS:
+        if KINDS[kind] != spec:
+            raise RegistryError(f"define_kind: kind {kind!r} is already defined as {KINDS[kind]}, "
+                                f"not {spec}")
+        return
+    KINDS[kind] = spec
+    _REGISTERED[kind] = {}
+
+
 def _auto_style(name: str) -> tuple[str, str]:
     h = zlib.crc32(name.encode())
     return _PALETTE[h % len(_PALETTE)], _MARKERS[(h // len(_PALETTE)) % len(_MARKERS)]
@@ -85,7 +112,8 @@ def _auto_style(name: str) -> tuple[str, str]:
 
 def _check_kind(kind: str) -> None:
     if kind not in KINDS:
-        raise RegistryError(f"unknown kind {kind!r}; expected one of {', '.join(KINDS)}")
+        raise RegistryError(f"unknown kind {kind!r}; expected one of {', '.join(KINDS)} (a kind "
+                            "of another layer exists once the module that defines it is imported)")
 
 
 def _check_name(kind: str, name: str, where: str) -> None:

@@ -31,8 +31,9 @@ def test_ctrl_c_stops_simulate_and_the_rerun_resumes(tmp_path, workers):
     out = tmp_path / "camp"
     args = ["simulate", "quick", "-o", str(out), *SMALL, "--workers", workers]
     env = dict(os.environ, PYTHONPATH=str(REPO))
+    # A shell's background job (CI started with `&`) inherits SIGINT ignored; Ctrl-C is what we test.
     p = subprocess.Popen([*TWIN, *args], cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                         text=True)
+                         text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # noqa: PLW1509
     t0 = time.monotonic()
     while not (out / ".parts").is_dir() or not parts(out):
         assert p.poll() is None, p.communicate()

@@ -57,3 +57,34 @@ def test_score_refuses_a_directory_without_truth_or_outputs(demo_run, tmp_path):
     assert proc.returncode == 2
     message = " ".join(proc.stderr.split())
     assert "found neither phase1/detection.json (twin detect) nor backlash/backlash.json" in message
+
+
+def test_readme_demo_figures_are_what_make_demo_prints(tmp_path):
+    """README, "The two commands": ``make demo`` (``twin demo``, full scale, about a minute on
+    two loaded cores) ends with the detection table and the backlash table whose figures the
+    README quotes: PCA-T²'s detection hour against the injected onset, the largest error against
+    the injected change and against the injected lost motion."""
+    import re
+
+    from conftest import REPO
+
+    readme = " ".join((REPO / "README.md").read_text().split())
+    m = re.search(r"PCA-T² detects the preload loss one sample after the injected onset, "
+                  r"(\d+) h against (\d+) h\), the backlash table \(error within ([\d.]+) µm of the "
+                  r"injected change, ([\d.]+) µm of the injected lost motion\)", readme)
+    assert m, "the README no longer quotes the demo's figures in the form this test reads"
+    detect_h, onset_h, err_um, err_lm_um = float(m[1]), float(m[2]), m[3], m[4]
+    out = tmp_path / "demo"
+    proc = run_twin("demo", "-o", out, check=False, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    tables = _tables(proc.stdout)
+    sc = json.loads((out / "score.json").read_text())
+    t2 = sc["phase1"]["methods"]["pca_t2"]
+    assert (t2["detection_hours"], sc["phase1"]["onset_hours"]) == (detect_h, onset_h)
+    assert t2["delay_samples"] == 1  # "one sample after the injected onset"
+    assert re.search(rf"│ PCA-T² +│ {detect_h:g} +│", tables)
+    sessions = sc["phase2"]["sessions"]
+    assert f"{max(abs(r['error_um']) for r in sessions):.2f}" == err_um
+    assert f"{max(abs(r['error_vs_lost_motion_um']) for r in sessions):.2f}" == err_lm_um
+    print(f"\nmake demo: PCA-T² at {detect_h:g} h (onset {onset_h:g} h), errors within {err_um} µm "
+          f"and {err_lm_um} µm of the lost motion, as the README says")

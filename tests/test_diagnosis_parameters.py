@@ -80,7 +80,7 @@ def _result():
     from twin.scenario import load
 
     s = load(BENCH_SCENARIO)
-    return {"library": library_json(["axis.carriage_mass_kg", "axis.truck_stiffness", "cogging"], s)}
+    return {"library": library_json(["axis.carriage_mass_kg", "axis.truck_stiffness", "cogging"], nominal=s)}
 
 
 def test_parameter_in_the_owners_words():
@@ -140,7 +140,7 @@ def _diagnose(tmp_path, small_ensemble, *sets):
     (rec / "truth.h5").unlink()
     real = {p: signature(rec / "measurements.h5", p) for p in PARTS}
     res, _ = diagnose_signatures(real, ens, None)
-    res["library"] = library_json([c.name for c in ens.candidates], s)
+    res["library"] = library_json([c.name for c in ens.candidates], ens.effects, s)
     return res
 
 

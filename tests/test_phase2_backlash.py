@@ -417,3 +417,27 @@ def test_bad_input_errors(synthetic):
     bad.forward[2, 5] = np.nan
     with pytest.raises(ValueError, match="non-finite"):
         est.estimate(bad)
+
+
+def test_readme_phase2_example_prints_what_it_claims(tmp_path_factory, monkeypatch, capsys):
+    """README, "Method developer": ``twin simulate scenarios/backlash-steps.toml -o runs/steps``
+    (the campaign above, no override), then the README's Python block, run as written with
+    ``runs/steps`` pointing at that campaign: it prints the list its comment line shows."""
+    import re
+
+    readme = (REPO / "README.md").read_text()
+    assert "twin simulate scenarios/backlash-steps.toml -o runs/steps " in readme
+    block = next(b for b in re.findall(r"```python\n(.*?)```", readme, re.S)
+                 if "runs/steps/measurements.h5" in b)
+    claim = re.search(r"^# (\[[-0-9., ]+\]) µm against the injected", block, re.M)
+    assert claim, block
+    d = steps_campaign(tmp_path_factory)
+    runs = tmp_path_factory.mktemp("readme")
+    (runs / "runs").mkdir()
+    (runs / "runs" / "steps").symlink_to(d)
+    monkeypatch.chdir(runs)
+    exec(compile(block, "README.md", "exec"), {})
+    printed = capsys.readouterr().out.strip()
+    with capsys.disabled():
+        print(f"\nREADME Phase II example prints {printed}; the README says {claim.group(1)}")
+    assert printed == claim.group(1)

@@ -303,5 +303,10 @@ def test_developer_guide_code_runs(analysed, tmp_path):
     assert r.stdout.count("--- guide block") == len(blocks)
     assert "KNNDistance" in r.stdout and "MedianBacklash" in r.stdout
     assert "rejected: scenarios/demo.toml: key `degradation.wear_rate_um_per_kh` = -1" in r.stdout
+    # Section 3: a law by module:Class, a gap-diagnosis candidate.
+    assert "onset 100 h; preload [0.962 0.6   0.238]; backlash [0.47 5.   9.53] µm" in r.stdout
+    assert "rejected: scenarios/demo.toml: key `degradation.midpoint_hours` = -5.0: allowed >= 0." in r.stdout
+    assert "and for the degradation law 'mylaws:Sigmoid': midpoint_hours, width_hours" in r.stdout
+    assert "carriage with HEAVY at 40 kg: 160.0 kg" in r.stdout
     assert f"detection: {plan.n_points} points x {len(plan.seeds)} seeds" in r.stdout
     assert "sensors.imu_noise" in r.stdout.split("rejected:")[-1]

@@ -123,41 +123,24 @@ def make_world(s: Scenario) -> World:
                  base_damping_ratio=fx.base_damping_ratio)
 
 
-def wear_law(s: Scenario) -> deg.WearLaw:
-    d = s.degradation
-    return deg.WearLaw(onset_hours=d.onset_hours, interference_um=d.interference_um,
-                       wear_rate_um_per_kh=d.wear_rate_um_per_kh, scatter_um=d.scatter_um,
-                       backlash_gain=d.backlash_gain)
+def degradation_law(s: Scenario):
+    """The scenario's degradation law (:mod:`twin.laws`: ``degradation.law`` looked up in the
+    registry, made with its parameters from ``[degradation]``)."""
+    return s.degradation.make_law()
 
 
 def degradation_at(s: Scenario, hours) -> tuple[np.ndarray, np.ndarray]:
     """(preload fraction (n,), backlash µm (n,)) at operating ``hours`` (n,)."""
     h = np.atleast_1d(np.asarray(hours, dtype=float))
-    d = s.degradation
-    if d.law == "table":
-        th = np.asarray(d.table_hours, dtype=float)
-        order = np.argsort(th)
-        pf = np.interp(h, th[order], np.asarray(d.table_preload_fraction)[order])
-        bl = np.interp(h, th[order], np.asarray(d.table_backlash_um)[order])
-        return pf, bl
-    law = wear_law(s)
-    return deg.preload_fraction(h, law), deg.backlash_um(h, law)
+    law = degradation_law(s)
+    return law.preload_fraction(h), law.backlash(h) * 1e6
 
 
 def onset_hours(s: Scenario) -> float:
-    """The injected onset of degradation, h (NaN if the scenario never degrades).
-
-    For a table law (linear interpolation between sorted points), the onset is the last healthy
-    point (preload fraction 1, no backlash) before the first degraded one."""
-    d = s.degradation
-    if d.law == "wear":
-        return float(d.onset_hours) if d.wear_rate_um_per_kh > 0 else math.nan
-    th = np.asarray(d.table_hours)
-    bad = (np.asarray(d.table_preload_fraction) < 1.0) | (np.asarray(d.table_backlash_um) > 0.0)
-    if not bad.any():
-        return math.nan
-    first_bad = int(np.argmax(bad))
-    return float(th[first_bad - 1]) if first_bad > 0 else float(th[0])
+    """The injected onset of degradation, h (NaN if the scenario never degrades): the law's
+    ``injected_onset_hours()`` (for the table law, the last healthy point before the first
+    degraded one)."""
+    return float(degradation_law(s).injected_onset_hours())
 
 
 def resume_hours(s: Scenario) -> list[float]:
@@ -186,9 +169,11 @@ def temperature_at(s: Scenario, hours) -> np.ndarray:
 
 
 def condition_at(s: Scenario, hours: float, origin_offset: float = 0.0) -> Condition:
-    pf, bl = degradation_at(s, hours)
+    law = degradation_law(s)
+    h = np.atleast_1d(np.asarray(hours, dtype=float))
+    pf, backlash = law.preload_fraction(h), law.backlash(h)  # (1,) fraction, (1,) m
     coupling = s.degradation.truck_wear_coupling
-    mech = MechanicalState(preload=float(pf[0]) * s.axis.preload_N, backlash=float(bl[0]) * 1e-6,
+    mech = MechanicalState(preload=float(pf[0]) * s.axis.preload_N, backlash=float(backlash[0]),
                            truck_preload_fraction=1.0 - coupling * (1.0 - float(pf[0])))
     return Condition(mech=mech, temperature_rise=float(temperature_at(s, hours)[0]),
                      origin_offset=origin_offset)

@@ -767,10 +767,14 @@ def diagnose(
     alpha: float = typer.Option(0.01, "--alpha", min=1e-9, max=0.5, help="family-wise error rate"),
     workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
     cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
+    candidates: list[str] = typer.Option(
+        [], "--candidate", help="a candidate the diagnosis may add (repeatable; default: every "
+                                "candidate of --kinds): a name (an effect, a twin parameter, a "
+                                "signal artefact) or module:NAME of an Effect"),
     kinds: str | None = typer.Option(None, "--kinds", help=(
-        "kinds of candidate, comma-separated: physical (the effect library), parameter (twin "
+        "kinds of candidate, comma-separated: physical (the registered effects), parameter (twin "
         "parameters set wrong: 60 more simulations, docs/gap-diagnosis.md), artefact (signal "
-        "artefacts); default physical,artefact")),
+        "artefacts); default physical,artefact; --candidate wins")),
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
@@ -801,8 +805,8 @@ def diagnose(
         cb = _progress_callback(progress, {})
         try:
             res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
-                                cache=cache, on_progress=lambda d, n: cb("simulations", d, n),
-                                kinds=kind_list)
+                                cache=cache, library=list(candidates) or None,
+                                on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list)
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

@@ -155,11 +155,13 @@ def _explain(err: dict, data: Any, source: str, root: type[BaseModel], special: 
     if bounds:
         return f"{source}: key `{key}` = {value!r} is out of range; allowed: value {' and '.join(bounds)}."
     if kind == "value_error":
-        # "field = value ..." from a section's validator, "section.field = value ..." from the
-        # root's own: name the full dotted key.
+        # "field = value ..." from a section's validator (a field, or a key the section allows
+        # beyond its fields), "section.field = value ..." from the root's own: name the full
+        # dotted key.
         first, _, rest = msg.partition(" ")
         model = model_at(root, loc)
-        if model is not None and first in model.model_fields:
+        if model is not None and (first in model.model_fields
+                                  or (isinstance(value, dict) and first in value)):
             return f"{source}: key `{key + '.' if loc else ''}{first}` {rest}."
         if not loc and "." in first and rest.startswith("="):
             return f"{source}: key `{first}` {rest}."

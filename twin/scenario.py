@@ -13,12 +13,13 @@ from __future__ import annotations
 import copy
 import json
 import tomllib
-from itertools import pairwise
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from analysis import registry
+from twin import laws
 from twin.axis import Axis, Carriage, ScrewDrive, Servo
 from twin.config import explain_errors, set_dotted
 
@@ -109,7 +110,19 @@ class SensorsConfig(_Section):
 
 
 class DegradationConfig(_Section):
-    law: Literal["wear", "table"] = "wear"
+    """The degradation law and its parameters, and the thermal transient.
+
+    ``law`` names a registered degradation law or ``module:Class`` (:mod:`twin.laws`); the law
+    reads its parameters from the keys of the same name here. The keys of the built-in laws are
+    fields with their ranges (``wear``: onset, interference, wear rate, scatter, backlash gain;
+    ``table``: the three lists); a law from elsewhere brings keys of its own, accepted only
+    when it takes them."""
+
+    model_config = ConfigDict(extra="allow", validate_assignment=True)
+
+    law: str = Field(default_factory=laws.default_name, description=(
+        "a registered degradation law (twin.laws: built-in or installed; default: the "
+        "registered default) or module:Class"))
     onset_hours: float = Field(2500.0, ge=0)
     interference_um: float = Field(4.0, gt=0, le=100)
     wear_rate_um_per_kh: float = Field(1.4, ge=0, le=1000)
@@ -127,26 +140,30 @@ class DegradationConfig(_Section):
         "β in drag = drag(20 °C)·exp(−β·ΔT): the nut's lubricant thins as the screw warms "
         "(0 = drag independent of temperature; about 0.03 /K for mineral greases)"))
 
+    @field_validator("law")
+    @classmethod
+    def _known_law(cls, v: str) -> str:
+        registry.get(laws.KIND, v)  # RegistryError (a ValueError) names the value and the laws
+        return v
+
     @model_validator(mode="after")
-    def _table(self) -> DegradationConfig:
-        if self.law == "table":
-            n = len(self.table_hours)
-            if n == 0 or len(self.table_preload_fraction) != n or len(self.table_backlash_um) != n:
+    def _law(self) -> DegradationConfig:
+        entry = registry.get(laws.KIND, self.law)
+        takes = laws.parameters(entry.factory)
+        fields = type(self).model_fields
+        own = [k for k in takes if k not in fields]  # the law's keys beyond the section's
+        for key, value in (self.model_extra or {}).items():
+            if key not in takes:
                 raise ValueError(
-                    "law = 'table' needs table_hours, table_preload_fraction and table_backlash_um "
-                    f"of equal, non-zero length (got {n}, {len(self.table_preload_fraction)}, "
-                    f"{len(self.table_backlash_um)})")
-            if any(b < 0 for b in self.table_backlash_um):
-                raise ValueError(f"table_backlash_um = {self.table_backlash_um} has a negative "
-                                 "backlash: allowed values are >= 0 µm")
-            if any(b <= a for a, b in pairwise(self.table_hours)):
-                raise ValueError(f"table_hours = {self.table_hours}: allowed strictly increasing hours")
-            if self.table_hours[0] < 0:
-                raise ValueError(f"table_hours = {self.table_hours}: allowed hours >= 0")
-            if any(not 0 < p <= 1 for p in self.table_preload_fraction):
-                raise ValueError(f"table_preload_fraction = {self.table_preload_fraction}: "
-                                 "allowed 0 < value <= 1")
+                    f"{key} = {value!r}: unknown key; allowed keys in [degradation]: "
+                    f"{', '.join(fields)}" + (f", and for the degradation law {self.law!r}: "
+                                              f"{', '.join(own)}" if own else ""))
+        laws.law_from_section(self.model_dump())  # the law's own checks (ValueError)
         return self
+
+    def make_law(self):
+        """The degradation law of this section (:func:`twin.laws.law_from_section`)."""
+        return laws.law_from_section(self.model_dump())
 
 
 class Phase1Config(_Section):

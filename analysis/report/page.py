@@ -118,6 +118,9 @@ def _scenario_rows(s: dict) -> list[tuple[str, str]]:
                  ("table: hours", d.get("table_hours")),
                  ("table: preload fraction", d.get("table_preload_fraction")),
                  ("table: backlash (µm)", d.get("table_backlash_um"))]
+    elif d.get("law", "wear") != "wear":  # a plug-in law (twin.laws): the whole section
+        rows += [("degradation law", d.get("law"))] + [
+            (f"degradation: {k}", v) for k, v in d.items() if k != "law"]
     else:
         rows += [("degradation law", d.get("law")),
                  ("wear onset (h)", d.get("onset_hours")),

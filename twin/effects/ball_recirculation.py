@@ -14,13 +14,13 @@ Parameter: impulse_N, the peak axial force of the impacts (twin key
 ball-pass period). It acts on the nut accelerometers (and torque) at the ball-pass harmonics.
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="ball_recirculation",
     title="ball recirculation impacts in the nut",
     params=(Param("impulse_N", ("effects.recirculation_impulse_N",), "add", low=10.0, high=60.0,
                   grid=(0.0, 10.0, 25.0, 60.0), label="recirculation impulse", unit="N"),),
     source="impacts of balls re-entering the loaded zone at the ball-pass frequency",
     amplitude="impulse_N",
-)
+))

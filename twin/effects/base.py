@@ -4,6 +4,13 @@ scenario keys, and the grid on which the diagnosis simulates its response.
 An effect is absent when all its parameters are at their ``off`` value; :meth:`Effect.apply`
 returns the scenario with the effect added (``add``: the value is added to the scenario's own,
 ``scale``: multiplies it, ``set``: replaces it; ``index`` picks an element of a list key).
+
+The effects are the twin's candidates of the gap diagnosis, found by name in
+:mod:`analysis.registry` under the kind ``gap_candidates`` (defined here, entry-point group
+``ballscrew_twin.gap_candidates``): the built-ins of :mod:`twin.effects` register with
+:func:`register_effect`, an installed package names an :class:`Effect` object in an entry point,
+and ``module:NAME`` (an :class:`Effect`, or a class or function that returns one when called
+without arguments) works wherever a candidate is named. An effect's name is its ``name``.
 """
 
 from __future__ import annotations
@@ -15,8 +22,12 @@ from typing import Any, Literal
 
 import numpy as np
 
+from analysis import registry
 from twin.config import get_dotted, set_dotted
 from twin.scenario import Scenario, from_dict
+
+KIND = "gap_candidates"
+registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.effects",), "gap-diagnosis candidate")
 
 
 @dataclass(frozen=True)
@@ -120,3 +131,11 @@ class Effect:
                 v *= float(rng.choice([-1.0, 1.0]))
             out[p.name] = float(v)
         return out
+
+
+def register_effect(effect: Effect) -> Effect:
+    """Register a built-in ``effect`` of the library by its name, labelled by its title
+    (returns it unchanged); the order of registration is the order of the library."""
+    if not isinstance(effect, Effect):
+        raise registry.RegistryError(f"register_effect: {effect!r} is not an Effect")
+    return registry.register(KIND, effect.name, label=effect.title)(effect)

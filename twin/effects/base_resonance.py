@@ -12,9 +12,9 @@ resonance moving between bands does not interpolate) and modal_mass_kg
 the band of the resonance, mostly in the transients and reversals.
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="base_resonance",
     title="structural resonance of the base",
     params=(Param("frequency_hz", ("effects.base_frequency_hz",), "set", low=80.0, high=450.0,
@@ -25,4 +25,4 @@ EFFECT = Effect(
                   unit="kg")),
     source="single-DOF modal model of the machine base (Altintas 2012, ch. 3)",
     amplitude="modal_mass_kg",
-)
+))

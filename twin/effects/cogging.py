@@ -13,9 +13,9 @@ slot/pole combinations). It acts on Phase I torque/speed/acc at N_c·f_rot (f_ro
 400 mm/s with a 10 mm lead).
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="cogging",
     title="motor cogging torque",
     params=(Param("torque_Nm", ("effects.cogging_Nm",), "add", low=0.03, high=0.15,
@@ -25,4 +25,4 @@ EFFECT = Effect(
                   label="cogging order", unit="per revolution")),
     source="PM motor cogging, period LCM(slots, poles) per revolution (Zhu & Howe 2000)",
     amplitude="torque_Nm",
-)
+))

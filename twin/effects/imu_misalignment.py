@@ -13,11 +13,11 @@ scale_ppm, a common scale error of the three accelerometer axes
 accelerometer (gravity) and the amplitude of its signal in the transients.
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
 _SCALE = tuple(f"sensors.imu_acc_scale_error[{i}]" for i in range(3))
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="imu_misalignment",
     title="IMU misalignment and scale error",
     params=(Param("pitch_urad", ("sensors.imu_misalignment_urad[1]",), "add", low=500.0,
@@ -27,4 +27,4 @@ EFFECT = Effect(
                   grid=(-5000.0, 0.0, 5000.0), log=True, signed=True, factor=1e-6,
                   label="IMU accelerometer scale error", unit="ppm")),
     source="accelerometer scale factor and misalignment model (IEEE Std 1293-2018)",
-)
+))

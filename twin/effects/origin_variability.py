@@ -12,9 +12,9 @@ scenario's ``phase2.origin_offset_max_mm``. It acts on the shift of the E_XX pro
 sessions (``lag`` statistics) and the dwell positions.
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="origin_variability",
     title="origin-setting variability between sessions",
     params=(Param("spread_mm", ("phase2.origin_offset_max_mm",), "add", low=0.5, high=3.0,
@@ -23,4 +23,4 @@ EFFECT = Effect(
     source="manual origin setting before each session (paper section III/V; ISO 230-2)",
     amplitude="spread_mm",
     random=True,
-)
+))

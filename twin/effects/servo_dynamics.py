@@ -13,9 +13,9 @@ loops (``axis.position_bandwidth_hz``, ``axis.velocity_bandwidth_hz``). It acts 
 speed and torque in the transients and at low frequencies.
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="servo_dynamics",
     title="servo loop dynamics (following error)",
     params=(Param("bandwidth_factor", ("axis.position_bandwidth_hz", "axis.velocity_bandwidth_hz"),
@@ -23,4 +23,4 @@ EFFECT = Effect(
                   log=True, label="servo bandwidth factor", unit="×"),),
     source="cascaded position/velocity loop tuning (Ellis 2012, ch. 17)",
     amplitude="bandwidth_factor",
-)
+))

@@ -12,9 +12,9 @@ Parameters: excess_N = F_s − F_c (``effects.stribeck_excess_N``) and velocity_
 reversals and in the transients, and on the IMU at the motion starts.
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="stribeck_friction",
     title="Stribeck friction at reversals",
     params=(Param("excess_N", ("effects.stribeck_excess_N",), "add", low=30.0, high=150.0,
@@ -23,4 +23,4 @@ EFFECT = Effect(
                   grid=(1.0, 3.0, 6.0), off=None, label="Stribeck velocity", unit="mm/s")),
     source="Stribeck curve (Armstrong-Hélouvry et al. 1994)",
     amplitude="excess_N",
-)
+))

@@ -19,9 +19,9 @@ Parameter: rise_K, the steady temperature rise added to the scenario's. It acts 
 torque level (steady, transient) and, through the lead, on where rail features are seen.
 """
 
-from twin.effects.base import Effect, Param
+from twin.effects.base import Effect, Param, register_effect
 
-EFFECT = Effect(
+EFFECT = register_effect(Effect(
     name="thermal_growth",
     title="thermal growth of the screw after a pause",
     params=(Param("rise_K", ("degradation.thermal_rise_K",), "add", low=4.0, high=20.0,
@@ -29,4 +29,4 @@ EFFECT = Effect(
     fixed={"degradation.drag_temperature_coefficient_per_K": 0.03},
     source="lead growth α·ΔT (ISO 230-3; Ramesh et al. 2000) and lubricant viscosity ∝ exp(−β·ΔT)",
     amplitude="rise_K",
-)
+))

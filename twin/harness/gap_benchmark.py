@@ -60,7 +60,7 @@ from analysis.diagnosis.artefacts import ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT, 
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
 from analysis.files import write_json
-from twin.effects import LIBRARY
+from twin.effects import candidates
 from twin.effects.parameters import PARAMETERS
 from twin.harness.gap_runner import (
     DEFAULT_KINDS,
@@ -101,7 +101,8 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
     """The benchmark's cases (deterministic in ``rng_seed``; the artefact cases, then the
     parameter cases come last and draw after the others, so adding them changes no other
     case)."""
-    lib = list(LIBRARY) if library is None else list(library)
+    effects = candidates()
+    lib = list(effects) if library is None else list(library)
     rng = np.random.default_rng(rng_seed)
     cases: list[Case] = []
 
@@ -113,17 +114,17 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
     for name in lib:
         for mag in ("low", "high"):
             for _ in range(per_cell):
-                add("single", {name: LIBRARY[name].draw(rng, mag)}, mag)
+                add("single", {name: effects[name].draw(rng, mag)}, mag)
     for _ in range(nulls):
         add("null", {})
     for name in rng.permutation(lib)[:open_set]:
         # The upper half of the range: the gap is clearly there (check 1 covers both
         # magnitudes), the question is only whether the diagnosis invents an explanation.
-        add("open_set", {str(name): LIBRARY[str(name)].draw(rng, "high")}, "high",
+        add("open_set", {str(name): effects[str(name)].draw(rng, "high")}, "high",
             [n for n in lib if n != name] + list(ARTEFACTS) + list(PARAMETERS))
     for _ in range(pairs):
         a, b = (str(n) for n in rng.choice(lib, 2, replace=False))
-        add("pair", {a: LIBRARY[a].draw(rng, "high"), b: LIBRARY[b].draw(rng, "high")}, "high")
+        add("pair", {a: effects[a].draw(rng, "high"), b: effects[b].draw(rng, "high")}, "high")
     kinds: dict[str, list[str]] = {}
     for name, art in ARTEFACTS.items():
         kinds.setdefault(art.artefact, []).append(name)
@@ -178,11 +179,12 @@ def _fit_errors(singles: list[dict]) -> dict[str, float]:
     """Median |fitted − injected| / |injected| of each continuous parameter over the single
     cases where the injected effect was added first."""
     errs: dict[str, list[float]] = {}
+    effects = candidates()
     for r in singles:
         name = r["injected"][0]
         if not r["correct"]:
             continue
-        for p in (LIBRARY.get(name) or PARAMETERS.get(name) or ARTEFACTS[name]).params:
+        for p in (effects.get(name) or PARAMETERS.get(name) or ARTEFACTS[name]).params:
             if p.discrete:
                 continue
             true, fit = r["values"][name][p.name], r["fitted"][name][p.name]

@@ -34,7 +34,7 @@ import os
 import shutil
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -60,8 +60,9 @@ from analysis.diagnosis.signature import (
     update_signature,
 )
 from analysis.files import atomic_write, write_json, write_text
+from analysis.registry import RegistryError
 from twin.campaign import simulate_campaigns_batched
-from twin.effects import LIBRARY, Effect
+from twin.effects import Effect, candidate, candidates
 from twin.effects import parameters as twin_parameters
 from twin.effects.parameters import PARAMETERS
 from twin.scenario import Scenario, from_dict
@@ -70,10 +71,9 @@ DEFAULT_SEEDS = 8
 BATCH = 6  # campaigns simulated together (batched rollouts) in one task
 SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
 
-#: The candidates simulated by the twin: the library's physical effects and the twin parameters
-#: (both are scenario changes, :class:`twin.effects.base.Effect`).
-SIMULATED: dict[str, Effect] = {**LIBRARY, **PARAMETERS}
-#: The kinds of candidate as ``--kinds`` names them.
+#: The kinds of candidate as ``--kinds`` names them: the registered physical effects, the twin
+#: parameters (:data:`twin.effects.parameters.PARAMETERS`, simulated like the effects), the
+#: signal artefacts.
 KINDS = {"physical": KIND_EFFECT, "parameter": KIND_PARAMETER, "artefact": KIND_ARTEFACT}
 #: The kinds a diagnosis tries unless told otherwise (docs/gap-diagnosis.md: the cost of each).
 DEFAULT_KINDS = ("physical", "artefact")
@@ -81,7 +81,13 @@ DEFAULT_KINDS = ("physical", "artefact")
 
 def kind_of(name: str) -> str:
     """The kind of a candidate by its name."""
-    return KIND_PARAMETER if name in PARAMETERS else KIND_EFFECT if name in LIBRARY else KIND_ARTEFACT
+    return KIND_PARAMETER if name in PARAMETERS else KIND_ARTEFACT if name in ARTEFACTS else KIND_EFFECT
+
+
+def simulated(name: str) -> Effect:
+    """The scenario change of a simulated candidate: a twin parameter, or a registered effect
+    (or ``module:NAME``: :func:`twin.effects.candidate`)."""
+    return PARAMETERS[name] if name in PARAMETERS else candidate(name)
 
 
 def twin_seeds(s: Scenario, k: int) -> list[int]:
@@ -96,12 +102,10 @@ def with_seed(s: Scenario, seed: int) -> Scenario:
 
 
 def with_effects(s: Scenario, effects: dict[str, dict[str, float]]) -> Scenario:
-    """The scenario with the library's effects or twin parameters {name: {param: value}}
-    added."""
+    """The scenario with the effects {name or module:NAME: {param: value}} added (registered
+    candidates: :func:`twin.effects.candidate`; twin parameters by their name)."""
     for name, values in effects.items():
-        if name not in SIMULATED:
-            raise ValueError(f"unknown effect {name!r}; the library has {', '.join(SIMULATED)}")
-        s = SIMULATED[name].apply(s, values)
+        s = simulated(name).apply(s, values)
     return s
 
 
@@ -230,7 +234,7 @@ def grid_points(effect: Effect) -> list[GridPoint]:
     return out
 
 
-def candidate_scenarios(seeded: list[Scenario], library: list[str]
+def candidate_scenarios(seeded: list[Scenario], library: dict[str, Effect]
                         ) -> tuple[list[Scenario], list[tuple[GridPoint, list[int]]]]:
     """The scenarios to simulate for the candidates' responses: one per grid point where the
     effect is present, with the first twin seed (all seeds for a random effect). Returns
@@ -238,8 +242,7 @@ def candidate_scenarios(seeded: list[Scenario], library: list[str]
     is the nominal twin)])."""
     scen: list[Scenario] = []
     points: list[tuple[GridPoint, list[int]]] = []
-    for name in library:
-        eff = SIMULATED[name]
+    for eff in library.values():
         bases = seeded if eff.random else seeded[:1]
         for gp in grid_points(eff):
             idx: list[int] = []
@@ -251,14 +254,13 @@ def candidate_scenarios(seeded: list[Scenario], library: list[str]
     return scen, points
 
 
-def responses(library: list[str], points, grid_sigs: list[dict[str, Signature]],
+def responses(library: dict[str, Effect], points, grid_sigs: list[dict[str, Signature]],
               nominal: list[dict[str, Signature]]) -> list[CandidateResponse]:
     """The candidates' response arrays (grid shape + (n,)): the change of every statistic
     against the same seed's nominal twin (common random numbers), averaged over the seeds
     used."""
     out = []
-    for name in library:
-        eff = SIMULATED[name]
+    for name, eff in library.items():
         shape = tuple(len(p.grid) for p in eff.params)
         n = nominal[0]["cal"].values.size
         delta = {p: np.zeros(shape + (n,)) for p in PARTS}
@@ -443,24 +445,64 @@ def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, wo
 
 @dataclass
 class TwinEnsemble:
-    """What the diagnosis simulated for one nominal scenario: the seeds' signatures and the
-    candidates' responses (reusable for every recording of that scenario)."""
+    """What the diagnosis simulated for one nominal scenario: the seeds' signatures, the
+    candidates' responses (reusable for every recording of that scenario) and the effects
+    among them by name."""
 
     nominal: Scenario
     seeds: list[int]
     twin: dict[str, list[Signature]]
     candidates: list[CandidateResponse]
+    effects: dict[str, Effect] = field(default_factory=dict)
 
 
-def candidate_names(kinds: tuple[str, ...] | list[str] | None = None) -> list[str]:
-    """The candidates of ``kinds`` (names of :data:`KINDS`; default :data:`DEFAULT_KINDS`): the
-    library's physical effects, then the twin parameters, then the signal artefacts."""
+def _kinds(kinds: tuple[str, ...] | list[str] | None) -> tuple[str, ...]:
     kinds = DEFAULT_KINDS if kinds is None else tuple(kinds)
     unknown = [k for k in kinds if k not in KINDS]
     if unknown:
         raise ValueError(f"unknown kind(s) of candidate {unknown}; the kinds are {', '.join(KINDS)}")
-    return ((list(LIBRARY) if "physical" in kinds else []) + (list(PARAMETERS) if "parameter" in kinds else [])
+    return kinds
+
+
+def candidate_names(kinds: tuple[str, ...] | list[str] | None = None) -> list[str]:
+    """The candidates of ``kinds`` (names of :data:`KINDS`; default :data:`DEFAULT_KINDS`): the
+    registered physical effects (built-in, then installed: :func:`twin.effects.candidates`),
+    then the twin parameters, then the signal artefacts."""
+    kinds = _kinds(kinds)
+    return ((list(candidates()) if "physical" in kinds else [])
+            + (list(PARAMETERS) if "parameter" in kinds else [])
             + (list(ARTEFACTS) if "artefact" in kinds else []))
+
+
+def resolve_library(library: list[str] | None, kinds: tuple[str, ...] | list[str] | None = None
+                    ) -> tuple[dict[str, Effect], list[str]]:
+    """(the simulated candidates by name: effects and twin parameters, the signal artefacts) of
+    a list of candidates: names of signal artefacts, twin parameters, registered effects or
+    ``module:NAME`` of an Effect; None: every candidate of ``kinds`` (default
+    :data:`DEFAULT_KINDS`). An unknown one raises ValueError naming it and the candidates."""
+    if library is None:
+        kinds = _kinds(kinds)
+        effects = {**(candidates() if "physical" in kinds else {}),
+                   **(PARAMETERS if "parameter" in kinds else {})}
+        return effects, (list(ARTEFACTS) if "artefact" in kinds else [])
+    effects: dict[str, Effect] = {}
+    artefacts: list[str] = []
+    for spec in library:
+        if spec in ARTEFACTS:
+            artefacts.append(spec)
+            continue
+        if spec in PARAMETERS:
+            effects[spec] = PARAMETERS[spec]
+            continue
+        try:
+            eff = candidate(spec)
+        except RegistryError as exc:
+            if ":" in spec and spec.split(":")[0] not in {n.split(":")[0] for n in ARTEFACTS}:
+                raise ValueError(str(exc)) from None  # module:NAME that cannot be used: why
+            raise ValueError(f"unknown candidate {spec!r}; the candidates are "
+                             f"{', '.join(candidate_names(tuple(KINDS)))}, or module:NAME of an Effect") from None
+        effects[eff.name] = eff
+    return effects, artefacts
 
 
 def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
@@ -470,13 +512,7 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     """Simulate the twin's spread and the candidates' responses (cached): the physical effects
     and the twin parameters by simulation, the signal artefacts by post-processing the first
     seed's campaign. ``library`` (candidate names) wins over ``kinds``."""
-    library = candidate_names(kinds) if library is None else list(library)
-    unknown = [n for n in library if n not in SIMULATED and n not in ARTEFACTS]
-    if unknown:
-        raise ValueError(f"unknown candidate(s) {unknown}; the candidates are "
-                         f"{', '.join(candidate_names(tuple(KINDS)))}")
-    effects = [n for n in library if n in SIMULATED]
-    artefacts = [n for n in library if n in ARTEFACTS]
+    effects, artefacts = resolve_library(library, kinds)
     workers = workers or os.cpu_count() or 1
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
@@ -486,7 +522,7 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
     if artefacts:
         cands += artefact_responses(artefacts, seeded, cache, workers)
-    return TwinEnsemble(nominal, seed_list, twin, cands)
+    return TwinEnsemble(nominal, seed_list, twin, cands, effects)
 
 
 def check_layout(real_dir: Path, nominal: Scenario, cache: Path) -> None:
@@ -509,24 +545,31 @@ def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
                         library: list[str] | None = None, alpha: float = 0.01
                         ) -> tuple[dict, dict[str, np.ndarray]]:
     """The diagnosis of a recording's signatures against an ensemble; ``library`` restricts
-    the candidates (the blind benchmark's open-set cases)."""
+    the candidates (the blind benchmark's open-set cases; names or ``module:NAME``)."""
+    if library is not None:
+        effects, artefacts = resolve_library(library)
+        library = [*effects, *artefacts]
     cands = [c for c in ens.candidates if library is None or c.name in library]
     return attribution.diagnose(real, ens.twin, cands, alpha=alpha)
 
 
-def library_json(names: list[str], nominal: Scenario | None = None) -> dict:
+def library_json(names: list[str], effects: dict[str, Effect] | None = None,
+                 nominal: Scenario | None = None) -> dict:
     """The library's entry of ``diagnosis.json``: per candidate its kind ("physical effect" |
     "parameter" | "signal artefact"), title, source, (artefacts) the phrase in the owner's
     words, (twin parameters) the keys, quantity, unit and the value of each key in ``nominal``
     and, per parameter, the prior range (low, high) and how the report prints it (label, unit,
-    digits, the fit grid's ends: :meth:`twin.effects.base.Param.display`)."""
+    digits, the fit grid's ends: :meth:`twin.effects.base.Param.display`). ``effects``: the
+    effects by name (default: the registered ones)."""
+    effects = candidates() if effects is None else effects
+
     def entry(n: str) -> dict:
-        if n in LIBRARY:
-            return {"kind": KIND_EFFECT, "title": LIBRARY[n].title, "source": LIBRARY[n].source,
-                    "params": {p.name: {"low": p.low, "high": p.high, **p.display()}
-                               for p in LIBRARY[n].params}}
         if n in PARAMETERS:
             return twin_parameters.library_entry(PARAMETERS[n], nominal)
+        if n in effects:
+            return {"kind": KIND_EFFECT, "title": effects[n].title, "source": effects[n].source,
+                    "params": {p.name: {"low": p.low, "high": p.high, **p.display()}
+                               for p in effects[n].params}}
         return art.library_entry(ARTEFACTS[n])
     return {n: entry(n) for n in names}
 
@@ -541,13 +584,14 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
+    resolve_library(library, kinds)  # an unknown candidate or kind stops before anything is simulated
     check_layout(real_dir, nominal, cache)
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
               "kinds": sorted({c.kind for c in ens.candidates}),
-              "library": library_json([c.name for c in ens.candidates], nominal),
+              "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
               **result}
     write_json(out / "diagnosis.json", result, nan_as_null=True)
     if plots:
