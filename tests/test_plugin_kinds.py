@@ -243,7 +243,9 @@ DIAG = ["campaign.phase2=false", "phase1.capture_s=1.0"]
 
 def test_candidate_by_module_name_and_bad_names(plugin, tmp_path):
     from twin.effects import candidate
-    from twin.harness.gap_runner import candidate_names, library_json, resolve_library, with_effects
+    from twin.harness.gap_runner import KINDS, candidate_names, library_json, resolve_library, with_effects
+
+    ALL_KINDS = tuple(KINDS)  # the error names every candidate --candidate accepts (twin parameters too)
     from twin.scenario import load
 
     effects, artefacts = resolve_library([f"{MODULE}:HEAVY", "cogging", "gain:acc1"])
@@ -255,7 +257,7 @@ def test_candidate_by_module_name_and_bad_names(plugin, tmp_path):
     with pytest.raises(ValueError) as exc:
         resolve_library(["carriage_mas"])
     assert str(exc.value) == (f"unknown candidate 'carriage_mas'; the candidates are "
-                              f"{', '.join(candidate_names())}, or module:NAME of an Effect")
+                              f"{', '.join(candidate_names(ALL_KINDS))}, or module:NAME of an Effect")
     with pytest.raises(ValueError) as exc:
         resolve_library(["gain:acc9"])
     assert str(exc.value).startswith("unknown candidate 'gain:acc9'; the candidates are ")
@@ -274,8 +276,8 @@ def test_candidate_by_module_name_and_bad_names(plugin, tmp_path):
     r = twin("diagnose", real, "--scenario", REPO / "scenarios/diagnose-bench.toml", "--candidate",
              "carriage_mas", "-o", tmp_path / "d", pythonpath=plugin[0], check=False)
     assert r.returncode == 2
-    assert (f"unknown candidate 'carriage_mas'; the candidates are {', '.join(candidate_names())}, "
-            "or module:NAME of an Effect") in flat(r.stderr)
+    assert (f"unknown candidate 'carriage_mas'; the candidates are "
+            f"{', '.join(candidate_names(ALL_KINDS))}, or module:NAME of an Effect") in flat(r.stderr)
 
 
 def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path):
