@@ -88,3 +88,34 @@ def test_scheduler_and_workers_exclude_each_other(tmp_path):
         r = run_twin(*cmd, "--workers", "2", "--scheduler", "tcp://127.0.0.1:9", check=False)
         assert r.returncode == 2 and "--scheduler and --workers exclude each other" in r.stdout + r.stderr
         assert "Traceback" not in r.stderr
+
+
+def test_diagnose_on_a_dask_scheduler_equals_local_processes(scheduler, tmp_path):
+    """`twin diagnose --scheduler` (issue 15, item 3): the twin's seeds, a twin parameter's
+    grid, an effect's grid and a signal artefact's post-processing run on the Dask cluster,
+    with their own cache, and give the diagnosis of two local processes, number for number."""
+    bench = REPO / "scenarios/diagnose-bench.toml"
+    sets = [a for kv in ("campaign.phase2=false", "phase1.capture_s=1.0") for a in ("--set", kv)]
+    run_twin("simulate", bench, "-o", tmp_path / "real", *sets, "--set", "axis.carriage_mass_kg=160",
+             "--set", "seed=3")
+    cands = [a for c in ("axis.carriage_mass_kg", "cogging", "gain:acc1") for a in ("--candidate", c)]
+    docs = {}
+    for label, where in (("local", ["--workers", "2"]), ("dask", ["--scheduler", scheduler])):
+        r = run_twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, *cands, "--seeds", "3",
+                     *where, "-o", tmp_path / label, "--cache", tmp_path / f"cache-{label}")
+        assert "Traceback" not in r.stderr
+        docs[label] = json.loads((tmp_path / label / "diagnosis.json").read_text())
+    # a significant gap, every candidate fitted: the comparison below compares real work
+    assert docs["local"]["heldout_gap_before"] > docs["local"]["heldout_gap_critical"]
+    assert sorted(c["effect"] for c in docs["local"]["ranking"]) == ["axis.carriage_mass_kg", "cogging", "gain:acc1"]
+    assert docs["dask"] == docs["local"]
+
+
+def test_diagnose_scheduler_errors_are_exact(tmp_path):
+    bench = REPO / "scenarios/diagnose-bench.toml"
+    (tmp_path / "real").mkdir()
+    r = run_twin("diagnose", tmp_path / "real", "--scenario", bench, "--scheduler", "tcp://127.0.0.1:1",
+                 "--workers", "2", check=False)
+    assert r.returncode == 2
+    assert ("error: --scheduler and --workers exclude each other: --scheduler sends the simulations to an "
+            "existing dask cluster, --workers N runs them in N local processes") in " ".join(r.stderr.split())

@@ -775,12 +775,19 @@ def diagnose(
         "kinds of candidate, comma-separated: physical (the registered effects), parameter (twin "
         "parameters set wrong: 60 more simulations, docs/gap-diagnosis.md), artefact (signal "
         "artefacts); default physical,artefact; --candidate wins")),
+    scheduler: str | None = typer.Option(None, "--scheduler",
+                                         help="address of a running dask.distributed scheduler to "
+                                              "run the simulations on (its workers must see the cache "
+                                              "at the same path); results as with local processes"),
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
     once it is added (held-out data). Writes OUT/diagnosis.json and OUT/report/ (gap maps
     before and after)."""
-    _require("diagnose", "sim")
+    _require("diagnose", "sim", *(["cluster"] if scheduler is not None else []))
+    if scheduler is not None and workers is not None:
+        _fail("--scheduler and --workers exclude each other: --scheduler sends the simulations to an "
+              "existing dask cluster, --workers N runs them in N local processes")
     from analysis.dataset import DatasetError
     from twin.harness.gap_runner import DEFAULT_KINDS, KINDS, run_diagnosis
 
@@ -806,7 +813,8 @@ def diagnose(
         try:
             res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
                                 cache=cache, library=list(candidates) or None,
-                                on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list)
+                                on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
+                                scheduler=scheduler)
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

@@ -33,9 +33,7 @@ import json
 import os
 import shutil
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -65,11 +63,28 @@ from twin.campaign import simulate_campaigns_batched
 from twin.effects import Effect, candidate, candidates
 from twin.effects import parameters as twin_parameters
 from twin.effects.parameters import PARAMETERS
+from twin.executors import make_executor, map_ordered
 from twin.scenario import Scenario, from_dict
 
 DEFAULT_SEEDS = 8
 BATCH = 6  # campaigns simulated together (batched rollouts) in one task
 SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
+
+
+def run_tasks(fn: Callable, args: list[tuple], workers: int, scheduler: str | None = None,
+              on_done: Callable[[int], None] | None = None) -> list:
+    """``[fn(*a) for a in args]`` in order: on the Dask cluster at ``scheduler`` when given
+    (its workers must see the cache at the same path), else on ``workers`` local processes
+    (spawn), or in this process when there is one worker or one task (:mod:`twin.executors`,
+    the executor choice of ``twin sweep`` and ``twin simulate``). ``on_done(i)`` is called as
+    task i finishes. Each task is a pure function of its arguments and writes its own cache
+    files, so the results do not depend on where it ran."""
+    if not args:
+        return []
+    local = 1 if workers <= 1 or len(args) <= 1 else min(workers, len(args))
+    with make_executor(local, scheduler=scheduler, prefix="diagnose") as ex:
+        return map_ordered(ex, fn, args, [str(i) for i in range(len(args))],
+                           None if on_done is None else (lambda i, _key: on_done(i)))
 
 #: The kinds of candidate as ``--kinds`` names them: the registered physical effects, the twin
 #: parameters (:data:`twin.effects.parameters.PARAMETERS`, simulated like the effects), the
@@ -167,8 +182,9 @@ def load_signatures(path: str) -> dict[str, Signature]:
 
 def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
                  on_progress: Callable[[int, int], None] | None = None,
-                 keep: bool = False) -> list[dict[str, Signature]]:
-    """Signatures of every scenario (cached), in order, on ``workers`` processes."""
+                 keep: bool = False, scheduler: str | None = None) -> list[dict[str, Signature]]:
+    """Signatures of every scenario (cached), in order, on ``workers`` processes or the Dask
+    cluster at ``scheduler`` (:func:`run_tasks`)."""
     payloads = [s.to_json() for s in scenarios]
     paths: list[str | None] = [None] * len(payloads)
     todo = []
@@ -198,18 +214,17 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
                 n += 1
         return n
 
-    if workers <= 1 or len(batches) <= 1:
-        for batch in batches:
-            done += record(batch, evaluate(batch, str(cache_dir), keep))
-            if on_progress:
-                on_progress(done, len(payloads))
-    else:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            futures = {pool.submit(evaluate, batch, str(cache_dir), keep): batch for batch in batches}
-            for fut in as_completed(futures):
-                done += record(futures[fut], fut.result())
-                if on_progress:
-                    on_progress(done, len(payloads))
+    counted = [done]
+
+    def finished(i: int) -> None:
+        counted[0] += sum(len(unique[payload]) for payload in batches[i])
+        if on_progress:
+            on_progress(counted[0], len(payloads))
+
+    results = run_tasks(evaluate, [(batch, str(cache_dir), keep) for batch in batches], workers, scheduler,
+                        finished)
+    for batch, result in zip(batches, results, strict=True):
+        record(batch, result)
     return [load_signatures(p) for p in paths]  # type: ignore[arg-type]
 
 
@@ -313,7 +328,8 @@ def artefact_cached(base: Scenario, specs: list[dict[str, dict[str, float]]], ca
 
 def artefact_signatures(base: Scenario, specs: list[dict[str, dict[str, float]]], cache: Path,
                         workers: int = 1, keep_campaign: bool = True,
-                        on_progress: Callable[[int, int], None] | None = None
+                        on_progress: Callable[[int, int], None] | None = None,
+                        scheduler: str | None = None
                         ) -> tuple[dict[str, Signature], list[dict[str, Signature]]]:
     """The signatures of the campaign of ``base`` as simulated (the base) and post-processed
     with each of ``specs`` ({artefact candidate: {param: value}}, applied in order; random
@@ -343,15 +359,8 @@ def artefact_signatures(base: Scenario, specs: list[dict[str, dict[str, float]]]
     done = len(specs) - len(jobs)
     if on_progress:
         on_progress(done, len(specs))
-    if len(chunks) <= 1:
-        for ch in chunks:
-            _artefact_batch(str(h5), [c[0] for c in ch], [c[1] for c in ch], str(base_path), base.seed)
-    else:
-        with ProcessPoolExecutor(max_workers=len(chunks), mp_context=get_context("spawn")) as pool:
-            futs = [pool.submit(_artefact_batch, str(h5), [c[0] for c in ch], [c[1] for c in ch],
-                                str(base_path), base.seed) for ch in chunks]
-            for fut in as_completed(futs):
-                fut.result()
+    run_tasks(_artefact_batch, [(str(h5), [c[0] for c in ch], [c[1] for c in ch], str(base_path), base.seed)
+                                for ch in chunks], len(chunks), scheduler)
     if on_progress:
         on_progress(len(specs), len(specs))
     if not keep_campaign:
@@ -377,7 +386,8 @@ def _simulate_kept(payloads: list[str], dirs: list[str]) -> None:
         simulate_campaigns_batched([from_dict(json.loads(p)) for p in payloads], [Path(d) for d in dirs])
 
 
-def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int) -> None:
+def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int,
+                     scheduler: str | None = None) -> None:
     """Simulate the campaigns of ``scenarios`` whose files are not kept in the cache
     (``cache/<key>/campaign``), in batches of up to ``BATCH`` on ``workers`` processes."""
     todo = [s for s in scenarios if not (Path(cache) / _key(s) / "campaign" / "measurements.h5").exists()]
@@ -386,18 +396,12 @@ def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int) -> No
     size = max(1, min(BATCH, -(-len(todo) // max(workers, 1))))
     batches = [todo[k:k + size] for k in range(0, len(todo), size)]
     args = [([s.to_json() for s in b], [str(Path(cache) / _key(s) / "campaign") for s in b]) for b in batches]
-    if workers <= 1 or len(batches) <= 1:
-        for a in args:
-            _simulate_kept(*a)
-        return
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        for fut in as_completed([pool.submit(_simulate_kept, *a) for a in args]):
-            fut.result()
+    run_tasks(_simulate_kept, args, workers, scheduler)
 
 
 def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, workers: int = 1,
-                       on_progress: Callable[[int, int], None] | None = None
-                       ) -> list[CandidateResponse]:
+                       on_progress: Callable[[int, int], None] | None = None,
+                       scheduler: str | None = None) -> list[CandidateResponse]:
     """The artefact candidates' responses: the change of every statistic when each grid point
     is applied to the campaign of the twin's first seed, against that campaign; for a
     ``seed_dependent`` artefact, the mean of that change over every seed of ``seeded``."""
@@ -415,13 +419,13 @@ def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, wo
         plans.append((specs, where))
     # The seeds' campaigns simulated together where their post-processed signatures are missing.
     ensure_campaigns([seeded[k] for k in range(1, n_bases) if not artefact_cached(seeded[k], plans[k][0], cache)],
-                     cache, workers)
+                     cache, workers, scheduler)
     sums: dict[str, dict[str, np.ndarray]] = {}
     for k, (specs, where) in enumerate(plans):
         # The first seed's campaign stays in the cache (the artefact grid of a later version is
         # post-processed from it); the others only serve the seed-dependent artefacts.
         base_sig, sigs = artefact_signatures(seeded[k], specs, cache, workers, keep_campaign=k == 0,
-                                             on_progress=on_progress)
+                                             on_progress=on_progress, scheduler=scheduler)
         n = base_sig["cal"].values.size
         for name in names:
             if k == 0 or ARTEFACTS[name].seed_dependent:
@@ -508,20 +512,22 @@ def resolve_library(library: list[str] | None, kinds: tuple[str, ...] | list[str
 def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
                    workers: int | None = None, library: list[str] | None = None,
                    on_progress: Callable[[int, int], None] | None = None,
-                   kinds: tuple[str, ...] | list[str] | None = None) -> TwinEnsemble:
+                   kinds: tuple[str, ...] | list[str] | None = None,
+                   scheduler: str | None = None) -> TwinEnsemble:
     """Simulate the twin's spread and the candidates' responses (cached): the physical effects
     and the twin parameters by simulation, the signal artefacts by post-processing the first
-    seed's campaign. ``library`` (candidate names) wins over ``kinds``."""
+    seed's campaign. ``library`` (candidate names) wins over ``kinds``; ``scheduler``: run the
+    simulations on that Dask cluster instead of ``workers`` local processes."""
     effects, artefacts = resolve_library(library, kinds)
     workers = workers or os.cpu_count() or 1
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
     cand_scen, points = candidate_scenarios(seeded, effects)
-    sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress)
+    sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress, scheduler=scheduler)
     twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
     cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
     if artefacts:
-        cands += artefact_responses(artefacts, seeded, cache, workers)
+        cands += artefact_responses(artefacts, seeded, cache, workers, scheduler=scheduler)
     return TwinEnsemble(nominal, seed_list, twin, cands, effects)
 
 
@@ -578,7 +584,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   library: list[str] | None = None, plots: bool = True,
                   on_progress: Callable[[int, int], None] | None = None,
-                  kinds: tuple[str, ...] | list[str] | None = None) -> dict:
+                  kinds: tuple[str, ...] | list[str] | None = None,
+                  scheduler: str | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content."""
     out = Path(out)
@@ -587,7 +594,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     resolve_library(library, kinds)  # an unknown candidate or kind stops before anything is simulated
     check_layout(real_dir, nominal, cache)
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
-    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds)
+    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
               "kinds": sorted({c.kind for c in ens.candidates}),
