@@ -324,3 +324,43 @@ def test_diagnose_names_a_mains_line_on_the_accelerometers(benchmark, tmp_path):
     assert re.search(r"a 50 Hz line of 0\.0[23]\d* m/s² on acc1 and acc2 at every speed: electrical pickup", said)
     page = (out / "report" / "index.html").read_text()
     assert "at every speed: electrical pickup" in page and "signal artefact" in page
+
+
+def test_benchmark_confusion_lists_every_miss(benchmark):
+    """Issue 15, item 6: the confusion table of benchmark.json (and benchmark_confusion.csv)
+    holds every single and artefact case whose first added candidate is not the injected one,
+    once, with what was named instead."""
+    out, res, _ = benchmark
+    misses = {c["id"]: c for c in res["cases"] if c["kind"] in ("single", "parameter", "artefact") and not c["correct"]}
+    listed = [i for g in res["confusion"] for i in g["cases"]]
+    assert sorted(listed) == sorted(misses)
+    for g in res["confusion"]:
+        assert g["count"] == len(g["cases"]) and g["named"] != g["injected"]
+        for i in g["cases"]:
+            assert misses[i]["injected"][0] == g["injected"]
+            assert (misses[i]["added"][:1] or [None])[0] == g["named"]
+    rows = (out / "benchmark_confusion.csv").read_text().splitlines()
+    assert rows[0] == "kind,injected,named first,verdict when none,count,cases"
+    assert len(rows) == 1 + len(res["confusion"])
+
+
+def test_confusion_groups_misses_by_what_was_named():
+    from twin.harness.gap_benchmark import confusion
+
+    def row(i, kind, injected, added, verdict="explained", correct=False):
+        return {"id": i, "kind": kind, "injected": [injected], "added": added, "verdict": verdict,
+                "correct": correct}
+
+    rows = [row("a", "parameter", "axis.nut_stiffness_N_per_um", ["axis.bearing_stiffness_N_per_um"]),
+            row("b", "parameter", "axis.nut_stiffness_N_per_um", ["axis.bearing_stiffness_N_per_um", "cogging"]),
+            row("c", "parameter", "axis.rail_friction_N", [], "no significant gap"),
+            row("d", "single", "cogging", ["cogging"], correct=True),
+            row("e", "null", "-", [], "explained"),
+            row("f", "artefact", "gain:acc1", [], "unexplained gap remains")]
+    assert confusion(rows) == [
+        {"kind": "parameter", "injected": "axis.nut_stiffness_N_per_um", "named": "axis.bearing_stiffness_N_per_um",
+         "verdict": None, "count": 2, "cases": ["a", "b"]},
+        {"kind": "artefact", "injected": "gain:acc1", "named": None, "verdict": "unexplained gap remains",
+         "count": 1, "cases": ["f"]},
+        {"kind": "parameter", "injected": "axis.rail_friction_N", "named": None, "verdict": "no significant gap",
+         "count": 1, "cases": ["c"]}]

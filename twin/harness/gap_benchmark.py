@@ -42,7 +42,10 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
   artefact on its target, "parameter": the parameter cases, the injected key first), with
   ``per_kind_median_heldout_shrink``; ``per_kind_top1_or_not_told_apart`` (the injected one
   first or among the ``alternatives`` of the first: candidates the data do not tell apart from
-  it); ``per_artefact_top1``, ``per_parameter_top1``.
+  it); ``per_artefact_top1``, ``per_parameter_top1``;
+- ``confusion`` (also ``benchmark_confusion.csv``): the cases whose first added candidate is not
+  the injected one, as (kind, injected, named first or none, count, case ids): the pairs the
+  diagnosis does not tell apart, measured (:func:`confusion`).
 """
 
 from __future__ import annotations
@@ -192,6 +195,24 @@ def _fit_errors(singles: list[dict]) -> dict[str, float]:
     return {k: float(np.median(v)) for k, v in sorted(errs.items())}
 
 
+def confusion(rows: list[dict]) -> list[dict]:
+    """What the diagnosis cannot tell apart, measured: every single, parameter and artefact case
+    whose first added candidate is not the injected one, grouped by (kind, injected, named) with
+    the count and the case ids, most frequent first. ``named`` is the first added candidate, or
+    ``None`` when nothing was added (``verdict`` then says whether a gap was seen at all)."""
+    groups: dict[tuple, dict] = {}
+    for r in rows:
+        if r["kind"] not in ("single", "parameter", "artefact") or r["correct"]:
+            continue
+        named = r["added"][0] if r["added"] else None
+        key = (r["kind"], r["injected"][0], named, None if named else r["verdict"])
+        g = groups.setdefault(key, {"kind": r["kind"], "injected": r["injected"][0], "named": named,
+                                    "verdict": key[3], "count": 0, "cases": []})
+        g["count"] += 1
+        g["cases"].append(r["id"])
+    return sorted(groups.values(), key=lambda g: (-g["count"], g["kind"], g["injected"], str(g["named"])))
+
+
 def _fraction(rows, kind) -> float | None:
     sel = [r["correct"] for r in rows if r["kind"] == kind]
     return float(np.mean(sel)) if sel else None
@@ -265,6 +286,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
         "fitted_relative_error": _fit_errors(singles + arts + pars),
         "per_effect_top1": {name: float(np.mean([r["correct"] for r in singles if r["injected"] == [name]]))
                             for name in sorted({r["injected"][0] for r in singles})},
+        "confusion": confusion(rows),
         "wall_time_s": {"twin_and_candidates": t_ens, "recordings": t_real,
                         "diagnoses": t_all - t_ens - t_real, "total": t_all},
         "cases": rows,
@@ -279,4 +301,10 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
             w.writerow([r["id"], r["kind"], "+".join(r["injected"]) or "-", r["magnitude"],
                         r["verdict"], " > ".join(r["ranking"]), "+".join(r["added"]) or "-",
                         f"{r['heldout_shrink']:.3f}", r["correct"]])
+    with open(out / "benchmark_confusion.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["kind", "injected", "named first", "verdict when none", "count", "cases"])
+        for g in summary["confusion"]:
+            w.writerow([g["kind"], g["injected"], g["named"] or "-", g["verdict"] or "", g["count"],
+                        " ".join(g["cases"])])
     return summary
