@@ -10,20 +10,10 @@ from typing import Any
 import h5py
 import numpy as np
 
+from analysis.dataset import schema
 from analysis.dataset.attrs import _loads, from_attr
 from analysis.dataset.h5file import _check_format, open_h5
-from analysis.dataset.schema import (
-    MEASUREMENTS_FORMAT,
-    OPTIONAL_PHASE2_CHANNELS,
-    PHASE1_CHANNELS,
-    PHASE2_CHANNELS,
-    PHYSICAL_RANGE,
-    SESSION_TRUTH_REQUIRED,
-    STROKE_TRUTH,
-    TIMELINE_REQUIRED,
-    TRUTH_FORMAT,
-    DatasetError,
-)
+from analysis.dataset.schema import DatasetError
 from analysis.dataset.validate import (
     _as_number,
     _attr_fs,
@@ -190,8 +180,8 @@ class _Reader:
                 f"{self.label}: {key} could not be read; the file may be truncated or corrupt ({e})") from None
         _check_finite(self.label, key, arr)
         name = key.rsplit("/", 1)[-1]
-        if self._format == MEASUREMENTS_FORMAT and name in PHYSICAL_RANGE and unit is not None:
-            _check_range(self.label, key, arr, PHYSICAL_RANGE[name], unit)
+        if self._format == schema.MEASUREMENTS_FORMAT and name in schema.PHYSICAL_RANGE and unit is not None:
+            _check_range(self.label, key, arr, schema.PHYSICAL_RANGE[name], unit)
         return arr, attrs
 
     def _json_attr(self, key: str, obj: h5py.HLObject, name: str) -> dict:
@@ -216,7 +206,7 @@ class Measurements(_Reader):
     Use :func:`open_measurements`; it is a context manager (``with open_measurements(p) as m:``).
     """
 
-    _format = MEASUREMENTS_FORMAT
+    _format = schema.MEASUREMENTS_FORMAT
 
     def axis(self) -> dict:
         """The nominal testbed description (``/@axis``, JSON)."""
@@ -235,7 +225,7 @@ class Measurements(_Reader):
         sample = _attr_int(self.label, attrs, gkey, "sample", "an integer Phase I sample index")
         fs = _attr_fs(self.label, attrs, gkey)
         arrays, n = {}, None
-        for ch, (unit, desc, cols) in PHASE1_CHANNELS.items():
+        for ch, (unit, desc, cols) in schema.PHASE1_CHANNELS.items():
             what = f"a dataset of {desc} in {unit}, shape {_shape_pattern(_dims(cols, 'n'))}"
             arrays[ch], _ = self._array(f"{gkey}/{ch}", what, _dims(cols, "n"), unit, n, "len(speed)")
             n = len(arrays[ch])
@@ -262,7 +252,7 @@ class Measurements(_Reader):
         format_version 2 on)."""
         rkey = f"/phase2/{session}/{run}"
         g = self._obj(rkey, h5py.Group, "a Phase II run group")
-        return [ch for ch in PHASE2_CHANNELS if isinstance(g.get(ch), h5py.Dataset)]
+        return [ch for ch in schema.PHASE2_CHANNELS if isinstance(g.get(ch), h5py.Dataset)]
 
     def phase2(self, session: str, run: str) -> Phase2Run:
         """One Phase II run, validated (see :class:`Phase2Run`)."""
@@ -270,8 +260,8 @@ class Measurements(_Reader):
         rkey = f"/phase2/{session}/{run}"
         g = self._obj(rkey, h5py.Group, "a Phase II run group")
         out: dict[str, Any] = {}
-        for ch, (unit, desc, cols) in PHASE2_CHANNELS.items():
-            if ch in OPTIONAL_PHASE2_CHANNELS and self.format_version >= 2 and f"{rkey}/{ch}" not in self._f:
+        for ch, (unit, desc, cols) in schema.PHASE2_CHANNELS.items():
+            if ch in schema.OPTIONAL_PHASE2_CHANNELS and self.format_version >= 2 and f"{rkey}/{ch}" not in self._f:
                 out[ch], out[f"{ch}_fs_hz"] = None, None
                 continue
             sym = {"imu_acc": "n", "imu_gyro": "m", "position_cmd": "k"}[ch]
@@ -323,7 +313,7 @@ class Measurements(_Reader):
 class Truth(_Reader):
     """Read-only view of a ``truth.h5``; use :func:`open_truth` (a context manager)."""
 
-    _format = TRUTH_FORMAT
+    _format = schema.TRUTH_FORMAT
 
     @property
     def onset_hours(self) -> float | None:
@@ -353,7 +343,7 @@ class Truth(_Reader):
         g = self._obj("/timeline", h5py.Group, "a group of (t,) arrays")
         out: dict[str, np.ndarray] = {}
         n = None
-        for key in [*TIMELINE_REQUIRED, *sorted(k for k in g if k not in TIMELINE_REQUIRED)]:
+        for key in [*schema.TIMELINE_REQUIRED, *sorted(k for k in g if k not in schema.TIMELINE_REQUIRED)]:
             out[key], _ = self._array(f"/timeline/{key}", "a (t,) array", ("t",), None, n, "len(hours)")
             n = len(out[key])
         return out
@@ -370,7 +360,7 @@ class Truth(_Reader):
             return None
         self._obj(key, h5py.Group, "a group of per-move arrays")
         out, n = {}, None
-        for k, unit in STROKE_TRUTH.items():
+        for k, unit in schema.STROKE_TRUTH.items():
             out[k], _ = self._array(f"{key}/{k}", "a (moves,) array", ("moves",), unit, n, "len(speed_m_s)")
             n = len(out[k])
         return out
@@ -380,7 +370,7 @@ class Truth(_Reader):
         key = f"/phase2/{name}"
         g = self._obj(key, h5py.Group, "a Phase II session group")
         attrs = {k: from_attr(v) for k, v in self._attrs(g, key).items()}
-        for a in SESSION_TRUTH_REQUIRED:
+        for a in schema.SESSION_TRUTH_REQUIRED:
             attrs[a] = _attr_number(self.label, attrs, key, a, "a finite number")
         x, _ = self._array(f"{key}/x_m", "a (n,) array of positions in m", ("n",), "m")
         E, _ = self._array(f"{key}/E", "a (6, n) array of error motions", (6, "n"), None, len(x), "len(x_m)")

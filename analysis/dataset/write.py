@@ -11,25 +11,11 @@ from typing import Any
 import h5py
 import numpy as np
 
+from analysis.dataset import schema
 from analysis.dataset.attrs import _dumps, write_attrs
 from analysis.dataset.axis import AxisDescription
 from analysis.dataset.leak_guard import _scan_truth_mentions
-from analysis.dataset.schema import (
-    DIAL_UNITS,
-    DOF_UNITS,
-    DOFS,
-    FORMAT_VERSION,
-    MEASUREMENTS_FORMAT,
-    OPTIONAL_PHASE2_CHANNELS,
-    PHASE1_CHANNELS,
-    PHASE2_CHANNELS,
-    PHYSICAL_RANGE,
-    SESSION_TRUTH_REQUIRED,
-    STROKE_TRUTH,
-    TIMELINE_REQUIRED,
-    TRUTH_FORMAT,
-    DatasetError,
-)
+from analysis.dataset.schema import DatasetError
 from analysis.dataset.validate import (
     _attr_fs,
     _attr_hours,
@@ -70,8 +56,8 @@ def _check_new(label: str, key: str, parent: h5py.Group, name: str, what: str) -
 
 def _put(label: str, key: str, g: h5py.Group, name: str, arr: np.ndarray, attrs: Mapping[str, Any]) -> None:
     _check_finite(label, key, arr)
-    if name in PHYSICAL_RANGE and g.file.attrs.get("format") == MEASUREMENTS_FORMAT:
-        _check_range(label, key, arr, PHYSICAL_RANGE[name], str(attrs.get("unit", "")))
+    if name in schema.PHYSICAL_RANGE and g.file.attrs.get("format") == schema.MEASUREMENTS_FORMAT:
+        _check_range(label, key, arr, schema.PHYSICAL_RANGE[name], str(attrs.get("unit", "")))
     # Fletcher-32: every chunk carries a checksum that the reader verifies, so bytes changed after
     # writing (a corrupt copy, a bad disk) raise an error instead of being analysed.
     ds = g.create_dataset(name, data=arr, fletcher32=True)
@@ -88,7 +74,7 @@ def _channels(
     unknown = sorted(set(datasets) - set(spec))
     if unknown:
         raise DatasetError(
-            f"{label}: {gkey}/{unknown[0]} is not a channel of format_version {FORMAT_VERSION}; "
+            f"{label}: {gkey}/{unknown[0]} is not a channel of format_version {schema.FORMAT_VERSION}; "
             f"expected only {', '.join(spec)}"
         )
     out = {}
@@ -102,6 +88,15 @@ def _channels(
         out[ch] = arr
     return out
 
+
+
+def _new_group_attrs(label: str, key: str, parent: h5py.Group, name: str, what: str, attrs) -> dict:
+    """The attributes of the new capture or session group ``key`` (a copy): refused if ``name``
+    already exists in ``parent``; ``hours`` validated (:class:`DatasetError` naming the key)."""
+    _check_new(label, key, parent, name, what)
+    attrs = dict(attrs)
+    attrs["hours"] = _attr_hours(label, attrs, key)
+    return attrs
 
 
 def assemble_measurements(
@@ -141,40 +136,36 @@ def assemble_measurements(
     axis_json = _dumps("axis", AxisDescription.from_dict(dict(axis), label).to_dict(), allow_nan=False)
 
     def write(f: h5py.File) -> None:
-        f.attrs["format"] = MEASUREMENTS_FORMAT
-        f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+        f.attrs["format"] = schema.MEASUREMENTS_FORMAT
+        f.attrs["format_version"] = np.int64(schema.FORMAT_VERSION)
         f.attrs["axis"] = axis_json
         g1 = f.create_group("phase1")
         for name, attrs, datasets in phase1:
             gkey = f"/phase1/{name}"
-            _check_new(label, gkey, g1, name, "capture")
-            attrs = dict(attrs)
-            attrs["hours"] = _attr_hours(label, attrs, gkey)
+            attrs = _new_group_attrs(label, gkey, g1, name, "capture", attrs)
             attrs["sample"] = _attr_int(label, attrs, gkey, "sample", "an integer Phase I sample index")
             attrs["fs_hz"] = _attr_fs(label, attrs, gkey)
-            arrays = _channels(label, gkey, datasets, PHASE1_CHANNELS)
+            arrays = _channels(label, gkey, datasets, schema.PHASE1_CHANNELS)
             n = None
-            for ch, (_unit, _, cols) in PHASE1_CHANNELS.items():
+            for ch, (_unit, _, cols) in schema.PHASE1_CHANNELS.items():
                 n = _check_shape(label, f"{gkey}/{ch}", arrays[ch].shape, _dims(cols, "n"), n, "len(speed)")
             g = g1.create_group(name)
             write_attrs(g, attrs)
-            for ch, (unit, _, _) in PHASE1_CHANNELS.items():
+            for ch, (unit, _, _) in schema.PHASE1_CHANNELS.items():
                 _put(label, f"{gkey}/{ch}", g, ch, arrays[ch], {"unit": unit})
         g2 = f.create_group("phase2")
         for sname, sattrs, runs in phase2:
             skey = f"/phase2/{sname}"
-            _check_new(label, skey, g2, sname, "session")
-            sattrs = dict(sattrs)
-            sattrs["hours"] = _attr_hours(label, sattrs, skey)
+            sattrs = _new_group_attrs(label, skey, g2, sname, "session", sattrs)
             gs = g2.create_group(sname)
             write_attrs(gs, sattrs)
             for rname, rattrs, datasets, dattrs in runs:
                 rkey = f"{skey}/{rname}"
                 _check_new(label, rkey, gs, rname, "run")
-                arrays = _channels(label, rkey, datasets, PHASE2_CHANNELS, OPTIONAL_PHASE2_CHANNELS)
+                arrays = _channels(label, rkey, datasets, schema.PHASE2_CHANNELS, schema.OPTIONAL_PHASE2_CHANNELS)
                 dattrs = dattrs or {}
                 chattrs = {}
-                for ch, (unit, _, cols) in PHASE2_CHANNELS.items():
+                for ch, (unit, _, cols) in schema.PHASE2_CHANNELS.items():
                     if ch not in arrays:
                         continue
                     a = dict(dattrs.get(ch, {}))
@@ -203,8 +194,9 @@ def assemble_measurements(
             check_dtype(label, "/dial_indicator/backlash_um", backlash.dtype)
             n = _check_shape(label, "/dial_indicator/hours", hours.shape, ("n",))
             _check_shape(label, "/dial_indicator/backlash_um", backlash.shape, ("n",), n, "len(hours)")
-            _put(label, "/dial_indicator/hours", gd, "hours", hours, {"unit": DIAL_UNITS["hours"]})
-            _put(label, "/dial_indicator/backlash_um", gd, "backlash_um", backlash, {"unit": DIAL_UNITS["backlash_um"]})
+            _put(label, "/dial_indicator/hours", gd, "hours", hours, {"unit": schema.DIAL_UNITS["hours"]})
+            _put(label, "/dial_indicator/backlash_um", gd, "backlash_um", backlash,
+                 {"unit": schema.DIAL_UNITS["backlash_um"]})
         leaks = _scan_truth_mentions(f)
         if leaks:
             shown = "; ".join(leaks[:5]) + (f"; and {len(leaks) - 5} more" if len(leaks) > 5 else "")
@@ -260,17 +252,17 @@ def assemble_truth(
     onset = float("nan") if onset_hours is None else float(onset_hours)
 
     def write(f: h5py.File) -> None:
-        f.attrs["format"] = TRUTH_FORMAT
-        f.attrs["format_version"] = np.int64(FORMAT_VERSION)
+        f.attrs["format"] = schema.TRUTH_FORMAT
+        f.attrs["format_version"] = np.int64(schema.FORMAT_VERSION)
         f.attrs["scenario"] = scenario_json
         f.attrs["onset_hours"] = np.float64(onset)
         gt = f.create_group("timeline")
         gt.attrs["onset_hours"] = np.float64(onset)  # also here, beside the injected state
-        for key in TIMELINE_REQUIRED:
+        for key in schema.TIMELINE_REQUIRED:
             if key not in timeline:
                 raise DatasetError(f"{label}: /timeline/{key} is missing; expected a (t,) array")
         n = None
-        for key in [*TIMELINE_REQUIRED, *(k for k in timeline if k not in TIMELINE_REQUIRED)]:
+        for key in [*schema.TIMELINE_REQUIRED, *(k for k in timeline if k not in schema.TIMELINE_REQUIRED)]:
             _check_name(label, f"/timeline/{key}", key, "timeline array")
             arr = np.asarray(timeline[key])
             check_dtype(label, f"/timeline/{key}", arr.dtype)
@@ -282,7 +274,7 @@ def assemble_truth(
             skey = f"/phase2/{name}"
             _check_new(label, skey, gp, name, "session")
             attrs = dict(attrs)
-            for a in SESSION_TRUTH_REQUIRED:
+            for a in schema.SESSION_TRUTH_REQUIRED:
                 attrs[a] = _attr_number(label, attrs, skey, a, "a finite number")
             x_m, E = np.asarray(x_m), np.asarray(E)
             check_dtype(label, f"{skey}/x_m", x_m.dtype)
@@ -292,22 +284,22 @@ def assemble_truth(
             g = gp.create_group(name)
             write_attrs(g, attrs)
             _put(label, f"{skey}/x_m", g, "x_m", x_m, {"unit": "m"})
-            _put(label, f"{skey}/E", g, "E", E, {"dofs": list(DOFS), "units": list(DOF_UNITS)})
+            _put(label, f"{skey}/E", g, "E", E, {"dofs": list(schema.DOFS), "units": list(schema.DOF_UNITS)})
             strokes = dict(rest[0]) if rest and rest[0] else {}
             if strokes:
                 gs = g.create_group("strokes")
                 m_ = None
-                for k in STROKE_TRUTH:
+                for k in schema.STROKE_TRUTH:
                     if k not in strokes:
                         raise DatasetError(f"{label}: {skey}/strokes/{k} is missing; expected a (moves,) array")
                 for k, arr in strokes.items():
-                    if k not in STROKE_TRUTH:
+                    if k not in schema.STROKE_TRUTH:
                         raise DatasetError(f"{label}: {skey}/strokes/{k} is not a stroke truth array; "
-                                           f"expected only {', '.join(STROKE_TRUTH)}")
+                                           f"expected only {', '.join(schema.STROKE_TRUTH)}")
                     arr = np.asarray(arr)
                     check_dtype(label, f"{skey}/strokes/{k}", arr.dtype)
                     m_ = _check_shape(label, f"{skey}/strokes/{k}", arr.shape, ("moves",), m_, "len(speed_m_s)")
-                    _put(label, f"{skey}/strokes/{k}", gs, k, arr, {"unit": STROKE_TRUTH[k]})
+                    _put(label, f"{skey}/strokes/{k}", gs, k, arr, {"unit": schema.STROKE_TRUTH[k]})
         ge = f.create_group("effects")
         ge.attrs["json"] = effects_json
 
