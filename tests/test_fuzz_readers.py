@@ -124,6 +124,7 @@ def run_forked(args: list[str], log, timeout_s: float = 30.0) -> tuple[int, floa
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(4 * 3600)  # 1500 verb runs: about 70 min on a shared 2-core machine
 def test_fuzz_500(sources, tmp_path):
     root, ref, src = sources
     n = int(os.environ.get("FUZZ_N", "500"))
