@@ -119,3 +119,13 @@ def test_diagnose_scheduler_errors_are_exact(tmp_path):
     assert r.returncode == 2
     assert ("error: --scheduler and --workers exclude each other: --scheduler sends the simulations to an "
             "existing dask cluster, --workers N runs them in N local processes") in " ".join(r.stderr.split())
+
+
+def test_diagnose_unknown_kind_is_refused_exactly(tmp_path):
+    bench = REPO / "scenarios/diagnose-bench.toml"
+    (tmp_path / "real").mkdir()
+    for kinds, unknown in (("physical,bogus", "['bogus']"), (",", "[]")):
+        r = run_twin("diagnose", tmp_path / "real", "--scenario", bench, "--kinds", kinds, check=False)
+        assert r.returncode == 2
+        assert (f"error: --kinds {kinds}: unknown kind(s) of candidate {unknown}; expected one or more of "
+                "physical, parameter, artefact") in " ".join(r.stderr.split())

@@ -789,16 +789,16 @@ def diagnose(
         _fail("--scheduler and --workers exclude each other: --scheduler sends the simulations to an "
               "existing dask cluster, --workers N runs them in N local processes")
     from analysis.dataset import DatasetError
-    from twin.harness.gap_runner import DEFAULT_KINDS, KINDS, run_diagnosis
+    from twin.harness.gap_runner import check_kinds, run_diagnosis
 
     try:
         s = load(scenario, overrides)
     except ScenarioError as exc:
         _fail(str(exc))
-    kinds = ",".join(DEFAULT_KINDS) if kinds is None else kinds
-    kind_list = [k.strip() for k in kinds.split(",") if k.strip()]
-    if not kind_list or any(k not in KINDS for k in kind_list):
-        _fail(f"--kinds {kinds}: allowed a comma-separated list of {', '.join(KINDS)}")
+    try:
+        kind_list = check_kinds(None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()])
+    except ValueError as exc:
+        _fail(f"--kinds {kinds}: {exc}")
     if not (real_dir / "measurements.h5").is_file():
         _fail(f"{real_dir}: no measurements.h5; expected a recording in the dataset format "
               "(docs/dataset-format.md)")

@@ -86,6 +86,7 @@ def run_tasks(fn: Callable, args: list[tuple], workers: int, scheduler: str | No
         return map_ordered(ex, fn, args, [str(i) for i in range(len(args))],
                            None if on_done is None else (lambda i, _key: on_done(i)))
 
+
 #: The kinds of candidate as ``--kinds`` names them: the registered physical effects, the twin
 #: parameters (:data:`twin.effects.parameters.PARAMETERS`, simulated like the effects), the
 #: signal artefacts.
@@ -206,14 +207,6 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
     size = max(1, min(BATCH, -(-len(keys) // max(workers, 1))))
     batches = [keys[k:k + size] for k in range(0, len(keys), size)]
 
-    def record(batch: list[str], result: list[str]) -> int:
-        n = 0
-        for payload, path in zip(batch, result, strict=True):
-            for i in unique[payload]:
-                paths[i] = path
-                n += 1
-        return n
-
     counted = [done]
 
     def finished(i: int) -> None:
@@ -224,7 +217,9 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
     results = run_tasks(evaluate, [(batch, str(cache_dir), keep) for batch in batches], workers, scheduler,
                         finished)
     for batch, result in zip(batches, results, strict=True):
-        record(batch, result)
+        for payload, path in zip(batch, result, strict=True):
+            for i in unique[payload]:
+                paths[i] = path
     return [load_signatures(p) for p in paths]  # type: ignore[arg-type]
 
 
@@ -389,7 +384,8 @@ def _simulate_kept(payloads: list[str], dirs: list[str]) -> None:
 def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int,
                      scheduler: str | None = None) -> None:
     """Simulate the campaigns of ``scenarios`` whose files are not kept in the cache
-    (``cache/<key>/campaign``), in batches of up to ``BATCH`` on ``workers`` processes."""
+    (``cache/<key>/campaign``), in batches of up to ``BATCH`` on ``workers`` processes or the
+    Dask cluster at ``scheduler`` (:func:`run_tasks`)."""
     todo = [s for s in scenarios if not (Path(cache) / _key(s) / "campaign" / "measurements.h5").exists()]
     if not todo:
         return
@@ -460,11 +456,13 @@ class TwinEnsemble:
     effects: dict[str, Effect] = field(default_factory=dict)
 
 
-def _kinds(kinds: tuple[str, ...] | list[str] | None) -> tuple[str, ...]:
+def check_kinds(kinds: tuple[str, ...] | list[str] | None) -> tuple[str, ...]:
+    """The kinds of candidate to try (names of :data:`KINDS`; None: :data:`DEFAULT_KINDS`);
+    ValueError naming the unknown ones, or an empty list."""
     kinds = DEFAULT_KINDS if kinds is None else tuple(kinds)
     unknown = [k for k in kinds if k not in KINDS]
-    if unknown:
-        raise ValueError(f"unknown kind(s) of candidate {unknown}; the kinds are {', '.join(KINDS)}")
+    if unknown or not kinds:
+        raise ValueError(f"unknown kind(s) of candidate {unknown}; expected one or more of {', '.join(KINDS)}")
     return kinds
 
 
@@ -472,7 +470,7 @@ def candidate_names(kinds: tuple[str, ...] | list[str] | None = None) -> list[st
     """The candidates of ``kinds`` (names of :data:`KINDS`; default :data:`DEFAULT_KINDS`): the
     registered physical effects (built-in, then installed: :func:`twin.effects.candidates`),
     then the twin parameters, then the signal artefacts."""
-    kinds = _kinds(kinds)
+    kinds = check_kinds(kinds)
     return ((list(candidates()) if "physical" in kinds else [])
             + (list(PARAMETERS) if "parameter" in kinds else [])
             + (list(ARTEFACTS) if "artefact" in kinds else []))
@@ -485,7 +483,7 @@ def resolve_library(library: list[str] | None, kinds: tuple[str, ...] | list[str
     ``module:NAME`` of an Effect; None: every candidate of ``kinds`` (default
     :data:`DEFAULT_KINDS`). An unknown one raises ValueError naming it and the candidates."""
     if library is None:
-        kinds = _kinds(kinds)
+        kinds = check_kinds(kinds)
         effects = {**(candidates() if "physical" in kinds else {}),
                    **(PARAMETERS if "parameter" in kinds else {})}
         return effects, (list(ARTEFACTS) if "artefact" in kinds else [])
