@@ -372,7 +372,9 @@ def test_runs_are_bit_for_bit_the_single_recordings():
                        measure_gyroscope(rate, 5_000.0, gyro_spec, g)[1]))
     gens = [np.random.default_rng([9, r]) for r in range(5)]
     old_block = instruments._BLOCK_BYTES
-    instruments._BLOCK_BYTES = 2 * (n + 100) * 3 * 8  # two runs per block: blocks and a remainder
+    # The accelerometer's noise is drawn at its 1613 Hz: 1291 samples after a 54-sample warm-up;
+    # two runs per block for it (blocks and a remainder), three for the gyroscope.
+    instruments._BLOCK_BYTES = 2 * (1291 + 54) * 3 * 8
     try:
         _, accs = measure_imu_accelerometer_runs([force] * 5, 5_000.0, acc_spec, gens)
         _, gyros = measure_gyroscope_runs([rate] * 5, 5_000.0, gyro_spec, gens)
@@ -390,6 +392,32 @@ def test_runs_are_bit_for_bit_the_single_recordings():
     assert np.array_equal(one, both[0]) and np.array_equal(two, both[1])
     with pytest.raises(ValueError, match="need one generator per recording"):
         measure_gyroscope_runs([rate] * 2, 5_000.0, gyro_spec, gens[:1])
+
+
+@pytest.mark.parametrize("measure, spec, fs_sim, draws_at", [
+    (measure_imu_accelerometer, AnalogAccelerometerSpec(), 5_000.0, 1613.0),
+    (measure_gyroscope, DigitalGyroSpec(), 5_000.0, 1000.0),
+    (measure_nut_accelerometer, NutAccelerometerSpec(), FS_SIM, FS_SIM),
+])
+def test_noise_spectrum_follows_the_sensor_response(measure, spec, fs_sim, draws_at):
+    """The noise is drawn at the instrument's output rate where it decimates (the IMU: no
+    resampling of noise), at the simulation rate otherwise (the nut accelerometers), and in both
+    cases its density follows the sensor's response: flat at ``noise_density`` in band, 1/√2 of it
+    at the half-power frequency (within 5 %)."""
+    n = int(120 * fs_sim)
+    rng = np.random.default_rng(21)
+    t, out = measure(np.zeros((n, 3)), fs_sim, spec, rng)
+    fs_out = 1.0 / np.mean(np.diff(t))
+    warm = math.ceil(10.0 / spec.bandwidth_hz * draws_at)
+    drawn = (warm + (t.size if draws_at != fs_sim else n)) * 3
+    twin_rng = np.random.default_rng(21)
+    twin_rng.standard_normal(drawn)
+    assert rng.bit_generator.state == twin_rng.bit_generator.state  # exactly these draws
+    freq, psd = signal.welch(out, fs=fs_out, nperseg=8192, axis=0)
+    in_band = np.sqrt(psd[(freq >= 5.0) & (freq <= 50.0)].mean(axis=0)) / spec.noise_density
+    edge = np.sqrt(psd[np.abs(freq - spec.bandwidth_hz) <= 5.0].mean(axis=0)) / spec.noise_density
+    assert np.all(np.abs(in_band - 1.0) < 0.05), in_band
+    assert np.all(np.abs(edge - 2 ** -0.5) < 0.05), edge
 
 
 # ---------------------------------------------------------------------------------------------

@@ -581,23 +581,38 @@ def _filter_design(spec, fs_sim: float) -> tuple[np.ndarray, np.ndarray]:
 _BLOCK_BYTES = 64 * 2**20
 
 
+def _noise_rate(spec, fs_sim: float) -> float:
+    """Rate at which the instrument's noise is drawn and filtered, Hz: its output rate
+    ``spec.fs_hz`` when it decimates (``fs_hz < fs_sim``) and its response can be designed there
+    (``bandwidth_hz < 0.45·fs_hz``), else ``fs_sim``. Noise drawn at the output rate has the same
+    in-band density ``noise_density·|H(f)|`` and needs no resampling (the IMU channels of Phase II);
+    what it lacks is the small share of noise above ``fs_hz/2`` that would alias into the band."""
+    fs_out = float(spec.fs_hz)
+    if fs_out < fs_sim and spec.bandwidth_hz < 0.45 * fs_out:
+        return fs_out
+    return float(fs_sim)
+
+
 def _instrument_chain(true_values: np.ndarray, fs_sim: float, spec, rng: np.random.Generator,
                       t0: float) -> tuple[np.ndarray, np.ndarray]:
     """The chain shared by all triaxial instruments, before their output quantisation.
 
     1. error model on the true signal (bias, scale, misalignment);
-    2. white noise added at the simulation rate, std = ``noise_density·sqrt(fs_sim / 2)`` per
-       sample, so its one-sided density is ``noise_density`` from 0 to fs_sim/2;
-    3. the sensor's causal response (``sosfilt``), started in the steady state of the first
-       (noise-free) input, so a constant input gives a constant output from the first sample.
-       The noise is run through the filter for a warm-up of ``10 / bandwidth_hz`` seconds that is
-       then discarded, so the filtered noise is stationary from the first sample too;
-    4. sampling at ``t0 + k / spec.fs_hz`` (:func:`decimate_to`, cubic).
+    2. the sensor's causal response (``sosfilt``, Butterworth low-pass of ``spec.filter_order``
+       with half-power at ``spec.bandwidth_hz``, plus the high-pass when the spec has one) on that
+       signal at ``fs_sim``, started in the steady state of its first value, so a constant input
+       gives a constant output from the first sample;
+    3. sampling at ``t0 + k / spec.fs_hz`` (:func:`decimate_to`: an exact pick when ``fs_hz``
+       divides ``fs_sim``, else the not-a-knot cubic spline);
+    4. white noise of one-sided density ``spec.noise_density``, drawn at the rate of
+       :func:`_noise_rate` (std ``noise_density·sqrt(rate / 2)`` per sample), run through the same
+       response designed at that rate (a warm-up of ``10 / bandwidth_hz`` seconds discarded, so it
+       is stationary from the first sample) and added; at ``fs_sim`` the noise is added before the
+       response and sampled with the signal (the instrument's aliasing of it included).
 
-    The filter's group delay (:func:`sensor_group_delay`) is left in, as in the real sensor. In
-    band the output noise density equals ``noise_density·|H(f)|``; noise that the low-pass leaves
-    above ``fs_hz/2`` aliases into the band as it would in the instrument (below 0.5 % of the
-    density for the IMU defaults at 1-100 Hz).
+    The response is linear, so filtering signal and noise apart equals filtering their sum; the
+    filter's group delay (:func:`sensor_group_delay`) is left in, as in the real sensor. In band
+    the output noise density is ``noise_density·|H(f)|`` either way.
 
     Returns:
         t_out: (m,) sample instants, s.
@@ -607,6 +622,18 @@ def _instrument_chain(true_values: np.ndarray, fs_sim: float, spec, rng: np.rand
     return t_out, out[0]
 
 
+def _sample_rows(rows: np.ndarray, fs_sim: float, fs_out: float, t0: float) -> np.ndarray:
+    """Rows (c, n) of a signal at ``fs_sim`` read at the instants of :func:`decimate_to`:
+    (c, m). Exact pick, cubic spline (n >= 4) or :func:`decimate_to` itself (n < 4)."""
+    n = rows.shape[1]
+    t_out, step, position = _sampling_plan(n, fs_sim, fs_out, t0)
+    if step:
+        return rows[:, : (t_out.size - 1) * step + 1: step]
+    if n < 4:
+        return decimate_to(rows.T, fs_sim, fs_out, t0=t0)[1].T
+    return _not_a_knot_cubic_rows(np.ascontiguousarray(rows), position)
+
+
 def _instrument_chains(true_values: list[np.ndarray], fs_sim: float, spec,
                        rngs: list[np.random.Generator], t0: float
                        ) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -614,13 +641,13 @@ def _instrument_chains(true_values: list[np.ndarray], fs_sim: float, spec,
 
     Recording j is ``true_values[j]`` (n, 3) measured with noise drawn from ``rngs[j]`` (the
     same array object may appear several times: the runs of a Phase II session share their
-    motion; its error model and filter start are then computed once). Recordings are processed in
-    blocks of columns: one filter design (cached per spec and rate), one ``sosfilt`` and one
-    spline collocation and factorisation per block. Each recording's noise is drawn from its own
-    generator in list order, one ``(n_warm + n, 3)`` block per recording, so the draws and every
-    output array are bit for bit those of one :func:`_instrument_chain` call per recording in the
-    same order (``sosfilt``, the banded solve and the spline evaluation act on each column
-    alone; checked by tests/test_sensors.py).
+    motion; its error model, response and sampling are then computed once). Noise is processed in
+    blocks of recordings: one filter design (cached per spec and rate) and one ``sosfilt`` per
+    block. Each recording's noise is drawn from its own generator in list order, one
+    ``(n_warm + n_noise, 3)`` block per recording, so the draws and every output array are bit
+    for bit those of one :func:`_instrument_chain` call per recording in the same order
+    (``sosfilt``, the banded solve and the spline evaluation act on each row alone; checked by
+    tests/test_sensors.py).
 
     Returns:
         t_out: (m,) sample instants, s.
@@ -632,43 +659,58 @@ def _instrument_chains(true_values: list[np.ndarray], fs_sim: float, spec,
     n = true_values[0].shape[0]
     if any(v.shape != (n, 3) for v in true_values):
         raise ValueError("recordings of one call must share their shape (n, 3)")
-    n_warm = int(math.ceil(10.0 / spec.bandwidth_hz * fs_sim))
-    noise_std = spec.noise_density * math.sqrt(fs_sim / 2.0)
-    # Deterministic part of the driving signal (warm-up at the first value, then the signal with
-    # its sensor errors), once per distinct true signal.
+    t_out = _sampling_plan(n, fs_sim, spec.fs_hz, t0)[0]
+    fs_noise = _noise_rate(spec, fs_sim)
+    separate = fs_noise != fs_sim
+    if separate:
+        n_noise = t_out.size
+        sos_noise = _filter_design(spec, fs_noise)[0]
+    else:
+        n_noise = n
+        sos_noise = sos
+    n_warm = int(math.ceil(10.0 / spec.bandwidth_hz * fs_noise))
+    noise_std = spec.noise_density * math.sqrt(fs_noise / 2.0)
+    # Deterministic part (the signal with its sensor errors), once per distinct true signal: at
+    # fs_sim with a warm-up at its first value when the noise joins it before the response, else
+    # already filtered and sampled.
     prepared: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for v in true_values:
         if id(v) not in prepared:
             det = spec.error.apply(v)
-            first = det[0]
-            driven = np.concatenate([np.broadcast_to(first, (n_warm, 3)), det])
-            prepared[id(v)] = (driven, zi_unit[:, None, :] * first[None, :, None])
-    per_block = max(1, _BLOCK_BYTES // ((n_warm + n) * 3 * 8))
-    t_out, step, position = _sampling_plan(n, fs_sim, spec.fs_hz, t0)
+            zi = zi_unit[:, None, :] * det[0][None, :, None]
+            if separate:
+                filtered, _ = signal.sosfilt(sos.copy(), np.ascontiguousarray(det.T), axis=-1, zi=zi)
+                prepared[id(v)] = (_sample_rows(filtered, fs_sim, spec.fs_hz, t0), zi)
+            else:
+                driven = np.concatenate([np.broadcast_to(det[0], (n_warm, 3)), det])
+                prepared[id(v)] = (driven.T, zi)
+    per_block = max(1, _BLOCK_BYTES // ((n_warm + n_noise) * 3 * 8))
     outputs = []
-    noise = np.empty((n_warm + n, 3))  # reused: standard_normal(out=) fills it as it would a new one
+    noise = np.empty((n_warm + n_noise, 3))  # reused: standard_normal(out=) fills it as a new one
     for start in range(0, len(rngs), per_block):
         block = range(start, min(start + per_block, len(rngs)))
         # One row per channel (3 per recording): the layout sosfilt and the spline work in.
-        driven = np.empty((3 * len(block), n_warm + n))
-        zi = np.empty((sos.shape[0], 3 * len(block), 2))
+        driven = np.empty((3 * len(block), n_warm + n_noise))
+        zi = np.zeros((sos_noise.shape[0], 3 * len(block), 2))
         for j, i in enumerate(block):
-            det, zi_i = prepared[id(true_values[i])]
             rngs[i].standard_normal(out=noise)
             noise *= noise_std
-            np.add(det.T, noise.T, out=driven[3 * j:3 * j + 3])
-            zi[:, 3 * j:3 * j + 3, :] = zi_i
-        filtered, _ = signal.sosfilt(sos.copy(), driven, axis=-1, zi=zi)
+            if separate:
+                driven[3 * j:3 * j + 3] = noise.T
+            else:
+                det, zi[:, 3 * j:3 * j + 3, :] = prepared[id(true_values[i])]
+                np.add(det, noise.T, out=driven[3 * j:3 * j + 3])
+        filtered, _ = signal.sosfilt(sos_noise.copy(), driven, axis=-1, zi=zi)
         del driven
-        if step:
-            samples = filtered[:, n_warm: n_warm + (t_out.size - 1) * step + 1: step]
-        elif n < 4:
-            _, samples = decimate_to(filtered[:, n_warm:].T, fs_sim, spec.fs_hz, t0=t0)
-            samples = samples.T
-        else:
-            samples = _not_a_knot_cubic_rows(filtered[:, n_warm:], position)
+        samples = filtered[:, n_warm:]
+        if not separate:
+            samples = _sample_rows(samples, fs_sim, spec.fs_hz, t0)
         del filtered
-        outputs += [samples[3 * j:3 * j + 3].T for j in range(len(block))]
+        for j, i in enumerate(block):
+            rows = samples[3 * j:3 * j + 3]
+            if separate:
+                rows = rows + prepared[id(true_values[i])][0]
+            outputs.append(rows.T)
     return t_out, outputs
 
 
