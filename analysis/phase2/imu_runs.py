@@ -29,13 +29,15 @@ Units SI: m, s, m/s, m/s², rad/s.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import interpolate, signal
+from scipy import signal
 
 from analysis.dataset import DatasetError, Measurements, Phase2Run
+from analysis.resample import not_a_knot_cubic_rows
 
 __all__ = [
     "BadRunError",
@@ -243,13 +245,22 @@ def grid_motion(values: np.ndarray, fs_hz: float, delay_s: float, motion: Motion
     seg = values[i0:i1 + 1]
     if seg.shape[0] < 8:
         return out
+    rows = np.ascontiguousarray(seg.T)  # one row per channel: the layout of the filter and spline
     if math.isfinite(cutoff_hz) and cutoff_hz < 0.45 * fs_hz:
-        sos = signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
-        seg = signal.sosfiltfilt(sos, seg, axis=0)
+        sos = _lowpass_sos(order, float(cutoff_hz), float(fs_hz)).copy()  # scipy wants it writeable
+        rows = signal.sosfiltfilt(sos, rows, axis=-1)
     pos = t_samp * fs_hz - i0
-    ok = (pos >= 0) & (pos <= seg.shape[0] - 1)
-    spline = interpolate.make_interp_spline(np.arange(seg.shape[0], dtype=float), seg, k=3, axis=0)
+    ok = (pos >= 0) & (pos <= rows.shape[1] - 1)
     vals = np.full((pos.size, values.shape[1]), np.nan)
-    vals[ok] = spline(pos[ok])
+    vals[ok] = not_a_knot_cubic_rows(rows, pos[ok]).T
     out[inside] = vals
     return out
+
+
+@functools.lru_cache(maxsize=64)
+def _lowpass_sos(order: int, cutoff_hz: float, fs_hz: float) -> np.ndarray:
+    """Second-order sections of the Butterworth low-pass of :func:`grid_motion`, designed once per
+    (order, cutoff, rate): a session grids every run with the same few filters."""
+    sos = signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
+    sos.flags.writeable = False
+    return sos
