@@ -165,10 +165,16 @@ def load_run(m: Measurements, session: str, run: str) -> Phase2Run:
     return r
 
 
+def _still_slices(t: np.ndarray, still: tuple[tuple[float, float], ...]) -> list[slice]:
+    """The samples of ``t`` (ascending, s) inside each stationary part [t0, t1], as slices."""
+    return [slice(int(np.searchsorted(t, t0, "left")), int(np.searchsorted(t, t1, "right")))
+            for t0, t1 in still]
+
+
 def _still_mask(t: np.ndarray, still: tuple[tuple[float, float], ...]) -> np.ndarray:
     mask = np.zeros(t.size, dtype=bool)
-    for t0, t1 in still:
-        mask |= (t >= t0) & (t <= t1)
+    for part in _still_slices(t, still):
+        mask[part] = True
     return mask
 
 
@@ -189,11 +195,10 @@ def remove_bias(values: np.ndarray, fs_hz: float, still: tuple[tuple[float, floa
             raise BadRunError(f"{label}: no stationary sample to estimate the bias from")
         return values - values[mask].mean(axis=0)
     centres, means = [], []
-    for t0, t1 in still:
-        sel = (t >= t0) & (t <= t1)
-        if sel.sum() >= 10:
+    for (t0, t1), part in zip(still, _still_slices(t, still), strict=True):
+        if part.stop - part.start >= 10:
             centres.append(0.5 * (t0 + t1))
-            means.append(values[sel].mean(axis=0))
+            means.append(values[part].mean(axis=0))
     if not centres:
         raise BadRunError(f"{label}: no stationary part to estimate the bias from")
     c = np.asarray(centres)
