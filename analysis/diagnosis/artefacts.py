@@ -218,6 +218,14 @@ def _amp(name: str, unit: str, grid: tuple[float, ...], low: float, high: float,
     return CandidateParam(name, low, high, grid, log=True, label=label, unit=unit, digits=digits)
 
 
+def _line_position(name: str, grid: tuple[float, ...], label: str, unit: str,
+                   digits: int) -> CandidateParam:
+    """Where a line stands (its frequency, its order): one of ``grid``, which lists every
+    value it can take (closed, discrete), and never off (the amplitude removes the line)."""
+    return CandidateParam(name, grid[0], grid[-1], grid, off=None, discrete=True, closed=True,
+                          label=label, unit=unit, digits=digits)
+
+
 _GAIN = CandidateParam("error_pct", 4.0, 20.0, (-20.0, -8.0, 0.0, 8.0, 20.0), signed=True,
                        label="sensitivity error", unit="%", digits=2)
 _NOISE_GRID = {  # RMS of the added noise, channel units: about 2, 5, 10, 25× the twin's floor
@@ -263,15 +271,13 @@ def _candidates() -> list[Artefact]:
         amp = _amp("amplitude", unit, tuple(_LINE_AMPS), 0.01, 0.08, "line amplitude (peak)")
         out.append(Artefact(
             "mains_line", TARGETS[t], f"fixed-frequency line on {TARGETS[t].words}",
-            (amp, CandidateParam("frequency_hz", 50.0, 180.0, _MAINS_HZ, off=None, discrete=True,
-                                 closed=True, label="line frequency", unit="Hz", digits=3)),
+            (amp, _line_position("frequency_hz", _MAINS_HZ, "line frequency", "Hz", digits=3)),
             lambda x, c: fixed_line(x, c["fs_hz"], c["amplitude"], c["frequency_hz"]),
             f"a {{frequency_hz}} line of {{amplitude}} on {TARGETS[t].words} at every speed: "
             "electrical pickup", "mains pickup on signal lines (IEC 61000-4-16)", amplitude="amplitude"))
         out.append(Artefact(
             "order_line", TARGETS[t], f"speed-locked line on {TARGETS[t].words}",
-            (amp, CandidateParam("order", 1.0, 5.0, _ORDERS, off=None, discrete=True,
-                                 closed=True, label="line order", unit="per revolution", digits=2)),
+            (amp, _line_position("order", _ORDERS, "line order", "per revolution", digits=2)),
             lambda x, c: order_line(x, c["angle"], c["amplitude"], c["order"]),
             f"a line of {{amplitude}} at {{order}} of the motor on {TARGETS[t].words}, "
             "following the speed: a mechanical source (unbalance, misalignment)",
