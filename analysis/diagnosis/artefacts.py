@@ -215,18 +215,18 @@ class Artefact:
 
 def _amp(name: str, unit: str, grid: tuple[float, ...], low: float, high: float,
          label: str, digits: int = 2) -> CandidateParam:
-    return CandidateParam(name, low, high, grid, log=True, label=label, unit=unit, digits=digits)
+    return CandidateParam(name, low=low, high=high, grid=grid, log=True, label=label, unit=unit, digits=digits)
 
 
 def _line_position(name: str, grid: tuple[float, ...], label: str, unit: str,
                    digits: int) -> CandidateParam:
     """Where a line stands (its frequency, its order): one of ``grid``, which lists every
     value it can take (closed, discrete), and never off (the amplitude removes the line)."""
-    return CandidateParam(name, grid[0], grid[-1], grid, off=None, discrete=True, closed=True,
+    return CandidateParam(name, low=grid[0], high=grid[-1], grid=grid, off=None, discrete=True, closed=True,
                           label=label, unit=unit, digits=digits)
 
 
-_GAIN = CandidateParam("error_pct", 4.0, 20.0, (-20.0, -8.0, 0.0, 8.0, 20.0), signed=True,
+_GAIN = CandidateParam("error_pct", low=4.0, high=20.0, grid=(-20.0, -8.0, 0.0, 8.0, 20.0), signed=True,
                        label="sensitivity error", unit="%", digits=2)
 _NOISE_GRID = {  # RMS of the added noise, channel units: about 2, 5, 10, 25× the twin's floor
     "torque": ("N·m", (0.0, 0.01, 0.02, 0.05, 0.1)),
@@ -286,7 +286,7 @@ def _candidates() -> list[Artefact]:
     for t, (unit, grid, lo, hi) in _DRIFT.items():
         out.append(Artefact(
             "bias_drift", TARGETS[t], f"bias drifting with the hours on {TARGETS[t].words}",
-            (CandidateParam("rate_per_kh", lo, hi, grid, signed=True, label="bias drift",
+            (CandidateParam("rate_per_kh", low=lo, high=hi, grid=grid, signed=True, label="bias drift",
                             unit=unit, digits=2),),
             lambda x, c: bias_drift(x, c["hours"], c["rate_per_kh"]),
             f"a bias on {TARGETS[t].words} drifting by {{rate_per_kh}} of operation: "
@@ -295,7 +295,7 @@ def _candidates() -> list[Artefact]:
         other = "speed and torque" if t == "acc" else "the position command"
         out.append(Artefact(
             "time_offset", TARGETS[t], f"time offset of {TARGETS[t].words} against {other}",
-            (CandidateParam("offset_ms", 2.0, 10.0, (-10.0, -5.0, -2.0, 0.0, 2.0, 5.0, 10.0),
+            (CandidateParam("offset_ms", low=2.0, high=10.0, grid=(-10.0, -5.0, -2.0, 0.0, 2.0, 5.0, 10.0),
                             signed=True, label="time offset (late when positive)", unit="ms",
                             digits=2),),
             lambda x, c: delay(x, int(round(c["offset_ms"] * 1e-3 * c["fs_hz"]))),
@@ -304,7 +304,7 @@ def _candidates() -> list[Artefact]:
     for t, (unit, grid) in _CLIP.items():
         out.append(Artefact(
             "clipping", TARGETS[t], f"clipping of {TARGETS[t].words}",
-            (CandidateParam("range", grid[1], grid[-1], grid, discrete=True,
+            (CandidateParam("range", low=grid[1], high=grid[-1], grid=grid, discrete=True,
                             label="converter range (±)", unit=unit, digits=2),),
             lambda x, c: clip(x, c["range"]),
             f"{TARGETS[t].words} clipped at ±{{range}}: a converter range too small",

@@ -10,7 +10,7 @@ report read both kinds the same way without importing the twin.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
 from typing import Any
 
 
@@ -27,9 +27,11 @@ class CandidateParam:
     its first or last value is not "beyond" the grid; log: drawn log-uniformly. label, unit,
     digits: how a person reads it (the diagnosis report: "cogging torque 0.033 N·m"): a short
     label in words, the unit as printed ("" for a ratio) and the significant digits shown; an
-    integer-valued discrete parameter (an order) is printed whole."""
+    integer-valued discrete parameter (an order) is printed whole. Every field after ``name`` is
+    keyword-only, so that a subclass can add positional fields after the name."""
 
     name: str
+    _: KW_ONLY
     low: float
     high: float
     grid: tuple[float, ...]

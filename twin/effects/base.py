@@ -31,7 +31,7 @@ KIND = "gap_candidates"
 registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.effects",), "gap-diagnosis candidate")
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True)
 class Param(CandidateParam):
     """One physical parameter of an effect: the fitted parameter of the diagnosis
     (:class:`analysis.diagnosis.candidate.CandidateParam`: name, prior range, grid, off value,
@@ -39,9 +39,9 @@ class Param(CandidateParam):
 
     keys: the scenario keys it sets (dotted, optional ``[i]``); mode: add | scale | set;
     factor: scenario units per parameter unit (e.g. 1e-6 for a scale error in ppm on a
-    dimensionless key). ``keys``, ``mode`` and ``factor`` are keyword-only:
-    ``Param("rise_K", keys=("degradation.thermal_rise_K",), mode="add", low=4.0, high=20.0,
-    grid=(0.0, 5.0, 10.0, 20.0))``."""
+    dimensionless key). ``keys`` and ``mode`` may follow the name by position, the
+    fields of the fitted parameter are keyword-only: ``Param("rise_K",
+    ("degradation.thermal_rise_K",), "add", low=4.0, high=20.0, grid=(0.0, 5.0, 10.0, 20.0))``."""
 
     keys: tuple[str, ...]
     mode: Literal["add", "scale", "set"]
