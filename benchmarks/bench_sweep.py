@@ -1,12 +1,12 @@
 """Benchmark: wall time of a 16-point sweep on a dask LocalCluster of 1 and of 2 worker processes,
 and the speed-up (issue 5, check 8).
 
-The sweep is Phase II only (``scenarios/backlash-steps.toml`` reduced to 2 sessions of 2 runs at
-100 mm/s over 450 mm): 4 backlash steps x 2 IMU noise levels x 2 seeds = 16 campaigns, each
-simulated, analysed and scored by :func:`twin.harness.chain.run_point` in a worker. Both runs go
-through ``twin sweep --workers N`` (a fresh output directory each, so nothing is reused); the
-times include starting the cluster and the workers' imports. The two result tables are compared
-(they must be identical).
+The sweep (``benchmarks/bench_sweep.toml``) is Phase II only (``scenarios/backlash-steps.toml``
+reduced to 2 sessions of 2 runs at 100 mm/s over 450 mm): 4 backlash steps x 2 IMU noise levels
+x 2 seeds = 16 campaigns, each simulated, analysed and scored by
+:func:`twin.harness.chain.run_point` in a worker. Both runs go through ``twin sweep --workers N``
+(a fresh output directory each, so nothing is reused); the times include starting the cluster
+and the workers' imports. The two result tables are compared (they must be identical).
 
 Usage: .venv/bin/python benchmarks/bench_sweep.py
 """
@@ -24,24 +24,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-SWEEP = """
-name = "bench-16"
-scenario = "{scenario}"
-seeds = [1, 2]
-[set]
-"phase2.session_hours" = [100.0, 300.0]
-"phase2.runs_per_session" = 2
-"degradation.table_hours" = [100.0, 300.0]
-"degradation.table_preload_fraction" = [1.0, 1.0]
-"degradation.table_backlash_um" = [0.0, 10.0]
-"campaign.total_hours" = 300.0
-[[grid]]
-key = "degradation.table_backlash_um[1]"
-values = [2.0, 5.0, 10.0, 20.0]
-[[grid]]
-key = "sensors.imu_acc_noise_ug_per_rthz"
-values = [7.0, 25.0]
-"""
+SWEEP = REPO / "benchmarks" / "bench_sweep.toml"  # the 16 points (a sweep file, data)
 
 
 def run(sweep: Path, out: Path, workers: int) -> float:
@@ -64,12 +47,10 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        sweep = tmp / "bench.toml"
-        sweep.write_text(SWEEP.format(scenario=REPO / "scenarios/backlash-steps.toml"))
         times, per_task, loads = {}, {}, {}
         for n in (1, 2):
             loads[n] = os.getloadavg()[0]
-            times[n] = run(sweep, tmp / f"w{n}", n)
+            times[n] = run(SWEEP, tmp / f"w{n}", n)
             per_task[n] = task_seconds(tmp / f"w{n}")
         a, b = (pd.read_parquet(tmp / f"w{n}" / "results.parquet") for n in (1, 2))
         pd.testing.assert_frame_equal(a, b, check_exact=True)

@@ -66,8 +66,8 @@ class NotALaw:
 
 
 HEAVY = Effect(name="carriage_mass", title="a carriage heavier than the twin's",
-               params=(Param("extra_kg", ("axis.carriage_mass_kg",), "add", low=20.0, high=80.0,
-                             grid=(0.0, 40.0, 80.0), label="extra carriage mass", unit="kg"),),
+               params=(Param("extra_kg", keys=("axis.carriage_mass_kg",), mode="add", low=20.0,
+                             high=80.0, grid=(0.0, 40.0, 80.0), label="extra carriage mass", unit="kg"),),
                source="a twin parameter set wrong")
 
 FAKE_COGGING = Effect(name="cogging", title="another cogging", params=HEAVY.params, source="-")

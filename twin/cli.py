@@ -11,6 +11,7 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import Annotated
 
 import typer
 from rich.console import Console
@@ -60,6 +61,24 @@ def _writable_dir(out: Path, what: str = "output directory") -> None:
             if not p.is_dir():
                 _fail(f"{out}: cannot write the {what} there: {p} is a file, not a directory")
             return
+
+
+# Options several verbs take, defined once (typer reads the option from the ``Annotated`` type).
+ScenarioOverrides = Annotated[list[str], typer.Option(
+    "--set", help="scenario override KEY=VALUE (TOML value), repeatable")]
+Workers = Annotated[int | None, typer.Option("--workers", min=1, help="local processes (default: all cores)")]
+Scheduler = Annotated[str | None, typer.Option(
+    "--scheduler", help="address of a running dask.distributed scheduler to run on instead of local "
+                        "processes; its workers must see the files at the same paths")]
+TwinSeeds = Annotated[int, typer.Option("--seeds", min=3, help="twin seeds for the seed-to-seed spread")]
+
+
+def _one_executor(scheduler: str | None, workers: int | None, what: str) -> None:
+    """Exit 2 when both --scheduler and --workers are given; ``what``: the work they would run
+    ("units", "sessions", ...)."""
+    if scheduler is not None and workers is not None:
+        _fail(f"--scheduler and --workers exclude each other: --scheduler sends the {what} to an "
+              "existing dask cluster, --workers N runs them in N local processes")
 
 
 def _version(value: bool) -> None:
@@ -123,20 +142,14 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: in
 def simulate(
     scenario: Path = typer.Argument(..., help="scenario TOML file, or a shipped scenario's name (quick)"),
     out: Path = typer.Option(..., "-o", "--out", help="campaign directory to write"),
-    set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE (TOML value), repeatable"),
-    workers: int | None = typer.Option(None, "--workers", min=1,
-                                       help="local processes (default: all cores)"),
-    scheduler: str | None = typer.Option(None, "--scheduler",
-                                         help="address of a running dask.distributed scheduler to "
-                                              "send the units to; OUT must be on a file system its "
-                                              "workers share"),
+    set_: ScenarioOverrides = (),
+    workers: Workers = None,
+    scheduler: Scheduler = None,
 ) -> None:
     """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed).
     SCENARIO is a TOML file or the name of a shipped scenario (quick, demo, paper-rtf, ...)."""
     _require("simulate", "sim", *(["cluster"] if scheduler is not None else []))
-    if scheduler is not None and workers is not None:
-        _fail("--scheduler and --workers exclude each other: --scheduler sends the units to an "
-              "existing dask cluster, --workers N runs them in N local processes")
+    _one_executor(scheduler, workers, "units")
     summary = _run_simulation(scenario, out, set_, workers, scheduler)
     console.print(f"{summary['simulated']} units simulated ({summary['executor']}), "
                   f"{summary['skipped']} reused, {summary['seconds']:.1f} s; wrote {out / 'measurements.h5'} and "
@@ -253,8 +266,8 @@ def score(
 @app.command()
 def demo(
     out: Path = typer.Option(Path("runs/demo"), "-o", "--out", help="where to write the demo"),
-    set_: list[str] = typer.Option([], "--set", help="override KEY=VALUE on scenarios/demo.toml"),
-    workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
+    set_: ScenarioOverrides = (),
+    workers: Workers = None,
 ) -> None:
     """The whole chain on a small campaign (scenarios/demo.toml): simulate the Phase I reference
     data set and the campaign, run Phase I (Fisher selection, six detectors) and Phase II
@@ -380,13 +393,8 @@ def backlash(
                                                 "record position_cmd, else imu), 'command' (the controller's "
                                                 "position_cmd) or 'imu' (strokes from the accelerometer and "
                                                 "the run's routine metadata; Eq. 5)"),
-    workers: int | None = typer.Option(None, "--workers", min=1,
-                                       help="local processes for the sessions (default: all cores; "
-                                            "1 = this process)"),
-    scheduler: str | None = typer.Option(None, "--scheduler",
-                                         help="address of a running dask.distributed scheduler to "
-                                              "send the sessions to; DIRECTORY must be on a file "
-                                              "system its workers share"),
+    workers: Workers = None,
+    scheduler: Scheduler = None,
     estimator: str | None = typer.Option(None, "--estimator",
                                          help="backlash estimator: a registered name or module:Class "
                                               "(default: the paper's, 'shift'); other than the default "
@@ -409,9 +417,7 @@ def backlash(
 
     if scheduler is not None:
         _require("backlash --scheduler", "cluster")
-    if scheduler is not None and workers is not None:
-        _fail("--scheduler and --workers exclude each other: --scheduler sends the sessions to an "
-              "existing dask cluster, --workers N runs them in N local processes")
+    _one_executor(scheduler, workers, "sessions")
 
     try:
         entry = (registry.get("backlash_estimators", estimator) if estimator
@@ -602,11 +608,8 @@ def scenario_init(
 def sweep(
     sweep_file: Path = typer.Argument(..., help="sweep TOML file (see docs/usage.md and scenarios/sweeps/)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: runs/sweeps/<file stem>)"),
-    scheduler: str | None = typer.Option(None, "--scheduler",
-                                            help="address of a running dask.distributed scheduler; "
-                                                 "OUT must be on a file system its workers share"),
-    workers: int | None = typer.Option(None, "--workers", min=1,
-                                          help="run on a dask LocalCluster of N worker processes"),
+    scheduler: Scheduler = None,
+    workers: Workers = None,
     methods: str | None = typer.Option(None, "--methods",
                                        help="Phase I methods of the per-point summary, comma-separated, "
                                             "or 'all' (default: the sweep's [analysis] methods, else "
@@ -762,10 +765,10 @@ def diagnose(
     real_dir: Path = typer.Argument(..., help="directory with the recording's measurements.h5 (no truth needed)"),
     scenario: Path = typer.Option(..., "--scenario", help="the scenario meant to describe the recorded axis"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default REAL_DIR/diagnosis)"),
-    overrides: list[str] = typer.Option([], "--set", help="scenario override KEY=VALUE (repeatable)"),
-    seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the seed-to-seed spread"),
+    overrides: ScenarioOverrides = (),
+    seeds: TwinSeeds = 8,
     alpha: float = typer.Option(0.01, "--alpha", min=1e-9, max=0.5, help="family-wise error rate"),
-    workers: int | None = typer.Option(None, "--workers", min=1, help="processes (default: all cores)"),
+    workers: Workers = None,
     cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default OUT/cache)"),
     candidates: list[str] = typer.Option(
         [], "--candidate", help="a candidate the diagnosis may add (repeatable; default: every "
@@ -775,19 +778,14 @@ def diagnose(
         "kinds of candidate, comma-separated: physical (the registered effects), parameter (twin "
         "parameters set wrong: 60 more simulations, docs/gap-diagnosis.md), artefact (signal "
         "artefacts); default physical,artefact; --candidate wins")),
-    scheduler: str | None = typer.Option(None, "--scheduler",
-                                         help="address of a running dask.distributed scheduler to "
-                                              "run the simulations on (its workers must see the cache "
-                                              "at the same path); results as with local processes"),
+    scheduler: Scheduler = None,
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
     once it is added (held-out data). Writes OUT/diagnosis.json and OUT/report/ (gap maps
     before and after)."""
     _require("diagnose", "sim", *(["cluster"] if scheduler is not None else []))
-    if scheduler is not None and workers is not None:
-        _fail("--scheduler and --workers exclude each other: --scheduler sends the simulations to an "
-              "existing dask cluster, --workers N runs them in N local processes")
+    _one_executor(scheduler, workers, "simulations")
     from analysis.dataset import DatasetError
     from twin.harness.gap_runner import check_kinds, run_diagnosis
 
@@ -838,8 +836,8 @@ def diagnose_benchmark(
         "cases per twin parameter and magnitude (0: none); the diagnosis then tries the twin "
         "parameters too")),
     rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
-    seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the spread"),
-    workers: int | None = typer.Option(None, "--workers", min=1),
+    seeds: TwinSeeds = 8,
+    workers: Workers = None,
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""

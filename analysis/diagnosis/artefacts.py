@@ -43,10 +43,11 @@ import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import h5py
 import numpy as np
+
+from analysis.diagnosis.candidate import CandidateParam
 
 KIND_EFFECT = "physical effect"
 KIND_ARTEFACT = "signal artefact"
@@ -136,32 +137,6 @@ def clip(x: np.ndarray, limit: float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class ArtefactParam:
-    """One parameter of an artefact (the fields of :class:`twin.effects.base.Param` that the
-    diagnosis and the benchmark use): prior range ``low``–``high`` of a present artefact (of
-    |value| when ``signed``), fit ``grid`` (ascending, with ``off`` where it can be absent),
-    ``discrete`` (no interpolation), ``closed`` (the grid lists every value it can take: no
-    "beyond" at its ends), ``log`` (drawn log-uniformly), and how a person reads it."""
-
-    name: str
-    low: float
-    high: float
-    grid: tuple[float, ...]
-    off: float | None = 0.0
-    discrete: bool = False
-    closed: bool = False
-    log: bool = False
-    signed: bool = False
-    label: str = ""
-    unit: str = ""
-    digits: int = 2
-
-    def display(self) -> dict[str, Any]:
-        return {"label": self.label or self.name, "unit": self.unit, "digits": self.digits,
-                "grid": [float(self.grid[0]), float(self.grid[-1])]}
-
-
-@dataclass(frozen=True)
 class Target:
     """The channels an artefact acts on: name, ((domain, dataset), ...) with domain "phase1" |
     "phase2" and dataset a channel of the format (``acc1``, ``imu_acc``, ...), and the words
@@ -202,7 +177,7 @@ class Artefact:
     artefact: str
     target: Target
     title: str
-    params: tuple[ArtefactParam, ...]
+    params: tuple[CandidateParam, ...]
     transform: Transform
     phrase: str
     source: str
@@ -239,12 +214,20 @@ class Artefact:
 
 
 def _amp(name: str, unit: str, grid: tuple[float, ...], low: float, high: float,
-         label: str, digits: int = 2) -> ArtefactParam:
-    return ArtefactParam(name, low, high, grid, log=True, label=label, unit=unit, digits=digits)
+         label: str, digits: int = 2) -> CandidateParam:
+    return CandidateParam(name, low=low, high=high, grid=grid, log=True, label=label, unit=unit, digits=digits)
 
 
-_GAIN = ArtefactParam("error_pct", 4.0, 20.0, (-20.0, -8.0, 0.0, 8.0, 20.0), signed=True,
-                      label="sensitivity error", unit="%", digits=2)
+def _line_position(name: str, grid: tuple[float, ...], label: str, unit: str,
+                   digits: int) -> CandidateParam:
+    """Where a line stands (its frequency, its order): one of ``grid``, which lists every
+    value it can take (closed, discrete), and never off (the amplitude removes the line)."""
+    return CandidateParam(name, low=grid[0], high=grid[-1], grid=grid, off=None, discrete=True, closed=True,
+                          label=label, unit=unit, digits=digits)
+
+
+_GAIN = CandidateParam("error_pct", low=4.0, high=20.0, grid=(-20.0, -8.0, 0.0, 8.0, 20.0), signed=True,
+                       label="sensitivity error", unit="%", digits=2)
 _NOISE_GRID = {  # RMS of the added noise, channel units: about 2, 5, 10, 25× the twin's floor
     "torque": ("N·m", (0.0, 0.01, 0.02, 0.05, 0.1)),
     "acc1": ("m/s²", (0.0, 0.005, 0.01, 0.02, 0.05)),
@@ -288,15 +271,13 @@ def _candidates() -> list[Artefact]:
         amp = _amp("amplitude", unit, tuple(_LINE_AMPS), 0.01, 0.08, "line amplitude (peak)")
         out.append(Artefact(
             "mains_line", TARGETS[t], f"fixed-frequency line on {TARGETS[t].words}",
-            (amp, ArtefactParam("frequency_hz", 50.0, 180.0, _MAINS_HZ, off=None, discrete=True,
-                                closed=True, label="line frequency", unit="Hz", digits=3)),
+            (amp, _line_position("frequency_hz", _MAINS_HZ, "line frequency", "Hz", digits=3)),
             lambda x, c: fixed_line(x, c["fs_hz"], c["amplitude"], c["frequency_hz"]),
             f"a {{frequency_hz}} line of {{amplitude}} on {TARGETS[t].words} at every speed: "
             "electrical pickup", "mains pickup on signal lines (IEC 61000-4-16)", amplitude="amplitude"))
         out.append(Artefact(
             "order_line", TARGETS[t], f"speed-locked line on {TARGETS[t].words}",
-            (amp, ArtefactParam("order", 1.0, 5.0, _ORDERS, off=None, discrete=True,
-                                closed=True, label="line order", unit="per revolution", digits=2)),
+            (amp, _line_position("order", _ORDERS, "line order", "per revolution", digits=2)),
             lambda x, c: order_line(x, c["angle"], c["amplitude"], c["order"]),
             f"a line of {{amplitude}} at {{order}} of the motor on {TARGETS[t].words}, "
             "following the speed: a mechanical source (unbalance, misalignment)",
@@ -305,8 +286,8 @@ def _candidates() -> list[Artefact]:
     for t, (unit, grid, lo, hi) in _DRIFT.items():
         out.append(Artefact(
             "bias_drift", TARGETS[t], f"bias drifting with the hours on {TARGETS[t].words}",
-            (ArtefactParam("rate_per_kh", lo, hi, grid, signed=True, label="bias drift",
-                           unit=unit, digits=2),),
+            (CandidateParam("rate_per_kh", low=lo, high=hi, grid=grid, signed=True, label="bias drift",
+                            unit=unit, digits=2),),
             lambda x, c: bias_drift(x, c["hours"], c["rate_per_kh"]),
             f"a bias on {TARGETS[t].words} drifting by {{rate_per_kh}} of operation: "
             "a sensor offset to re-zero", "sensor bias drift (IEEE Std 1554)", amplitude="rate_per_kh"))
@@ -314,17 +295,17 @@ def _candidates() -> list[Artefact]:
         other = "speed and torque" if t == "acc" else "the position command"
         out.append(Artefact(
             "time_offset", TARGETS[t], f"time offset of {TARGETS[t].words} against {other}",
-            (ArtefactParam("offset_ms", 2.0, 10.0, (-10.0, -5.0, -2.0, 0.0, 2.0, 5.0, 10.0),
-                           signed=True, label="time offset (late when positive)", unit="ms",
-                           digits=2),),
+            (CandidateParam("offset_ms", low=2.0, high=10.0, grid=(-10.0, -5.0, -2.0, 0.0, 2.0, 5.0, 10.0),
+                            signed=True, label="time offset (late when positive)", unit="ms",
+                            digits=2),),
             lambda x, c: delay(x, int(round(c["offset_ms"] * 1e-3 * c["fs_hz"]))),
             f"{TARGETS[t].words} recorded {{offset_ms}} late against {other}: a clock offset "
             "between the acquisition's channels", "acquisition clock offset", amplitude="offset_ms"))
     for t, (unit, grid) in _CLIP.items():
         out.append(Artefact(
             "clipping", TARGETS[t], f"clipping of {TARGETS[t].words}",
-            (ArtefactParam("range", grid[1], grid[-1], grid, discrete=True,
-                           label="converter range (±)", unit=unit, digits=2),),
+            (CandidateParam("range", low=grid[1], high=grid[-1], grid=grid, discrete=True,
+                            label="converter range (±)", unit=unit, digits=2),),
             lambda x, c: clip(x, c["range"]),
             f"{TARGETS[t].words} clipped at ±{{range}}: a converter range too small",
             "converter saturation", amplitude="range"))

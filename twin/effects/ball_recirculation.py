@@ -19,8 +19,8 @@ from twin.effects.base import Effect, Param, register_effect
 EFFECT = register_effect(Effect(
     name="ball_recirculation",
     title="ball recirculation impacts in the nut",
-    params=(Param("impulse_N", ("effects.recirculation_impulse_N",), "add", low=10.0, high=60.0,
-                  grid=(0.0, 10.0, 25.0, 60.0), label="recirculation impulse", unit="N"),),
+    params=(Param("impulse_N", keys=("effects.recirculation_impulse_N",), mode="add", low=10.0,
+                  high=60.0, grid=(0.0, 10.0, 25.0, 60.0), label="recirculation impulse", unit="N"),),
     source="impacts of balls re-entering the loaded zone at the ball-pass frequency",
     amplitude="impulse_N",
 ))

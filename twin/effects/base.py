@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from analysis import registry
+from analysis.diagnosis.candidate import CandidateParam
 from twin.config import get_dotted, set_dotted
 from twin.scenario import Scenario, from_dict
 
@@ -31,40 +32,20 @@ registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.effects",), "gap-dia
 
 
 @dataclass(frozen=True)
-class Param:
-    """One physical parameter of an effect.
+class Param(CandidateParam):
+    """One physical parameter of an effect: the fitted parameter of the diagnosis
+    (:class:`analysis.diagnosis.candidate.CandidateParam`: name, prior range, grid, off value,
+    display) and how a value enters the scenario.
 
-    name: with its unit (``rise_K``); keys: the scenario keys it sets (dotted, optional
-    ``[i]``); mode: add | scale | set; low, high: prior range of a present effect (the blind
-    benchmark draws from it); grid: values simulated for the fit (ascending; includes ``off``
-    where the effect can be absent); off: the value that leaves the scenario unchanged (None:
-    none, e.g. a cogging order); discrete: no interpolation between grid values; log: draw
-    log-uniformly in the benchmark; factor: scenario units per parameter unit (e.g. 1e-6 for a
-    scale error in ppm on a dimensionless key); signed: the range applies to |value|, the sign
-    is drawn too. label, unit, digits: how a person reads it (the diagnosis report: "cogging
-    torque 0.033 N·m"): a short label in words, the unit as printed ("" for a ratio) and the
-    significant digits shown; an integer-valued discrete parameter (an order) is printed whole."""
+    keys: the scenario keys it sets (dotted, optional ``[i]``); mode: add | scale | set;
+    factor: scenario units per parameter unit (e.g. 1e-6 for a scale error in ppm on a
+    dimensionless key). ``keys`` and ``mode`` may follow the name by position, the
+    fields of the fitted parameter are keyword-only: ``Param("rise_K",
+    ("degradation.thermal_rise_K",), "add", low=4.0, high=20.0, grid=(0.0, 5.0, 10.0, 20.0))``."""
 
-    name: str
     keys: tuple[str, ...]
     mode: Literal["add", "scale", "set"]
-    low: float
-    high: float
-    grid: tuple[float, ...]
-    off: float | None = 0.0
-    discrete: bool = False
-    log: bool = False
     factor: float = 1.0
-    signed: bool = False
-    label: str = ""
-    unit: str = ""
-    digits: int = 2
-
-    def display(self) -> dict[str, Any]:
-        """The display entry of the parameter (what the report reads, analysis never imports
-        the twin): label, unit, digits, and the fit grid's ends."""
-        return {"label": self.label or self.name, "unit": self.unit, "digits": self.digits,
-                "grid": [float(self.grid[0]), float(self.grid[-1])]}
 
 
 @dataclass(frozen=True)

@@ -17,10 +17,10 @@ from twin.effects.base import Effect, Param, register_effect
 EFFECT = register_effect(Effect(
     name="base_resonance",
     title="structural resonance of the base",
-    params=(Param("frequency_hz", ("effects.base_frequency_hz",), "set", low=80.0, high=450.0,
+    params=(Param("frequency_hz", keys=("effects.base_frequency_hz",), mode="set", low=80.0, high=450.0,
                   grid=(80.0, 125.0, 175.0, 250.0, 350.0, 450.0), off=None, discrete=True,
                   label="base resonance frequency", unit="Hz", digits=3),
-            Param("modal_mass_kg", ("effects.base_modal_mass_kg",), "set", low=300.0, high=3000.0,
+            Param("modal_mass_kg", keys=("effects.base_modal_mass_kg",), mode="set", low=300.0, high=3000.0,
                   grid=(0.0, 300.0, 1000.0, 3000.0), log=True, label="modal mass of the base",
                   unit="kg")),
     source="single-DOF modal model of the machine base (Altintas 2012, ch. 3)",

@@ -18,9 +18,9 @@ from twin.effects.base import Effect, Param, register_effect
 EFFECT = register_effect(Effect(
     name="cogging",
     title="motor cogging torque",
-    params=(Param("torque_Nm", ("effects.cogging_Nm",), "add", low=0.03, high=0.15,
+    params=(Param("torque_Nm", keys=("effects.cogging_Nm",), mode="add", low=0.03, high=0.15,
                   grid=(0.0, 0.03, 0.07, 0.15), label="cogging torque", unit="N·m"),
-            Param("per_rev", ("effects.cogging_per_rev",), "set", low=4, high=24,
+            Param("per_rev", keys=("effects.cogging_per_rev",), mode="set", low=4, high=24,
                   grid=(4.0, 6.0, 12.0, 18.0, 24.0), off=None, discrete=True,
                   label="cogging order", unit="per revolution")),
     source="PM motor cogging, period LCM(slots, poles) per revolution (Zhu & Howe 2000)",

@@ -20,10 +20,10 @@ _SCALE = tuple(f"sensors.imu_acc_scale_error[{i}]" for i in range(3))
 EFFECT = register_effect(Effect(
     name="imu_misalignment",
     title="IMU misalignment and scale error",
-    params=(Param("pitch_urad", ("sensors.imu_misalignment_urad[1]",), "add", low=500.0,
+    params=(Param("pitch_urad", keys=("sensors.imu_misalignment_urad[1]",), mode="add", low=500.0,
                   high=5000.0, grid=(-5000.0, 0.0, 5000.0), log=True, signed=True,
                   label="IMU pitch misalignment", unit="µrad"),
-            Param("scale_ppm", _SCALE, "add", low=500.0, high=5000.0,
+            Param("scale_ppm", keys=_SCALE, mode="add", low=500.0, high=5000.0,
                   grid=(-5000.0, 0.0, 5000.0), log=True, signed=True, factor=1e-6,
                   label="IMU accelerometer scale error", unit="ppm")),
     source="accelerometer scale factor and misalignment model (IEEE Std 1293-2018)",

@@ -17,7 +17,7 @@ from twin.effects.base import Effect, Param, register_effect
 EFFECT = register_effect(Effect(
     name="origin_variability",
     title="origin-setting variability between sessions",
-    params=(Param("spread_mm", ("phase2.origin_offset_max_mm",), "add", low=0.5, high=3.0,
+    params=(Param("spread_mm", keys=("phase2.origin_offset_max_mm",), mode="add", low=0.5, high=3.0,
                   grid=(0.0, 0.5, 1.5, 3.0), label="origin spread between sessions (±)",
                   unit="mm"),),
     source="manual origin setting before each session (paper section III/V; ISO 230-2)",

@@ -131,7 +131,7 @@ _GRID_SERVO = (0.45, 0.7, 1.0, 1.3, 1.7)
 
 def _p(name: str, keys: tuple[str, ...], quantity: str, unit: str, low: float, high: float,
        grid: tuple[float, ...], source: str, digits: int = 3) -> TwinParameter:
-    factor = Param("factor", keys, "scale", low=low, high=high, grid=grid, off=1.0, log=True,
+    factor = Param("factor", keys=keys, mode="scale", low=low, high=high, grid=grid, off=1.0, log=True,
                    label=f"{quantity}, times the scenario's", unit="×", digits=2)
     return TwinParameter(name=name, title=quantity, params=(factor,), source=source,
                          amplitude="factor", quantity=quantity, unit=unit, digits=digits)

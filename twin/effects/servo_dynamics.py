@@ -18,8 +18,8 @@ from twin.effects.base import Effect, Param, register_effect
 EFFECT = register_effect(Effect(
     name="servo_dynamics",
     title="servo loop dynamics (following error)",
-    params=(Param("bandwidth_factor", ("axis.position_bandwidth_hz", "axis.velocity_bandwidth_hz"),
-                  "scale", low=0.35, high=0.75, grid=(0.3, 0.45, 0.6, 0.8, 1.0), off=1.0,
+    params=(Param("bandwidth_factor", keys=("axis.position_bandwidth_hz", "axis.velocity_bandwidth_hz"),
+                  mode="scale", low=0.35, high=0.75, grid=(0.3, 0.45, 0.6, 0.8, 1.0), off=1.0,
                   log=True, label="servo bandwidth factor", unit="×"),),
     source="cascaded position/velocity loop tuning (Ellis 2012, ch. 17)",
     amplitude="bandwidth_factor",

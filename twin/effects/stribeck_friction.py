@@ -17,9 +17,9 @@ from twin.effects.base import Effect, Param, register_effect
 EFFECT = register_effect(Effect(
     name="stribeck_friction",
     title="Stribeck friction at reversals",
-    params=(Param("excess_N", ("effects.stribeck_excess_N",), "add", low=30.0, high=150.0,
+    params=(Param("excess_N", keys=("effects.stribeck_excess_N",), mode="add", low=30.0, high=150.0,
                   grid=(0.0, 30.0, 70.0, 150.0), label="Stribeck excess friction", unit="N"),
-            Param("velocity_mm_s", ("effects.stribeck_velocity_mm_s",), "set", low=1.0, high=6.0,
+            Param("velocity_mm_s", keys=("effects.stribeck_velocity_mm_s",), mode="set", low=1.0, high=6.0,
                   grid=(1.0, 3.0, 6.0), off=None, label="Stribeck velocity", unit="mm/s")),
     source="Stribeck curve (Armstrong-Hélouvry et al. 1994)",
     amplitude="excess_N",

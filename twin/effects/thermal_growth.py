@@ -24,7 +24,7 @@ from twin.effects.base import Effect, Param, register_effect
 EFFECT = register_effect(Effect(
     name="thermal_growth",
     title="thermal growth of the screw after a pause",
-    params=(Param("rise_K", ("degradation.thermal_rise_K",), "add", low=4.0, high=20.0,
+    params=(Param("rise_K", keys=("degradation.thermal_rise_K",), mode="add", low=4.0, high=20.0,
                   grid=(0.0, 5.0, 10.0, 20.0), label="temperature rise of the screw", unit="K"),),
     fixed={"degradation.drag_temperature_coefficient_per_K": 0.03},
     source="lead growth α·ΔT (ISO 230-3; Ramesh et al. 2000) and lubricant viscosity ∝ exp(−β·ΔT)",
