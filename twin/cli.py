@@ -744,12 +744,17 @@ def _print_diagnosis(res: dict) -> None:
                   f"significantly (best: {best['effect']}, {best.get('kind', 'physical effect')}, "
                   f"-{100 * best['heldout_reduction']:.0f} %)")
     if res["verdict"] != "no significant gap":
+        rs = res.get("resimulation") or {}
+        residual = rs["residual"] if rs.get("done") else res["residual"]
+        resim = (f"re-simulated with {rs['seeds']} twin seeds -> {rs['heldout_gap_after']:.1f} "
+                 f"(shrink {100 * rs['heldout_shrink']:.0f} %)" if rs.get("done")
+                 else f"no re-simulation: {rs.get('reason') or 'nothing was added'}")
         out.print(f"held-out gap {res['heldout_gap_before']:.1f} -> {res['heldout_gap_after']:.1f} "
-                  f"(shrink {100 * res['heldout_shrink']:.0f} %)"
+                  f"interpolated (shrink {100 * res['heldout_shrink']:.0f} %); {resim}"
                   + ("; still beyond the spread: " + "; ".join(
                       f"{r['domain']} {r['channel']} {r['family']} {r['bin']}"
-                      for r in res["residual"].get("top_regions", [])[:3])
-                     if res["residual"].get("significant") else ""))
+                      for r in residual.get("top_regions", [])[:3])
+                     if residual.get("significant") else ""))
     if res.get("worse_regions"):
         out.print("made worse by the added effects (held-out): " + "; ".join(
             f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² "
@@ -779,6 +784,10 @@ def diagnose(
                                          help="address of a running dask.distributed scheduler to "
                                               "run the simulations on (its workers must see the cache "
                                               "at the same path); results as with local processes"),
+    resim_seeds: int | None = typer.Option(None, "--resim-seeds", min=0, help=(
+        "twin seeds the twin is re-simulated with, the added candidates at their fitted values, "
+        "for the re-simulated shrink the verdict follows (default: all --seeds; 0: none, the "
+        "verdict then follows the interpolated shrink)")),
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
@@ -814,7 +823,7 @@ def diagnose(
             res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
                                 cache=cache, library=list(candidates) or None,
                                 on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
-                                scheduler=scheduler)
+                                scheduler=scheduler, resim_seeds=resim_seeds)
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))
