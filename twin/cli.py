@@ -849,6 +849,9 @@ def diagnose_benchmark(
     rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
     seeds: int = typer.Option(8, "--seeds", min=3, help="twin seeds for the spread"),
     workers: int | None = typer.Option(None, "--workers", min=1),
+    resim_seeds: int = typer.Option(2, "--resim-seeds", min=0, help=(
+        "twin seeds each case with candidates added is re-simulated with, for the re-simulated "
+        "shrink and the verdict (0: none; fewer than --seeds: that many campaigns per case)")),
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
@@ -866,18 +869,22 @@ def diagnose_benchmark(
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console, transient=False) as progress:
         res = run_benchmark(out, s, cases, seeds=seeds, workers=workers,
-                            on_progress=_progress_callback(progress, {}))
+                            on_progress=_progress_callback(progress, {}), resim_seeds=resim_seeds)
+    fmt = lambda v: "-" if v is None else f"{100 * v:.0f} %"  # noqa: E731
     table = Table(title=f"blind benchmark ({res['n_cases']} cases, {res['wall_time_s']['total']:.0f} s)")
-    for col in ("case", "injected", "magnitude", "verdict", "first ranked", "added", "held-out shrink", "correct"):
+    for col in ("case", "injected", "magnitude", "verdict", "first ranked", "added", "held-out shrink",
+                "re-simulated", "correct"):
         table.add_column(col)
     for r in res["cases"]:
         table.add_row(r["id"], "+".join(r["injected"]) or "-", r["magnitude"] or "-", r["verdict"],
                       r["ranking"][0] if r["ranking"] else "-", "+".join(r["added"]) or "-",
-                      f"{100 * r['heldout_shrink']:.0f} %", "yes" if r["correct"] else "NO")
+                      f"{100 * r['heldout_shrink']:.0f} %",
+                      fmt(r["heldout_shrink_resimulated"]),
+                      "yes" if r["correct"] else "NO")
     Console(width=max(130, Console().width)).print(table)
-    fmt = lambda v: "n/a" if v is None else f"{100 * v:.0f} %"  # noqa: E731
     console.print(f"top-1 accuracy {fmt(res['top1_accuracy'])}, median held-out shrink "
-                  f"{fmt(res['median_heldout_shrink'])}, null cases correct "
+                  f"{fmt(res['median_heldout_shrink'])} (re-simulated with {res['resim_seeds']} twin seeds "
+                  f"{fmt(res['median_heldout_shrink_resimulated'])}), null cases correct "
                   f"{fmt(res['null_correct_fraction'])}, open-set unexplained "
                   f"{fmt(res['open_set_correct_fraction'])} (and no wrong effect removing half "
                   f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), pairs both in top 3 "
