@@ -446,11 +446,12 @@ def resimulated(real: dict[str, Signature], twin: dict[str, list[Signature]],
     random numbers, as for the grid: with all K seeds it is the mean of the re-simulated twin
     minus the mean of the twin), and the statistic is the interpolated one with Δ in place of
     the interpolated, additive response: G = Σ_{j∈S} ((r_j − μ_j − Δ_j)/σ_j)² over the same
-    statistics S (those of S whose re-simulated value is finite), with the twin's own spread σ_j.
+    statistics S, with the twin's own spread σ_j (a statistic no re-simulated seed could compute
+    gets Δ_j = 0, as a NaN of the grid's responses; ``n_statistics_resimulated`` counts the others).
     The verdict follows the rule of :func:`diagnose` on this G.
 
     Returns the ``resimulation`` entry of the result: done, seeds (n), heldout_gap_before,
-    heldout_gap_after, heldout_shrink, n_statistics (of S used), verdict, residual (significant,
+    heldout_gap_after, heldout_shrink, n_statistics (of S), n_statistics_resimulated, verdict, residual (significant,
     heldout_gap, critical, top_regions) and worse_regions (against the twin as it is).
     """
     n = len(resim["heldout"])
@@ -461,11 +462,14 @@ def resimulated(real: dict[str, Signature], twin: dict[str, list[Signature]],
             g.check_same(twin[part][0], s, f"twin seed 0 ({part})", f"re-simulated seed {i} ({part})")
     sp, z0, select, sel_ho, g_before, crit = _gap_setup(real, twin, alpha)
     regions = real["cal"].regions
-    delta = {p: np.mean([r.values - t.values for r, t in zip(resim[p], twin[p][:n], strict=False)], axis=0)
+    diffs = {p: np.stack([r.values - t.values for r, t in zip(resim[p], twin[p][:n], strict=False)])
+             for p in sp}
+    finite = {p: np.isfinite(d).any(axis=0) for p, d in diffs.items()}
+    # A statistic no re-simulated seed could compute gets no response, as a NaN of the grid's.
+    delta = {p: np.where(finite[p], np.nanmean(np.where(finite[p], diffs[p], 0.0), axis=0), 0.0)
              for p in sp}
     z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}
-    use = sel_ho & np.isfinite(z["heldout"])
-    g_after = float(np.sum(z["heldout"][use] ** 2))
+    g_after = float(np.sum(z["heldout"][sel_ho] ** 2))
     shrink = 1.0 - g_after / g_before if g_before > 0 else 0.0
     residual_sig = g_after > crit
     explained = not residual_sig or shrink >= explained_fraction
@@ -473,7 +477,8 @@ def resimulated(real: dict[str, Signature], twin: dict[str, list[Signature]],
     top = [r for r in _regions(regions, z, z, select, sig_keys, g.region_gaps(z["cal"], regions))
            if r["significant"]][:5]
     return {"done": True, "seeds": n, "heldout_gap_before": g_before, "heldout_gap_after": g_after,
-            "heldout_shrink": shrink, "n_statistics": int(use.sum()),
+            "heldout_shrink": shrink, "n_statistics": int(sel_ho.sum()),
+            "n_statistics_resimulated": int((sel_ho & finite["heldout"]).sum()),
             "verdict": EXPLAINED if explained else UNEXPLAINED,
             "residual": {"significant": bool(residual_sig), "heldout_gap": g_after, "critical": crit,
                          "top_regions": top},

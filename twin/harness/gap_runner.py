@@ -14,7 +14,11 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
    its response averaged);
 4. computes the signature (both parts) of every simulation and of the recording, and runs
    :func:`analysis.diagnosis.attribution.diagnose`;
-5. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
+5. when candidates were added, simulates the twin again with them at their fitted values for
+   the seeds of the spread (signal artefacts post-processed on those campaigns) and measures
+   the held-out gap on it: the re-simulated shrink the verdict follows (:func:`resimulate`,
+   :func:`analysis.diagnosis.attribution.resimulated`);
+6. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
 
 Every simulation is a campaign of the scenario, cached by the hash of its scenario under
 ``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
