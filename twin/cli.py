@@ -882,9 +882,10 @@ def diagnose_benchmark(
                       fmt(r["heldout_shrink_resimulated"]),
                       "yes" if r["correct"] else "NO")
     Console(width=max(130, Console().width)).print(table)
+    resim = (f"re-simulated with {res['resim_seeds']} twin seeds {fmt(res['median_heldout_shrink_resimulated'])}"
+             if res["resim_seeds"] else "not re-simulated")
     console.print(f"top-1 accuracy {fmt(res['top1_accuracy'])}, median held-out shrink "
-                  f"{fmt(res['median_heldout_shrink'])} (re-simulated with {res['resim_seeds']} twin seeds "
-                  f"{fmt(res['median_heldout_shrink_resimulated'])}), null cases correct "
+                  f"{fmt(res['median_heldout_shrink'])} ({resim}), null cases correct "
                   f"{fmt(res['null_correct_fraction'])}, open-set unexplained "
                   f"{fmt(res['open_set_correct_fraction'])} (and no wrong effect removing half "
                   f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), pairs both in top 3 "
