@@ -823,7 +823,8 @@ def diagnose(
             res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
                                 cache=cache, library=list(candidates) or None,
                                 on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
-                                scheduler=scheduler, resim_seeds=resim_seeds)
+                                scheduler=scheduler, resim_seeds=resim_seeds,
+                                on_resim_progress=lambda d, n: cb("re-simulation with the added candidates", d, n))
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

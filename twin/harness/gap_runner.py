@@ -606,7 +606,8 @@ def resimulate(ens: TwinEnsemble, addeds: list[list[dict]], cache: Path, workers
     plans = [resim_plan(ens, a, n_seeds) if a else None for a in addeds]
     cache = Path(cache)
     plain = [s for p in plans if p and not p[1] for s in p[0]]
-    evaluate_all(plain, cache, workers, on_progress, scheduler=scheduler)
+    if plain:
+        evaluate_all(plain, cache, workers, on_progress, scheduler=scheduler)
     # Post-processed: the campaigns whose post-processed signature is missing.
     jobs: dict[str, tuple[Scenario, list[str]]] = {}
     for p in plans:
@@ -684,7 +685,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                   library: list[str] | None = None, plots: bool = True,
                   on_progress: Callable[[int, int], None] | None = None,
                   kinds: tuple[str, ...] | list[str] | None = None,
-                  scheduler: str | None = None, resim_seeds: int | None = None) -> dict:
+                  scheduler: str | None = None, resim_seeds: int | None = None,
+                  on_resim_progress: Callable[[int, int], None] | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
     twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
@@ -699,7 +701,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     resim = None
     if result["added"] and result["verdict"] != attribution.NO_GAP and resim_seeds != 0:
-        resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_progress)[0]
+        resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_resim_progress)[0]
     result = add_resimulation(result, real, ens, resim, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
               "kinds": sorted({c.kind for c in ens.candidates}),
