@@ -165,6 +165,66 @@ def test_fit_beyond_the_grid_is_flagged_high():
 
 
 # ---------------------------------------------------------------------------------------------
+# The re-simulated shrink (issue 15, item 2)
+
+
+def test_resimulated_shrink_uses_the_same_statistic_and_sets_the_verdict(tmp_path):
+    """The recording is the twin plus 10 σ on the torque; the candidate's response is linear, so
+    the fit is p = 10 and the interpolated shrink 100 %. Re-simulated runs that carry exactly that
+    response give the same gap to 1e-9; runs that carry only half of it (the responses were not
+    additive, say) leave 25 % of the gap: the verdict follows them ("unexplained gap remains",
+    the interpolated "explained" kept), paired with the first n seeds of the spread."""
+    real, twin, regions, sd = _signatures({"torque": 10.0, "speed": 0.0})
+    cand = _response("c", sd, {"torque": 1.0, "speed": 0.0}, grid=(0.0, 20.0))
+    res, _ = at.diagnose(real, twin, [cand])
+    assert [a["effect"] for a in res["added"]] == ["c"] and res["verdict"] == at.EXPLAINED
+    assert res["added"][0]["params"]["p"] == pytest.approx(10.0)
+    k = np.repeat([1.0, 0.0], 10)
+
+    def runs(p_true, n):
+        return {p: [Signature(s.values + p_true * k * sd[p], regions) for s in twin[p][:n]] for p in twin}
+
+    exact = at.resimulated(real, twin, runs(10.0, 8))
+    assert exact["heldout_gap_after"] == pytest.approx(res["heldout_gap_after"], abs=1e-9)
+    assert exact["heldout_shrink"] == pytest.approx(res["heldout_shrink"], abs=1e-12)
+    assert exact["seeds"] == 8 and exact["n_statistics"] == 10 and exact["verdict"] == at.EXPLAINED
+    half = at.resimulated(real, twin, runs(5.0, 2))  # t = 5 left on 10 statistics: 250 of 1000
+    assert half["seeds"] == 2
+    assert half["heldout_gap_before"] == pytest.approx(res["heldout_gap_before"])
+    assert half["heldout_gap_after"] == pytest.approx(250.0, rel=1e-9)
+    assert half["heldout_shrink"] == pytest.approx(0.75, rel=1e-9)
+    out = at.with_resimulation(res, half)
+    assert out["verdict"] == at.UNEXPLAINED and out["verdict_interpolated"] == at.EXPLAINED
+    assert out["heldout_shrink_resimulated"] == pytest.approx(0.75)
+    assert out["heldout_shrink"] == res["heldout_shrink"]  # the interpolated one, side by side
+    assert half["residual"]["significant"] and half["residual"]["top_regions"][0]["channel"] == "torque"
+    res = {**out, "library": {}}
+    said = w.answer(res)
+    assert ("How much: run with the added candidates at their fitted values, the twin (2 seeds) removes "
+            "75 % of the held-out gap (1\u202f000 → 250; the twin's own spread allows 23.2); "
+            "interpolated from the candidates' responses, 100 % (1\u202f000 → 0).") in said
+    assert "What is left: unexplained, 25 % of the gap, mostly in Phase I torque, 10-30 Hz band." in said
+    html = render_page(res, [])
+    assert "shrink 75 % re-simulated with the twin seeds (2 seeds; 1\u202f000 → 250), 100 % interpolated" in html
+    assert "The verdict follows the re-simulated shrink (interpolated, it would be: explained)." in html
+    with pytest.raises(ValueError, match="re-simulation with 9 seeds"):
+        at.resimulated(real, twin, runs(10.0, 8) | {"heldout": runs(10.0, 9)["heldout"] + [twin["heldout"][0]]})
+
+
+def test_nothing_added_is_not_resimulated():
+    """No candidate added (or no gap): no re-simulation, said so; the verdict stays."""
+    real, twin, regions, sd = _signatures({"torque": 10.0})
+    res, _ = at.diagnose(real, twin, [])
+    assert res["added"] == [] and res["verdict"] == at.UNEXPLAINED
+    out = at.with_resimulation(res, None, "nothing was added")
+    assert out["resimulation"] == {"done": False, "reason": "nothing was added"}
+    assert out["heldout_shrink_resimulated"] is None and out["verdict"] == at.UNEXPLAINED
+    html = render_page({**out, "library": {}}, [])
+    assert "None: no candidate passed the selection test; no re-simulation (nothing was added)." in html
+    assert "0 % interpolated from the responses (1\u202f000 → 1\u202f000); no re-simulation: nothing was added" in html
+
+
+# ---------------------------------------------------------------------------------------------
 # Regions made worse
 
 
@@ -255,7 +315,7 @@ def test_answer_paragraph():
         "servo bandwidth factor is at the lower edge of the tried range 0.3–1×: the "
         "true value may lie beyond. "
         "How much: the added candidates remove 70 % of the held-out gap (5\u202f000 → 1\u202f500; the twin's "
-        "own spread allows 150). "
+        "own spread allows 150), interpolated from their responses (no re-simulation). "
         "What is left: unexplained, 30 % of the gap, mostly in Phase II acc_x RMS in the transient "
         "phase. The added effects make 1 region worse than the twin as it is: Phase I speed RMS in "
         "the transient phase.")

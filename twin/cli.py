@@ -747,12 +747,17 @@ def _print_diagnosis(res: dict) -> None:
                   f"significantly (best: {best['effect']}, {best.get('kind', 'physical effect')}, "
                   f"-{100 * best['heldout_reduction']:.0f} %)")
     if res["verdict"] != "no significant gap":
+        rs = res.get("resimulation") or {}
+        residual = rs["residual"] if rs.get("done") else res["residual"]
+        resim = (f"re-simulated with {rs['seeds']} twin seeds -> {rs['heldout_gap_after']:.1f} "
+                 f"(shrink {100 * rs['heldout_shrink']:.0f} %)" if rs.get("done")
+                 else f"no re-simulation: {rs.get('reason') or 'nothing was added'}")
         out.print(f"held-out gap {res['heldout_gap_before']:.1f} -> {res['heldout_gap_after']:.1f} "
-                  f"(shrink {100 * res['heldout_shrink']:.0f} %)"
+                  f"interpolated (shrink {100 * res['heldout_shrink']:.0f} %); {resim}"
                   + ("; still beyond the spread: " + "; ".join(
                       f"{r['domain']} {r['channel']} {r['family']} {r['bin']}"
-                      for r in res["residual"].get("top_regions", [])[:3])
-                     if res["residual"].get("significant") else ""))
+                      for r in residual.get("top_regions", [])[:3])
+                     if residual.get("significant") else ""))
     if res.get("worse_regions"):
         out.print("made worse by the added effects (held-out): " + "; ".join(
             f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² "
@@ -779,6 +784,10 @@ def diagnose(
         "parameters set wrong: 60 more simulations, docs/gap-diagnosis.md), artefact (signal "
         "artefacts); default physical,artefact; --candidate wins")),
     scheduler: Scheduler = None,
+    resim_seeds: int | None = typer.Option(None, "--resim-seeds", min=0, help=(
+        "twin seeds the twin is re-simulated with, the added candidates at their fitted values, "
+        "for the re-simulated shrink the verdict follows (default: all --seeds; 0: none, the "
+        "verdict then follows the interpolated shrink)")),
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
@@ -812,7 +821,8 @@ def diagnose(
             res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha,
                                 cache=cache, library=list(candidates) or None,
                                 on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
-                                scheduler=scheduler)
+                                scheduler=scheduler, resim_seeds=resim_seeds,
+                                on_resim_progress=lambda d, n: cb("re-simulation with the added candidates", d, n))
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))
@@ -838,6 +848,9 @@ def diagnose_benchmark(
     rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
     seeds: TwinSeeds = 8,
     workers: Workers = None,
+    resim_seeds: int = typer.Option(2, "--resim-seeds", min=0, help=(
+        "twin seeds each case with candidates added is re-simulated with, for the re-simulated "
+        "shrink and the verdict (0: none; fewer than --seeds: that many campaigns per case)")),
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
@@ -855,18 +868,23 @@ def diagnose_benchmark(
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console, transient=False) as progress:
         res = run_benchmark(out, s, cases, seeds=seeds, workers=workers,
-                            on_progress=_progress_callback(progress, {}))
+                            on_progress=_progress_callback(progress, {}), resim_seeds=resim_seeds)
+    fmt = lambda v: "-" if v is None else f"{100 * v:.0f} %"  # noqa: E731
     table = Table(title=f"blind benchmark ({res['n_cases']} cases, {res['wall_time_s']['total']:.0f} s)")
-    for col in ("case", "injected", "magnitude", "verdict", "first ranked", "added", "held-out shrink", "correct"):
+    for col in ("case", "injected", "magnitude", "verdict", "first ranked", "added", "held-out shrink",
+                "re-simulated", "correct"):
         table.add_column(col)
     for r in res["cases"]:
         table.add_row(r["id"], "+".join(r["injected"]) or "-", r["magnitude"] or "-", r["verdict"],
                       r["ranking"][0] if r["ranking"] else "-", "+".join(r["added"]) or "-",
-                      f"{100 * r['heldout_shrink']:.0f} %", "yes" if r["correct"] else "NO")
+                      f"{100 * r['heldout_shrink']:.0f} %",
+                      fmt(r["heldout_shrink_resimulated"]),
+                      "yes" if r["correct"] else "NO")
     Console(width=max(130, Console().width)).print(table)
-    fmt = lambda v: "n/a" if v is None else f"{100 * v:.0f} %"  # noqa: E731
+    resim = (f"re-simulated with {res['resim_seeds']} twin seeds {fmt(res['median_heldout_shrink_resimulated'])}"
+             if res["resim_seeds"] else "not re-simulated")
     console.print(f"top-1 accuracy {fmt(res['top1_accuracy'])}, median held-out shrink "
-                  f"{fmt(res['median_heldout_shrink'])}, null cases correct "
+                  f"{fmt(res['median_heldout_shrink'])} ({resim}), null cases correct "
                   f"{fmt(res['null_correct_fraction'])}, open-set unexplained "
                   f"{fmt(res['open_set_correct_fraction'])} (and no wrong effect removing half "
                   f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), pairs both in top 3 "

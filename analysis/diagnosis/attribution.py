@@ -55,6 +55,14 @@ test) or by no more than ``TIE_FRACTION`` (1 %) of the gap before (the error of 
 responses from one seed) is listed in the added entry's ``alternatives``: the data do not tell
 them apart (springs in series, a constant against a viscous drag at one speed).
 
+**Re-simulated shrink.** The shrink above is interpolated: one seed's responses, linear
+between grid values and added. :func:`resimulated` measures it again on the twin re-simulated
+with every added candidate at its fitted values (the simulation is the caller's: this module
+never simulates) for the first n of the K seeds, the response taken as the mean paired
+difference to the same seeds (common random numbers: Law, Simulation Modeling and Analysis,
+5th ed., section 11.2), with the same statistic G over the same statistics S;
+:func:`with_resimulation` makes the verdict follow it.
+
 The ranking lists the added effects in the order they were added, then the others by their
 net held-out reduction in the last round. ``worse_regions`` of the summary compares the twin
 with all the added effects to the twin as it is.
@@ -351,19 +359,10 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     counts, regions with their held-out gap before/after, the ranking of every candidate, the
     effects added in order, and the residual) and the held-out t of every statistic against the
     twin as it is and with the added effects, {"before", "after"}: (n,) (for the gap maps)."""
-    for part in ("cal", "heldout"):
-        for i, s in enumerate(twin[part]):
-            g.check_same(real[part], s, f"the recording's {part} part", f"twin seed {i} ({part})")
-    sp = {p: g.spread(twin[p]) for p in ("cal", "heldout")}
+    sp, z0, select, sel_ho, g_before, crit = _gap_setup(real, twin, alpha)
     sd = {p: sp[p].sd for p in sp}
     regions = real["cal"].regions
-    z0 = {p: g.zscores(real[p], sp[p]) for p in sp}
-    p_cal = g.pvalues(z0["cal"], sp["cal"])
-    select = g.holm(p_cal, alpha)
-    sel_ho = select & np.isfinite(z0["heldout"])
     n_sel = int(sel_ho.sum())
-    g_before = float(np.sum(z0["heldout"][sel_ho] ** 2))
-    crit = float(stats.chi2.ppf(1.0 - alpha, max(n_sel, 1)))
     out: dict = {
         "alpha": alpha, "min_gain": min_gain, "seeds": sp["cal"].k,
         "n_statistics": int(np.isfinite(z0["cal"]).sum()),
@@ -418,6 +417,90 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
                                   if r["significant"]][:5]},
     )
     return out, {"before": z0["heldout"], "after": z["heldout"]}
+
+
+def _gap_setup(real: dict[str, Signature], twin: dict[str, list[Signature]], alpha: float):
+    """What every measure of the held-out gap shares: the spread of each part, the t of the
+    twin as it is, the significant statistics S (calibration, Holm), S where the held-out t is
+    usable, the held-out gap G over them and its χ²_|S|(1 − α) quantile."""
+    for part in ("cal", "heldout"):
+        for i, s in enumerate(twin[part]):
+            g.check_same(real[part], s, f"the recording's {part} part", f"twin seed {i} ({part})")
+    sp = {p: g.spread(twin[p]) for p in ("cal", "heldout")}
+    z0 = {p: g.zscores(real[p], sp[p]) for p in sp}
+    select = g.holm(g.pvalues(z0["cal"], sp["cal"]), alpha)
+    sel_ho = select & np.isfinite(z0["heldout"])
+    g_before = float(np.sum(z0["heldout"][sel_ho] ** 2))
+    crit = float(stats.chi2.ppf(1.0 - alpha, max(int(sel_ho.sum()), 1)))
+    return sp, z0, select, sel_ho, g_before, crit
+
+
+def resimulated(real: dict[str, Signature], twin: dict[str, list[Signature]],
+                resim: dict[str, list[Signature]], *, alpha: float = 0.01,
+                explained_fraction: float = 0.9) -> dict:
+    """The held-out gap with the added candidates **re-simulated** instead of interpolated.
+
+    ``resim``: {part: [signature of twin seed k with every added candidate applied at its fitted
+    values]} for the first n ≤ K seeds of ``twin`` (the same seeds, in order). The added
+    candidates' response is then Δ_j = mean over those seeds of (resim_k,j − twin_k,j) (common
+    random numbers, as for the grid: with all K seeds it is the mean of the re-simulated twin
+    minus the mean of the twin), and the statistic is the interpolated one with Δ in place of
+    the interpolated, additive response: G = Σ_{j∈S} ((r_j − μ_j − Δ_j)/σ_j)² over the same
+    statistics S, with the twin's own spread σ_j (a statistic no re-simulated seed could compute
+    gets Δ_j = 0, as a NaN of the grid's responses; ``n_statistics_resimulated`` counts the others).
+    The verdict follows the rule of :func:`diagnose` on this G.
+
+    Returns the ``resimulation`` entry of the result: done, seeds (n), heldout_gap_before,
+    heldout_gap_after, heldout_shrink, n_statistics (of S), n_statistics_resimulated, verdict, residual (significant,
+    heldout_gap, critical, top_regions) and worse_regions (against the twin as it is).
+    """
+    n = len(resim["heldout"])
+    if n < 1 or n > len(twin["heldout"]):
+        raise ValueError(f"re-simulation with {n} seeds; expected 1 to {len(twin['heldout'])}")
+    for part in ("cal", "heldout"):
+        for i, s in enumerate(resim[part]):
+            g.check_same(twin[part][0], s, f"twin seed 0 ({part})", f"re-simulated seed {i} ({part})")
+    sp, z0, select, sel_ho, g_before, crit = _gap_setup(real, twin, alpha)
+    regions = real["cal"].regions
+    diffs = {p: np.stack([r.values - t.values for r, t in zip(resim[p], twin[p][:n], strict=False)])
+             for p in sp}
+    finite = {p: np.isfinite(d).any(axis=0) for p, d in diffs.items()}
+    # A statistic no re-simulated seed could compute gets no response, as a NaN of the grid's.
+    delta = {p: np.where(finite[p], np.nanmean(np.where(finite[p], diffs[p], 0.0), axis=0), 0.0)
+             for p in sp}
+    z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}
+    g_after = float(np.sum(z["heldout"][sel_ho] ** 2))
+    shrink = 1.0 - g_after / g_before if g_before > 0 else 0.0
+    residual_sig = g_after > crit
+    explained = not residual_sig or shrink >= explained_fraction
+    sig_keys = {r.key for r, s in zip(regions, select, strict=True) if s}
+    top = [r for r in _regions(regions, z, z, select, sig_keys, g.region_gaps(z["cal"], regions))
+           if r["significant"]][:5]
+    return {"done": True, "seeds": n, "heldout_gap_before": g_before, "heldout_gap_after": g_after,
+            "heldout_shrink": shrink, "n_statistics": int(sel_ho.sum()),
+            "n_statistics_resimulated": int((sel_ho & finite["heldout"]).sum()),
+            "verdict": EXPLAINED if explained else UNEXPLAINED,
+            "residual": {"significant": bool(residual_sig), "heldout_gap": g_after, "critical": crit,
+                         "top_regions": top},
+            "worse_regions": worse_regions(z0["heldout"], z["heldout"], regions, alpha)}
+
+
+def with_resimulation(result: dict, resim: dict | None, reason: str = "") -> dict:
+    """``result`` of :func:`diagnose` with its ``resimulation`` entry (:func:`resimulated`, or
+    None: not re-simulated, for ``reason``): the verdict becomes the re-simulated one, the
+    interpolated one stays in ``verdict_interpolated``; ``heldout_shrink_resimulated`` is the
+    re-simulated shrink (None without a re-simulation)."""
+    out = dict(result)
+    out["verdict_interpolated"] = result.get("verdict_interpolated", result["verdict"])
+    if resim is None:
+        out["resimulation"] = {"done": False, "reason": reason}
+        out["heldout_shrink_resimulated"] = None
+        out["verdict"] = out["verdict_interpolated"]
+    else:
+        out["resimulation"] = resim
+        out["heldout_shrink_resimulated"] = resim["heldout_shrink"]
+        out["verdict"] = resim["verdict"] if result["verdict"] != NO_GAP else NO_GAP
+    return out
 
 
 def _regions(regions, z_before, z_after, select, sig_keys, gaps_cal) -> list[dict]:

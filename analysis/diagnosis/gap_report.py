@@ -55,6 +55,11 @@ RULES = (
     "1 − α once the effect is added. Its rise outside the significant statistics is subtracted "
     "from the candidate's gain (net reduction), which ranks the candidates and must pass the "
     "selection test.",
+    "Shrink, re-simulated: the twin run again with every added candidate at its fitted values "
+    "(its seeds of the spread; signal artefacts post-processed on those runs), the held-out gap "
+    "measured on them with the same statistic; the verdict follows it. Interpolated: from the "
+    "candidates' responses on their grids (one seed, linear between grid values, added). The gap "
+    "maps and the regions' \"after\" are interpolated.",
 )
 
 
@@ -219,9 +224,10 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
     facts = [f"recording {result.get('recording', '–')}", f"scenario {result.get('scenario', '–')}",
              f"{result.get('seeds', len(result.get('twin_seeds', [])))} twin seeds",
              f"α = {w.number(result.get('alpha', 0.01), 2)}",
-             f"held-out gap {w.gap_number(result['heldout_gap_before'])} → "
-             f"{w.gap_number(result['heldout_gap_after'])} (the spread allows "
-             f"{w.gap_number(result['heldout_gap_critical'])}; shrink {w.percent(result['heldout_shrink'])})"]
+             f"held-out gap {w.gap_number(result['heldout_gap_before'])} (the spread allows "
+             f"{w.gap_number(result['heldout_gap_critical'])})"]
+    if result["verdict"] != "no significant gap" or w.resimulated(result):
+        facts.append(f"shrink {w.shrink_phrase(result)}")
     title_of = lambda e: result.get("library", {}).get(e, {}).get("title", e)  # noqa: E731
     added = [{"step": a.get("step", i + 1), "title": title_of(a["effect"]), "effect": a["effect"],
               "kind": w.kind(result, a["effect"]), "words": w.added_phrase(result, a),
@@ -254,7 +260,24 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
                for r in [r for r in result.get("regions", []) if r["significant"]][:15]]
     figures = [{"link": q.name, "alt": q.stem.replace("_", " "),
                 "caption": _CAPTIONS.get(q.stem, q.stem.replace("_", " "))} for q in pngs]
-    return {"title": f"Gap diagnosis: {verdict}", "verdict": verdict, "verdict_class": cls,
+    rs = w.resimulated(result)
+    if rs is not None:
+        before = result.get("verdict_interpolated", verdict)
+        other = "" if before == verdict else f" (interpolated, it would be: {before})"
+        resim = (f"The twin re-simulated with the added candidates at their fitted values ({rs['seeds']} "
+                 f"twin seed{'s' if rs['seeds'] != 1 else ''}, signal artefacts post-processed on its "
+                 f"campaigns): held-out gap {w.gap_number(rs['heldout_gap_before'])} → "
+                 f"{w.gap_number(rs['heldout_gap_after'])}, shrink {w.percent(rs['heldout_shrink'])}; "
+                 f"interpolated from the candidates' responses: {w.gap_number(result['heldout_gap_after'])}, "
+                 f"shrink {w.percent(result['heldout_shrink'])}. The verdict follows the re-simulated "
+                 f"shrink{other}.")
+    elif result.get("added"):
+        resim = ("Not re-simulated ("
+                 f"{(result.get('resimulation') or {}).get('reason') or 'not asked for'}): the shrink is "
+                 "interpolated from the candidates' responses.")
+    else:
+        resim = ""
+    return {"title": f"Gap diagnosis: {verdict}", "verdict": verdict, "verdict_class": cls, "resim": resim,
             "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
             "facts": facts, "added": added, "ranking": ranking,
             "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}

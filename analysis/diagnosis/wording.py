@@ -233,6 +233,29 @@ def _places(rows: list[dict], k: int = 3) -> str:
     return "; ".join(names[:-1]) + " and " + names[-1]
 
 
+def resimulated(result: dict) -> dict | None:
+    """The ``resimulation`` entry of a result when the twin was re-simulated with the added
+    candidates, else None (nothing added, no gap, or results written before it existed)."""
+    rs = result.get("resimulation")
+    return rs if rs and rs.get("done") else None
+
+
+def shrink_phrase(result: dict) -> str:
+    """The held-out shrink, re-simulated and interpolated side by side: "99 % re-simulated (8
+    seeds; 71 612 → 926), 99 % interpolated (→ 421)"; "no re-simulation: nothing was added"
+    when the twin was not run again."""
+    g0, g1 = result["heldout_gap_before"], result["heldout_gap_after"]
+    rs = resimulated(result)
+    interp = (f"{percent(result['heldout_shrink'])} interpolated from the responses "
+              f"({gap_number(g0)} → {gap_number(g1)})")
+    if rs is None:
+        why = (result.get("resimulation") or {}).get("reason") or "nothing was added"
+        return f"{interp}; no re-simulation: {why}"
+    return (f"{percent(rs['heldout_shrink'])} re-simulated with the twin seeds ({rs['seeds']} "
+            f"seed{'s' if rs['seeds'] != 1 else ''}; {gap_number(g0)} → {gap_number(rs['heldout_gap_after'])}), "
+            f"{interp}")
+
+
 def answer(result: dict) -> str:
     """The report's opening paragraph, from the result alone: where the recording differs from
     the twin, what explains it, how sure, how much of the gap it removes, what is left."""
@@ -266,9 +289,19 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
         edges = [f"{r['label']} is {r['note']}" for a in added for r in parameters(result, a) if r["note"]]
         out.append(("How sure", f"{sure} on the held-out part"
                     + (f"; but {'; '.join(edges)}" if edges else "") + "."))
-        out.append(("How much", f"the added candidates remove {percent(result['heldout_shrink'])} of the "
-                   f"held-out gap ({gap_number(g0)} → {gap_number(g1)}; the twin's own spread "
-                   f"allows {gap_number(crit)})."))
+        rs = resimulated(result)
+        if rs is not None:
+            out.append(("How much", f"run with the added candidates at their fitted values, the twin "
+                        f"({rs['seeds']} seed{'s' if rs['seeds'] != 1 else ''}) removes "
+                        f"{percent(rs['heldout_shrink'])} of the held-out gap ({gap_number(g0)} → "
+                        f"{gap_number(rs['heldout_gap_after'])}; the twin's own spread allows "
+                        f"{gap_number(crit)}); interpolated from the candidates' responses, "
+                        f"{percent(result['heldout_shrink'])} ({gap_number(g0)} → {gap_number(g1)})."))
+        else:
+            out.append(("How much", f"the added candidates remove {percent(result['heldout_shrink'])} of the "
+                       f"held-out gap ({gap_number(g0)} → {gap_number(g1)}; the twin's own spread "
+                       f"allows {gap_number(crit)}), interpolated from their responses (no "
+                       "re-simulation)."))
     else:
         best = (result.get("ranking") or [None])[0]
         if best:
@@ -280,10 +313,14 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
             out.append(("What", "no candidate effect was tried."))
         out.append(("How much", f"nothing is removed (held-out gap {gap_number(g0)}; the twin's "
                     f"own spread allows {gap_number(crit)})."))
-    residual = result.get("residual", {})
+    # What is left follows the verdict: the re-simulated twin when there is one.
+    rs = resimulated(result)
+    residual = rs["residual"] if rs is not None else result.get("residual", {})
+    shrink = rs["heldout_shrink"] if rs is not None else result["heldout_shrink"]
+    g1 = rs["heldout_gap_after"] if rs is not None else g1
     if result["verdict"] == "explained":
         left = ("nothing beyond the spread." if not residual.get("significant") else
-                f"a small remainder ({percent(1 - result['heldout_shrink'])} of the "
+                f"a small remainder ({percent(1 - shrink)} of the "
                 f"gap), still beyond the spread mostly in {_places(residual.get('top_regions', []), 2)}.")
     else:
         left = (f"unexplained, {percent(g1 / g0 if g0 else 0.0)} of the gap, "

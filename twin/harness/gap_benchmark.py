@@ -37,6 +37,10 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
   gap); ``open_set_no_wrong_effect_fraction``, stricter: and no wrong effect added that removes
   ``HIGH_SCORE`` (50 %) or more of the held-out gap;
 - ``pair_both_top3_fraction``: pair cases with both effects among the first three of the ranking;
+- ``median_heldout_shrink_resimulated``, ``per_kind_median_heldout_shrink_resimulated``: the
+  same on the twin re-simulated with each case's added candidates (the first ``resim_seeds``
+  twin seeds; the verdicts follow it), ``per_kind_median_shrink_difference`` the median
+  |re-simulated − interpolated|;
 - ``per_kind_top1``: top-1 accuracy per kind of candidate ("physical effect": the single cases,
   "signal artefact": the artefact cases, whose first added candidate must be the injected
   artefact on its target, "parameter": the parameter cases, the injected key first), with
@@ -68,16 +72,21 @@ from twin.effects.parameters import PARAMETERS
 from twin.harness.gap_runner import (
     DEFAULT_KINDS,
     DEFAULT_SEEDS,
+    add_resimulation,
     artefact_cached,
     artefact_signatures,
     build_ensemble,
     diagnose_signatures,
     evaluate_all,
+    resimulate,
     with_effects,
     with_seed,
 )
 from twin.scenario import Scenario
 
+#: Twin seeds the benchmark re-simulates each case with (fewer than the spread's K: the
+#: re-simulation costs that many campaigns per case with candidates added; docs/gap-diagnosis.md).
+DEFAULT_RESIM_SEEDS = 2
 HIGH_SCORE = 0.5  # the stricter open-set score: no wrong effect removing this much of the gap
 CASE_SEED0 = 10_000
 
@@ -156,6 +165,9 @@ def _score_case(case: Case, res: dict) -> dict:
            "heldout_gap_before": res["heldout_gap_before"],
            "heldout_gap_after": res["heldout_gap_after"],
            "heldout_shrink": res["heldout_shrink"],
+           "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated"),
+           "heldout_gap_after_resimulated": (res.get("resimulation") or {}).get("heldout_gap_after"),
+           "verdict_interpolated": res.get("verdict_interpolated", res["verdict"]),
            "n_significant": res["n_significant_calibration"],
            "top_region": ([top["domain"], top["channel"], top["family"], top["bin"]] if top else None)}
     if case.kind in ("single", "parameter"):
@@ -221,11 +233,14 @@ def _fraction(rows, kind) -> float | None:
 def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int = DEFAULT_SEEDS,
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   on_progress: Callable[[str, int, int], None] | None = None,
-                  kinds: tuple[str, ...] | list[str] | None = None) -> dict:
+                  kinds: tuple[str, ...] | list[str] | None = None,
+                  resim_seeds: int = DEFAULT_RESIM_SEEDS) -> dict:
     """Simulate, diagnose and score every case; writes OUT/benchmark.json and
     OUT/benchmark_cases.csv and returns the summary. ``kinds``: the kinds of candidate the
     diagnosis tries (default :data:`DEFAULT_KINDS`, and "parameter" when there are parameter
-    cases)."""
+    cases). Every case with candidates added is re-simulated with them for the first
+    ``resim_seeds`` twin seeds (0: none; all the cases' campaigns together,
+    :func:`twin.harness.gap_runner.resimulate`) and scored with the verdict that gives."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
@@ -250,20 +265,43 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     for i in post:
         sigs[i] = artefact_signatures(reals[i], [cases[i].artefacts], cache, 1, keep_campaign=False)[1][0]
     t_real = time.perf_counter() - t0 - t_ens
+    results = [diagnose_signatures({p: sig[p] for p in PARTS}, ens, case.library, alpha)[0]
+               for case, sig in zip(cases, sigs, strict=True)]
+    t_diag = time.perf_counter() - t0 - t_ens - t_real
+    # The re-simulated shrink: the twin run with each case's added candidates (all cases at once).
+    todo = [i for i, r in enumerate(results) if r["added"] and r["verdict"] != NO_GAP] if resim_seeds else []
+    resims: list = [None] * len(cases)
+    for i, rs in zip(todo, resimulate(ens, [results[i]["added"] for i in todo], cache, workers,
+                                      resim_seeds, on_progress=prog("re-simulations")), strict=True):
+        resims[i] = rs
     rows = []
-    for case, sig in zip(cases, sigs, strict=True):
-        res, _ = diagnose_signatures({p: sig[p] for p in PARTS}, ens, case.library, alpha)
+    for case, sig, res, rs in zip(cases, sigs, results, resims, strict=True):
+        res = add_resimulation(res, {p: sig[p] for p in PARTS}, ens, rs, alpha)
         rows.append(_score_case(case, res))
     t_all = time.perf_counter() - t0
     singles = [r for r in rows if r["kind"] == "single"]
     arts = [r for r in rows if r["kind"] == "artefact"]
     pars = [r for r in rows if r["kind"] == "parameter"]
     med = lambda rs: float(np.median([r["heldout_shrink"] for r in rs])) if rs else None  # noqa: E731
+
+    def med_resim(rs: list[dict]) -> float | None:
+        vals = [r["heldout_shrink_resimulated"] for r in rs if r["heldout_shrink_resimulated"] is not None]
+        return float(np.median(vals)) if vals else None
+
+    def resim_diff(rs: list[dict]) -> float | None:
+        vals = [abs(r["heldout_shrink_resimulated"] - r["heldout_shrink"]) for r in rs
+                if r["heldout_shrink_resimulated"] is not None]
+        return float(np.median(vals)) if vals else None
+
     summary = {
         "scenario": nominal.name, "twin_seeds": ens.seeds, "alpha": alpha,
         "n_cases": len(rows),
         "top1_accuracy": _fraction(rows, "single"),
         "median_heldout_shrink": float(np.median([r["heldout_shrink"] for r in singles])) if singles else None,
+        "median_heldout_shrink_resimulated": med_resim(singles),
+        "resim_seeds": min(resim_seeds, len(ens.seeds)),
+        "n_resimulated": len(todo),
+        "verdict_changed_by_resimulation": [r["id"] for r in rows if r["verdict"] != r["verdict_interpolated"]],
         "null_correct_fraction": _fraction(rows, "null"),
         "open_set_correct_fraction": _fraction(rows, "open_set"),
         "open_set_no_wrong_effect_fraction": (float(np.mean([r["no_wrong_effect"] for r in rows
@@ -275,6 +313,10 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                           KIND_PARAMETER: _fraction(rows, "parameter")},
         "per_kind_median_heldout_shrink": {KIND_EFFECT: med(singles), KIND_ARTEFACT: med(arts),
                                            KIND_PARAMETER: med(pars)},
+        "per_kind_median_heldout_shrink_resimulated": {KIND_EFFECT: med_resim(singles), KIND_ARTEFACT: med_resim(arts),
+                                                       KIND_PARAMETER: med_resim(pars)},
+        "per_kind_median_shrink_difference": {KIND_EFFECT: resim_diff(singles), KIND_ARTEFACT: resim_diff(arts),
+                                              KIND_PARAMETER: resim_diff(pars)},
         "per_kind_top1_or_not_told_apart": {
             kind: (float(np.mean([r["correct_or_not_told_apart"] for r in rs])) if rs else None)
             for kind, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars))},
@@ -288,7 +330,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                             for name in sorted({r["injected"][0] for r in singles})},
         "confusion": confusion(rows),
         "wall_time_s": {"twin_and_candidates": t_ens, "recordings": t_real,
-                        "diagnoses": t_all - t_ens - t_real, "total": t_all},
+                        "diagnoses": t_diag, "resimulations": t_all - t_ens - t_real - t_diag, "total": t_all},
         "cases": rows,
         "plan": [asdict(c) for c in cases],
     }
@@ -296,11 +338,13 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     with open(out / "benchmark_cases.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["id", "kind", "injected", "magnitude", "verdict", "ranking", "added",
-                    "heldout_shrink", "correct"])
+                    "heldout_shrink", "heldout_shrink_resimulated", "verdict_interpolated", "correct"])
         for r in rows:
             w.writerow([r["id"], r["kind"], "+".join(r["injected"]) or "-", r["magnitude"],
                         r["verdict"], " > ".join(r["ranking"]), "+".join(r["added"]) or "-",
-                        f"{r['heldout_shrink']:.3f}", r["correct"]])
+                        f"{r['heldout_shrink']:.3f}",
+                        "" if r["heldout_shrink_resimulated"] is None else f"{r['heldout_shrink_resimulated']:.3f}",
+                        r["verdict_interpolated"], r["correct"]])
     with open(out / "benchmark_confusion.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["kind", "injected", "named first", "verdict when none", "count", "cases"])

@@ -14,7 +14,11 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
    its response averaged);
 4. computes the signature (both parts) of every simulation and of the recording, and runs
    :func:`analysis.diagnosis.attribution.diagnose`;
-5. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
+5. when candidates were added, simulates the twin again with them at their fitted values for
+   the seeds of the spread (signal artefacts post-processed on those campaigns) and measures
+   the held-out gap on it: the re-simulated shrink the verdict follows (:func:`resimulate`,
+   :func:`analysis.diagnosis.attribution.resimulated`);
+6. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
 
 Every simulation is a campaign of the scenario, cached by the hash of its scenario under
 ``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
@@ -557,6 +561,104 @@ def diagnose_signatures(real: dict[str, Signature], ens: TwinEnsemble,
     return attribution.diagnose(real, ens.twin, cands, alpha=alpha)
 
 
+# ---------------------------------------------------------------------------------------------
+# The re-simulated shrink: the twin run again with the added candidates at their fitted values
+
+
+def resim_plan(ens: TwinEnsemble, added: list[dict], n_seeds: int | None = None
+               ) -> tuple[list[Scenario], dict[str, dict[str, float]]]:
+    """What re-simulates the added candidates (entries of ``added``: effect, params): the
+    scenarios of the first ``n_seeds`` twin seeds (default: all K) with every added physical
+    effect and twin parameter applied at its fitted values (``Effect.apply``, the mechanism of
+    the grid), and the signal artefacts {name: values} to post-process their campaigns with."""
+    n = len(ens.seeds) if n_seeds is None else max(1, min(int(n_seeds), len(ens.seeds)))
+    spec = {a["effect"]: dict(a["params"]) for a in added if a["effect"] in ARTEFACTS}
+    scen = []
+    for sd in ens.seeds[:n]:
+        s = with_seed(ens.nominal, sd)
+        for a in added:
+            if a["effect"] not in ARTEFACTS:
+                eff = ens.effects.get(a["effect"]) or simulated(a["effect"])
+                s = eff.apply(s, dict(a["params"]))
+        scen.append(s)
+    return scen, spec
+
+
+def _resim_path(s: Scenario, spec: dict[str, dict[str, float]], cache: Path) -> Path:
+    d = Path(cache) / _key(s)
+    return d / "artefacts" / f"{_spec_key(spec, s.seed)}.npz" if spec else d / "signature.npz"
+
+
+def resimulate(ens: TwinEnsemble, addeds: list[list[dict]], cache: Path, workers: int | None = None,
+               n_seeds: int | None = None, scheduler: str | None = None,
+               on_progress: Callable[[int, int], None] | None = None
+               ) -> list[dict[str, list[Signature]] | None]:
+    """The signatures of the twin re-simulated with each list of added candidates (one list per
+    diagnosis; None where it is empty) for the first ``n_seeds`` twin seeds (:func:`resim_plan`),
+    all diagnoses' campaigns simulated together through the cache and the executor of the grid
+    (:func:`evaluate_all`: batched rollouts, ``workers`` processes or the Dask cluster at
+    ``scheduler``). Signal artefacts are applied to those campaigns by their post-processing
+    (:func:`analysis.diagnosis.artefacts.apply`, the twin seed's random draws, as for their
+    grid); the post-processed signatures are cached under the campaign's entry, the campaigns
+    kept only for the nominal twin's seeds (every artefact-only diagnosis of the scenario
+    post-processes those)."""
+    workers = workers or os.cpu_count() or 1
+    plans = [resim_plan(ens, a, n_seeds) if a else None for a in addeds]
+    cache = Path(cache)
+    plain = [s for p in plans if p and not p[1] for s in p[0]]
+    if plain:
+        evaluate_all(plain, cache, workers, on_progress, scheduler=scheduler)
+    # Post-processed: the campaigns whose post-processed signature is missing.
+    jobs: dict[str, tuple[Scenario, list[str]]] = {}
+    for p in plans:
+        if p and p[1]:
+            for s in p[0]:
+                if not _resim_path(s, p[1], cache).exists():
+                    specs = jobs.setdefault(_key(s), (s, []))[1]
+                    if json.dumps(p[1]) not in specs:
+                        specs.append(json.dumps(p[1]))
+    if jobs:
+        scen = [s for s, _ in jobs.values()]
+        had = {k for k in jobs if (cache / k / "campaign" / "measurements.h5").exists()}
+        evaluate_all(scen, cache, workers, on_progress, keep=True, scheduler=scheduler)
+        ensure_campaigns(scen, cache, workers, scheduler)
+        args = []
+        for k, (s, specs) in jobs.items():
+            paths = [str(_resim_path(s, json.loads(sp), cache)) for sp in specs]
+            Path(paths[0]).parent.mkdir(parents=True, exist_ok=True)
+            args.append((str(cache / k / "campaign" / "measurements.h5"), specs, paths,
+                         str(cache / k / "signature.npz"), s.seed))
+        run_tasks(_artefact_batch, args, workers, scheduler)
+        nominal = {_key(with_seed(ens.nominal, sd)) for sd in ens.seeds}
+        for k in jobs:
+            if k not in had and k not in nominal:
+                shutil.rmtree(cache / k / "campaign", ignore_errors=True)
+    out: list[dict[str, list[Signature]] | None] = []
+    for p in plans:
+        if not p:
+            out.append(None)
+            continue
+        sigs = [load_signatures(str(_resim_path(s, p[1], cache))) for s in p[0]]
+        out.append({part: [sg[part] for sg in sigs] for part in PARTS})
+    return out
+
+
+def add_resimulation(result: dict, real: dict[str, Signature], ens: TwinEnsemble,
+                     resim: dict[str, list[Signature]] | None, alpha: float = 0.01) -> dict:
+    """``result`` with its ``resimulation`` entry (:func:`analysis.diagnosis.attribution.resimulated`
+    on the re-simulated signatures; the reason when there are none) and the verdict it gives."""
+    if result["verdict"] == attribution.NO_GAP:
+        return attribution.with_resimulation(result, None, "no significant gap: nothing to explain")
+    if not result["added"]:
+        return attribution.with_resimulation(result, None, "nothing was added")
+    if resim is None:
+        return attribution.with_resimulation(result, None, "not asked for (0 re-simulation seeds)")
+    rs = attribution.resimulated(real, ens.twin, resim, alpha=alpha,
+                                 explained_fraction=result.get("explained_fraction", 0.9))
+    rs["twin_seeds"] = ens.seeds[:rs["seeds"]]
+    return attribution.with_resimulation(result, rs)
+
+
 def library_json(names: list[str], effects: dict[str, Effect] | None = None,
                  nominal: Scenario | None = None) -> dict:
     """The library's entry of ``diagnosis.json``: per candidate its kind ("physical effect" |
@@ -583,9 +685,12 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                   library: list[str] | None = None, plots: bool = True,
                   on_progress: Callable[[int, int], None] | None = None,
                   kinds: tuple[str, ...] | list[str] | None = None,
-                  scheduler: str | None = None) -> dict:
+                  scheduler: str | None = None, resim_seeds: int | None = None,
+                  on_resim_progress: Callable[[int, int], None] | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
-    (and OUT/report/ with ``plots``) and returns its content."""
+    (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
+    twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
+    0: none) and the verdict follows the re-simulated shrink (:func:`resimulate`)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
@@ -594,6 +699,10 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
+    resim = None
+    if result["added"] and result["verdict"] != attribution.NO_GAP and resim_seeds != 0:
+        resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_resim_progress)[0]
+    result = add_resimulation(result, real, ens, resim, alpha)
     result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
               "kinds": sorted({c.kind for c in ens.candidates}),
               "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
