@@ -6,7 +6,8 @@ of 90; S = 1 is the paper's campaign) on all local cores (or ``--workers N`` / `
 ADDR``), then ``twin backlash`` on it, then ``twin detect`` against the reference set
 (``scenarios/paper-reference.toml`` at the same scale, simulated too). For each step: wall time,
 CPU time of its processes and the peak memory of its largest process; the size of the HDF5
-files. Long: about 10-20 min on a 2-core machine for S = 0.1, 20-30 min for S = 1.
+files. Long: about 10-20 min on a 2-core machine for S = 0.1; S = 1 writes about 46 GB and as
+much again in resumable parts before they are assembled (about 100 GB of free disk).
 
 Run: .venv/bin/python benchmarks/bench_campaign.py [--scale 0.1] [--out DIR] [--scheduler ADDR]
 """
