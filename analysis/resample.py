@@ -87,8 +87,22 @@ def not_a_knot_cubic_rows(y: np.ndarray, position: np.ndarray) -> np.ndarray:
     i = np.minimum(position.astype(np.intp), n - 2)
     u = position - i
     a = 1.0 - u
-    out = a * y[:, i]
-    out += u * y[:, i + 1]
-    out += (a * a * a - a) / 6.0 * moments[:, i]
-    out += (u * u * u - u) / 6.0 * moments[:, i + 1]
-    return out
+    ca, cu = (a * a * a - a) / 6.0, (u * u * u - u) / 6.0
+    if 4 * position.size < n:  # few points: gather the four columns directly
+        out = a * y[:, i]
+        out += u * y[:, i + 1]
+        out += ca * moments[:, i]
+        out += cu * moments[:, i + 1]
+        return out
+    # many points: one table row per sample (values, then moments), so that each position
+    # gathers two contiguous rows instead of four strided columns
+    c = y.shape[0]
+    table = np.empty((n, 2 * c))
+    table[:, :c] = y.T
+    table[:, c:] = moments.T
+    left, right = table[i], table[i + 1]
+    out = a[:, None] * left[:, :c]
+    out += u[:, None] * right[:, :c]
+    out += ca[:, None] * left[:, c:]
+    out += cu[:, None] * right[:, c:]
+    return out.T

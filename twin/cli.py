@@ -982,6 +982,9 @@ def report(
 
 
 def main() -> None:
+    from twin.executors import keep_freed_memory
+
+    keep_freed_memory()
     try:
         app()
     except ScenarioError as exc:  # pragma: no cover - defensive

@@ -183,20 +183,23 @@ def resolved_band(k_per_m: np.ndarray, psd: np.ndarray, precision: float) -> tup
     dk = float(k[0])
     budget = precision ** 2
     lo = hi = int(np.argmin(p))
-    total = p[lo] * dk
-    if total > budget:
+    if p[lo] * dk > budget:
         return None
-    while True:
-        left = p[lo - 1] if lo > 0 else np.inf
-        right = p[hi + 1] if hi + 1 < p.size else np.inf
-        step = min(left, right)
-        if not np.isfinite(step) or total + step * dk > budget:
-            break
-        total += step * dk
-        if left <= right:
-            lo -= 1
-        else:
-            hi += 1
+    # The greedy growth, in one pass: it takes the frontier values of the two sides (towards lower
+    # and towards higher k) smallest head first, so each side's values go in blocks that start at
+    # a new running maximum of that side, and the blocks go in the order of those maxima (the
+    # lower side first on a tie, as the greedy step takes it). A stable sort of the running maxima
+    # gives that order; the band stops at the first value that is not finite or that would bring
+    # Σ PSD·Δk (summed in the same order) above the budget.
+    lower, upper = p[lo - 1::-1] if lo > 0 else p[:0], p[hi + 1:]
+    keys = np.concatenate((np.maximum.accumulate(lower), np.maximum.accumulate(upper)))
+    order = np.argsort(keys, kind="stable")
+    values = np.concatenate((lower, upper))[order]
+    total = np.cumsum(np.concatenate(([p[lo] * dk], values * dk)))[1:]
+    over = np.flatnonzero(~np.isfinite(values) | (total > budget))
+    taken = order[:over[0] if over.size else order.size]
+    n_lower = int(np.count_nonzero(taken < lower.size))
+    lo, hi = lo - n_lower, hi + (taken.size - n_lower)
     return 1.0 / float(k[hi]), 1.0 / float(k[lo])
 
 
