@@ -368,19 +368,33 @@ def _timeline(s: Scenario, units: list[Unit]) -> dict[str, np.ndarray]:
             "temperature_rise_K": np.array([c.temperature_rise for c in conds])}
 
 
-def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
-    """Write measurements.h5 and truth.h5 from the stored parts."""
+#: The order in which :func:`assemble` reads the parts, and so the order in which
+#: :func:`simulate_campaign` computes them (the assembly follows the simulation).
+ASSEMBLY_ORDER = ("dial", "phase1", "phase2")
+
+
+def assemble(s: Scenario, out_dir: Path, units: list[Unit],
+             wait: Callable[[Unit], None] | None = None) -> None:
+    """Write measurements.h5 and truth.h5 from the stored parts, reading them kind by kind in
+    :data:`ASSEMBLY_ORDER` and by name within a kind. ``wait(unit)``, if given, is called before
+    each part is read and returns once that part is stored (or raises to abandon the assembly:
+    nothing is written then), so the assembly can run while the units are still computed."""
     store = PartStore(out_dir)
-    by_kind = {k: [u for u in units if u.kind == k] for k in ("phase1", "phase2", "dial")}
+    by_kind = {k: [u for u in units if u.kind == k] for k in ASSEMBLY_ORDER}
+
+    def read(u: Unit, prefix: str = ""):
+        if wait is not None:
+            wait(u)
+        return store.read(u.kind, u.name, prefix)
 
     def phase1_items():
         for u in by_kind["phase1"]:
-            attrs, data, _ = store.read("phase1", u.name)
+            attrs, data, _ = read(u)
             yield u.name, attrs, data
 
     def phase2_items():
         for u in by_kind["phase2"]:
-            attrs, data, dattrs = store.read("phase2", u.name)
+            attrs, data, dattrs = read(u)
             runs = sorted({k.split("/")[0] for k in data if k.startswith("r")})
             yield (u.name, {"hours": attrs["hours"]},
                    [(r, {"speeds_mm_s": list(s.phase2.speeds_mm_s), "accel_mm_s2": s.phase2.accel_mm_s2,
@@ -392,7 +406,7 @@ def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
 
     dial_h, dial_b = [], []
     for u in by_kind["dial"]:
-        attrs, _, _ = store.read("dial", u.name)
+        attrs, _, _ = read(u)
         dial_h.append(attrs["hours"])
         dial_b.append(attrs["backlash_um"])
     ds.assemble_measurements(out_dir / "measurements.h5", nominal_axis_description(s),
@@ -401,7 +415,7 @@ def assemble(s: Scenario, out_dir: Path, units: list[Unit]) -> None:
 
     def sessions():
         for u in by_kind["phase2"]:
-            attrs, data, _ = store.read("phase2", u.name)
+            attrs, data, _ = store.read("phase2", u.name, "truth/")
             strokes = {k[len("truth/stroke_"):]: v for k, v in data.items() if k.startswith("truth/stroke_")}
             yield u.name, attrs, data["truth/x_m"], data["truth/E"], strokes
 
@@ -491,25 +505,89 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     if on_progress:
         on_progress(done, len(units), "")
     payload = s.to_json()
-    # Phase II sessions first: they are the longest units.
-    todo.sort(key=lambda u: 0 if u.kind == "phase2" else 1)
+    # In the order the assembly reads them, which starts on the files as soon as the first parts
+    # are stored (_Assembler); the tail this leaves unbalanced is at most one Phase II session.
+    todo.sort(key=lambda u: ASSEMBLY_ORDER.index(u.kind))
     processes = 1 if len(todo) <= 1 and scheduler is None else workers
+    assembler = _Assembler(s, out, units, stored={u.name for u in units} - {u.name for u in todo})
     with make_executor(processes, scheduler=scheduler, prefix="unit") as ex:
         try:
             futures = [ex.submit(run_unit, payload, u, str(out), key=u.name) for u in todo]
+            if not ex.in_process:
+                assembler.start()  # in this process's spare time while the workers simulate
             for fut in ex.completed(futures):
                 name = fut.result()
+                assembler.stored(name)
                 done += 1
                 if on_progress:
                     on_progress(done, len(units), name)
         except KeyboardInterrupt:
+            assembler.abandon()
             ex.interrupt()
             kept = _stored(store, units)
             raise CampaignInterrupted(kept, len(units), len(units) - kept) from None
+        except BaseException:
+            assembler.abandon()
+            raise
         where = ex.description
-    assemble(s, out, units)
+    assembler.finish()
     return {"units": len(units), "simulated": len(todo), "skipped": len(units) - len(todo),
             "executor": where}
+
+
+class _Abandoned(Exception):
+    """The simulation stopped: the assembly running beside it writes nothing."""
+
+
+class _Assembler:
+    """:func:`assemble` in a thread of the campaign's process, reading each part as soon as its
+    unit is stored, so that writing the two files overlaps the simulation of the later units
+    (the process otherwise only waits for its workers). ``finish`` runs it here if it was not
+    started (one process simulating), or waits for it and re-raises what it raised."""
+
+    def __init__(self, s: Scenario, out: Path, units: list[Unit], stored: set[str]):
+        import threading
+
+        self._args = (s, out, units)
+        self._cond = threading.Condition()
+        self._stored, self._abandoned = set(stored), False
+        self._thread = threading.Thread(target=self._run, name="assemble", daemon=True)
+        self._error: BaseException | None = None
+
+    def _wait(self, unit: Unit) -> None:
+        with self._cond:
+            self._cond.wait_for(lambda: unit.name in self._stored or self._abandoned)
+            if self._abandoned:
+                raise _Abandoned
+
+    def _run(self) -> None:
+        try:
+            assemble(*self._args, wait=self._wait)
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller by finish()
+            self._error = exc
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stored(self, name: str) -> None:
+        with self._cond:
+            self._stored.add(name)
+            self._cond.notify_all()
+
+    def abandon(self) -> None:
+        with self._cond:
+            self._abandoned = True
+            self._cond.notify_all()
+        if self._thread.is_alive():
+            self._thread.join()
+
+    def finish(self) -> None:
+        if not self._thread.is_alive() and self._thread.ident is None:
+            assemble(*self._args)
+            return
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
 
 
 def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | Path]) -> None:

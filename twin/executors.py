@@ -29,9 +29,11 @@ class ExecutorError(ValueError):
 
 class Executor:
     """submit(fn, *args, key) -> future; completed(futures) yields them as they finish;
-    ``description`` says where the work runs (for logs)."""
+    ``description`` says where the work runs (for logs); ``in_process`` whether it runs in this
+    process (then this process has no spare time while it does)."""
 
     description = ""
+    in_process = False
 
     def __enter__(self):
         return self
@@ -105,6 +107,7 @@ class _Deferred:
 
 class _Serial(Executor):
     description = "this process"
+    in_process = True
 
     def submit(self, fn, *args, key: str):
         return _Deferred(fn, args)
@@ -233,19 +236,24 @@ def map_ordered(executor: Executor, fn: Callable, args: Sequence[tuple], keys: S
 
 
 def mapper(processes: int | None = None, *, scheduler: str | None = None,
-           prefix: str = "task") -> Callable[[Callable, Sequence[tuple]], list]:
-    """A ``map(fn, args) -> [fn(*a) for a in args]`` (in order) that runs the calls on an
-    executor started for them and closed after: local processes (``processes``, default all
-    cores, never more than there are calls; one runs them in this process) or the Dask cluster
-    at ``scheduler``. What ``twin backlash`` passes to the analysis for its sessions.
+           prefix: str = "task") -> Callable[[Callable, Sequence[tuple]], Iterator]:
+    """A ``map(fn, args)`` that yields ``fn(*a)`` for each of ``args`` in order, each as soon as
+    it and those before it are done (the caller works on it while the executor computes the
+    next), running the calls on an executor started for them and closed after: local processes
+    (``processes``, default all cores, never more than there are calls; one runs them in this
+    process, one after the other) or the Dask cluster at ``scheduler``. What ``twin backlash``
+    passes to the analysis for its sessions. A call that raised re-raises where its result is
+    due; the executor is then closed, which stops the rest.
 
-    Raises (when called):
+    Raises (when iterated):
         ExecutorError: no scheduler answers at ``scheduler``.
     """
-    def run(fn: Callable, args: Sequence[tuple]) -> list:
+    def run(fn: Callable, args: Sequence[tuple]) -> Iterator:
         n = len(args)
         local = min(processes or os.cpu_count() or 1, max(n, 1))
         with make_executor(local, scheduler=scheduler, prefix=prefix) as ex:
-            return map_ordered(ex, fn, args, [str(i) for i in range(n)])
+            futures = [ex.submit(fn, *a, key=str(i)) for i, a in enumerate(args)]
+            for fut in futures:
+                yield fut.result()
 
     return run

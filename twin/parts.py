@@ -127,8 +127,10 @@ class PartStore:
         atomic_write(final, create, fsync=self.fsync)
         return final
 
-    def read(self, kind: str, name: str) -> tuple[dict[str, Any], dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        """Return ``(attrs, datasets, dataset_attrs)`` of a part, arrays in their stored dtype.
+    def read(self, kind: str, name: str, prefix: str = "") -> tuple[dict[str, Any], dict[str, np.ndarray],
+                                                                     dict[str, dict[str, Any]]]:
+        """Return ``(attrs, datasets, dataset_attrs)`` of a part, arrays in their stored dtype;
+        with ``prefix``, only the datasets whose keys start with it (the others are not read).
 
         ``dataset_attrs`` has an entry only for datasets that have attributes. Raises
         FileNotFoundError for a missing part and :class:`DatasetError` for an unreadable one.
@@ -143,7 +145,7 @@ class PartStore:
             f.visititems(lambda k, obj: keys.append(k) if isinstance(obj, h5py.Dataset) else None)
             datasets: dict[str, np.ndarray] = {}
             dattrs: dict[str, dict[str, Any]] = {}
-            for key in sorted(keys):
+            for key in sorted(k for k in keys if k.startswith(prefix)):
                 ds = f[key]
                 check_dtype(label, "/" + key, ds.dtype)
                 try:

@@ -414,10 +414,11 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
             ``travel_mm`` and ``lead_mm``, required).
         progress: optional callable(done, total, session).
         baseline_sessions: leading sessions that define zero change (:func:`rezero_on_baseline`).
-        map_sessions: optional ``map_sessions(fn, args) -> [fn(*a) for a in args]`` (in order)
-            that runs :func:`session_error_motions_task` for the sessions elsewhere (processes,
-            a cluster: the caller's executor); None computes them here, one after the other.
-            The results are the same either way.
+        map_sessions: optional ``map_sessions(fn, args)`` returning or yielding ``fn(*a)`` for
+            each of ``args`` in order, that runs :func:`session_error_motions_task` for the
+            sessions elsewhere (processes, a cluster: the caller's executor); None computes them
+            here, one after the other. Each session is estimated as it arrives, so a generator
+            lets this work overlap the next sessions'. The results are the same either way.
     Raises:
         DatasetError: a bad run with ``on_bad_run="raise"``, no Phase II session, or no usable
             run in any session.
@@ -445,13 +446,17 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
         outcomes = map_sessions(session_error_motions_task,
                                 [(str(m.path.resolve()), name, on_bad_run, error_motion_kw)
                                  for name in names])
-    ems, skipped_runs, skipped_sessions = [], [], []
+    ems, estimates, skipped_runs, skipped_sessions = [], [], [], []
     for i, (name, (em, why)) in enumerate(zip(names, outcomes, strict=True)):
         if em is None:
             if on_bad_run == "raise":
                 raise DatasetError(why)
             skipped_sessions.append((name, why))
         else:
+            if not ems:
+                estimator.fit(em)  # the first usable session is the reference
+            # estimated as it arrives, while the executor computes the next sessions
+            estimates.append(estimator.estimate(em))
             ems.append(em)
             skipped_runs.extend((name, run, why) for run, why in em.skipped)
         if progress is not None:
@@ -459,8 +464,7 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
     if not ems:
         raise DatasetError(f"{m.label}: no Phase II session has a usable run "
                            f"({'; '.join(w for _, w in skipped_sessions)})")
-    estimator.fit(ems[0])
-    sessions, offset = rezero_on_baseline([estimator.estimate(e) for e in ems], baseline_sessions)
+    sessions, offset = rezero_on_baseline(estimates, baseline_sessions)
     return CampaignBacklash(sessions=sessions, error_motions=ems, skipped_runs=skipped_runs,
                             skipped_sessions=skipped_sessions, estimator=estimator,
                             baseline_sessions=baseline_sessions, baseline_offset_m=offset)
