@@ -9,7 +9,12 @@ CPU time of its processes and the peak memory of its largest process; the size o
 files. Long: about 10-20 min on a 2-core machine for S = 0.1; S = 1 writes about 46 GB and as
 much again in resumable parts before they are assembled (about 100 GB of free disk).
 
+With ``--sessions N`` (for a disk that cannot hold the campaign and its parts at once), Phase I
+is simulated alone and Phase II alone for its first N sessions, ``twin backlash`` runs on those,
+and the whole campaign is projected from them (Phase I + Phase II × sessions / N).
+
 Run: .venv/bin/python benchmarks/bench_campaign.py [--scale 0.1] [--out DIR] [--scheduler ADDR]
+     [--sessions N]
 """
 
 from __future__ import annotations
@@ -46,6 +51,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--scheduler", default=None)
     ap.add_argument("--no-analysis", action="store_true", help="simulate only")
+    ap.add_argument("--sessions", type=int, default=None,
+                    help="Phase I alone and the first N Phase II sessions alone, then a projection")
     args = ap.parse_args()
     where = (["--scheduler", args.scheduler] if args.scheduler else
              ["--workers", str(args.workers)] if args.workers else [])
@@ -60,6 +67,8 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as tmp:
         work = args.out or Path(tmp)
+        if args.sessions:
+            return by_parts(work, scale, where, args.sessions, show)
         rtf, ref = work / "rtf", work / "reference"
         step = twin("simulate", str(REPO / "scenarios/paper-rtf.toml"), "-o", str(rtf), *scale, *where)
         size = sum(p.stat().st_size for p in rtf.glob("*.h5")) / 1e9
@@ -71,6 +80,36 @@ def main() -> None:
             "simulate", str(REPO / "scenarios/paper-reference.toml"), "-o", str(ref), *scale, *where))
         show("twin detect (all six methods)",
              twin("detect", str(rtf), "--reference", str(ref), "-o", str(work / "detect")))
+
+
+def by_parts(work: Path, scale: list[str], where: list[str], n: int, show) -> None:
+    """Phase I alone, the first ``n`` Phase II sessions alone, ``twin backlash`` on those, and the
+    whole campaign projected from them; each output is deleted once measured (disk)."""
+    import shutil
+
+    sys.path.insert(0, str(REPO))
+    from twin.campaign import plan
+    from twin.scenario import load
+
+    paper = str(REPO / "scenarios/paper-rtf.toml")
+    hours = [u.hours for u in plan(load(paper, [scale[1]])) if u.kind == "phase2"]
+    n = min(n, len(hours))
+    p1, p2 = work / "phase1", work / "phase2"
+    a = twin("simulate", paper, "-o", str(p1), *scale, "--set", "campaign.phase2=false", *where)
+    show("twin simulate, Phase I alone", a, f", {(p1 / 'measurements.h5').stat().st_size / 1e9:.1f} GB")
+    shutil.rmtree(p1)
+    b = twin("simulate", paper, "-o", str(p2), *scale, "--set", "campaign.phase1=false",
+             "--set", f"phase2.session_hours={[float(h) for h in hours[:n]]}", *where)
+    show(f"twin simulate, {n} of {len(hours)} Phase II sessions", b,
+         f", {(p2 / 'measurements.h5').stat().st_size / 1e9:.1f} GB")
+    shutil.rmtree(p2 / ".parts")
+    c = twin("backlash", str(p2), "--no-plots", *where)
+    show(f"twin backlash on the {n} sessions", c)
+    k = len(hours) / n
+    print(f"  projected for the whole campaign ({len(hours)} sessions): simulation "
+          f"{(a[0] + b[0] * k) / 60:.1f} min wall (Phase I {a[0] / 60:.1f} + Phase II {b[0] * k / 60:.1f}), "
+          f"twin backlash {c[0] * k / 60:.1f} min wall")
+    shutil.rmtree(p2)
 
 
 if __name__ == "__main__":
