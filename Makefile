@@ -20,8 +20,10 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
+# Two test processes (pytest-xdist), a test file to each in turn: the suite's long campaigns run
+# side by side. The slowest tests are listed at the end of every run.
 test: lint
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile --durations=25
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow
