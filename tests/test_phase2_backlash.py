@@ -339,8 +339,8 @@ def test_slow_reversal_travels_l_minus_b(reversal_campaign):
     "On the IMU axis Eq. 9 cannot see D = L − b here: analysis.phase2.strokes times each stroke "
     "by its half-velocity instant, and with a 50 mm/s² ramp the carriage crosses the clearance "
     "before half speed and then moves with the screw, so the instants, the cruise windows and the "
-    "axis do not change with backlash; and the comb's spacing scatters by tenths of a µm per "
-    "10 mm pitch with the origin (x L/p = 45: ±10 µm of backlash). docs/error-motions.md"))
+    "axis do not change with backlash; and the comb's pitch moves by up to 0.3 µm per 10 mm "
+    "with the origin alone (x L/p = 45 in Eq. 9). docs/error-motions.md"))
 def test_eq9_on_the_imu_axis_where_d_is_l_minus_b(reversal_campaign):
     doc = backlash_json(reversal_campaign, "--no-plots", "--position-reference", "imu")
     injected = injected_change_um(reversal_campaign)
