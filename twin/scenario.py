@@ -65,7 +65,7 @@ class AxisConfig(_Section):
         "time constant of MuJoCo's soft friction constraint (the joints' solreffriction) of the "
         "nut drag and the rail friction, ms; null = MuJoCo's default (20 ms), under which the "
         "Coulomb friction acts as a damper at low speed; at least two simulation steps"))
-    friction_impedance: float | None = Field(None, gt=0, lt=1, description=(
+    friction_impedance: float | None = Field(None, ge=0.0001, le=0.9999, description=(
         "impedance d of that constraint (solimpfriction): the fraction of an applied force that "
         "static friction cancels, the rest creeps; null = MuJoCo's default (0.9 to 0.95)"))
 
