@@ -26,6 +26,10 @@ CASES = [
      ["`campaign.warmup_hours` = 700", "total_hours = 600", "warmup_hours <= total_hours"]),
     (["--set", "seed=4294967296"], ["seed", "4294967296", "<= 4294967295"]),
     (["--set", "sensors.imu_acc_fs_hz=0"], ["sensors.imu_acc_fs_hz", "0", "> 0"]),
+    (["--set", "axis.friction_timeconst_ms=0.1"],
+     ["axis.friction_timeconst_ms", "0.1", "shorter than two simulation steps", ">= 0.4 ms"]),
+    (["--set", "axis.friction_impedance=1.0"], ["axis.friction_impedance", "1", "0.9999"]),
+    (["--set", "phase2.start_flank=\"middle\""], ["phase2.start_flank", "middle", "'first'", "'last'"]),
 ]
 
 
@@ -69,3 +73,19 @@ def test_reduced_scale_is_one_override():
     # the same timeline: the same sessions and samples
     assert [u.hours for u in plan(full) if u.kind == "phase2"] == \
         [u.hours for u in plan(reduced) if u.kind == "phase2"]
+
+
+def test_friction_constraint_keys():
+    """axis.friction_timeconst_ms / friction_impedance set MuJoCo's friction constraint of the
+    nut drag and the rails; unset, the MJCF carries no such attribute (MuJoCo's defaults)."""
+    from twin.model import build_mjcf, build_model
+    from twin.scenario import to_axis
+
+    plain = load(QUICK)
+    assert "solreffriction" not in build_mjcf(to_axis(plain), 2e-4)
+    s = load(QUICK, ["axis.friction_timeconst_ms=0.4", "axis.friction_impedance=0.999"])
+    m = build_model(to_axis(s), 2e-4)
+    for joint in ("screw", "carriage_x"):
+        dof = m.joint(joint).dofadr[0]
+        assert list(m.dof_solref[dof]) == pytest.approx([4e-4, 1.0])
+        assert list(m.dof_solimp[dof][:2]) == pytest.approx([0.999, 0.999])

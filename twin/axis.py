@@ -167,12 +167,31 @@ class Servo:
 
 @dataclass(frozen=True)
 class Axis:
-    """The whole testbed: travel, drive, carriage, servo and simulation settings."""
+    """The whole testbed: travel, drive, carriage, servo and simulation settings.
+
+    friction_timeconst (s) and friction_impedance: the time constant and impedance d of MuJoCo's
+    soft constraint for the Coulomb friction of the nut drag and of the rails (the joints'
+    ``solreffriction`` and ``solimpfriction``; MuJoCo documentation, "Solver parameters");
+    None = MuJoCo's defaults (0.02 s; d from 0.9 to 0.95). A soft friction constraint cancels
+    only the fraction d of an applied force below the friction limit (the rest creeps) and
+    decelerates a sliding joint to rest over about the time constant, like a damper."""
 
     travel: float
     screw: ScrewDrive
     carriage: Carriage
     servo: Servo
+    friction_timeconst: float | None = None
+    friction_impedance: float | None = None
+
+    def friction_solver_attributes(self) -> str:
+        """MJCF attributes of a friction joint for the settings above ("" for MuJoCo's defaults)."""
+        out = ""
+        if self.friction_timeconst is not None:
+            out += f' solreffriction="{self.friction_timeconst!r} 1.0"'
+        if self.friction_impedance is not None:
+            d = float(self.friction_impedance)
+            out += f' solimpfriction="{d!r} {d!r} 0.001 0.5 2"'
+        return out
 
     def total_inertia(self) -> float:
         """Rotational inertia seen by the motor: J_m + J_s + m·R², kg·m²."""

@@ -333,7 +333,8 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
         for g in groups:
             _, sim0, _, cmd0, _, _ = items[g[0]]
             if sim.structure() == sim0.structure() and cmd.x.shape == cmd0.x.shape \
-                    and np.array_equal(cmd.x, cmd0.x) and np.array_equal(cmd.v, cmd0.v):
+                    and np.array_equal(cmd.x, cmd0.x) and np.array_equal(cmd.v, cmd0.v) \
+                    and cmd.rest_direction == cmd0.rest_direction:
                 g.append(i)
                 break
         else:

@@ -52,12 +52,17 @@ class Move:
 
 @dataclass(frozen=True)
 class Profile:
-    """Sampled command. t (n,) s; x (n,) m; v (n,) m/s; a (n,) m/s²."""
+    """Sampled command. t (n,) s; x (n,) m; v (n,) m/s; a (n,) m/s².
+
+    rest_direction: sign (+1 or −1) of the motion that brought the axis to its rest before the
+    first sample, which decides the nut flank the carriage rests on; 0 = that of the first
+    motion (the carriage brought into contact by a move in the direction it starts in)."""
 
     t: np.ndarray
     x: np.ndarray
     v: np.ndarray
     a: np.ndarray
+    rest_direction: float = 0.0
 
 
 def _move_samples(move: Move, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

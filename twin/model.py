@@ -264,6 +264,7 @@ def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str
     zn = c.nut_height - c.com_height  # nut axis relative to the centre of mass (m, negative)
     zi = c.imu_height - c.com_height
     kp, ki, kd = axis.servo_gains()
+    fric = axis.friction_solver_attributes()
     half_travel = axis.travel / 2.0
     flank_kp = FLANK_MASS * (0.5 / timestep) ** 2
     flank_kv = 2.0 * math.sqrt(flank_kp * FLANK_MASS)
@@ -301,14 +302,14 @@ def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str
           contype="0" conaffinity="0" rgba="0.5 0.5 0.5 1"/>
     <body name="screw" pos="0 0 {_fmt(c.nut_height)}">
       <joint name="screw" type="hinge" axis="1 0 0" armature="{_fmt(axis.servo.motor_inertia)}"
-             damping="{_fmt(s.drag_viscous)}" frictionloss="{_fmt(s.drag_torque(s.preload))}"/>
+             damping="{_fmt(s.drag_viscous)}" frictionloss="{_fmt(s.drag_torque(s.preload))}"{fric}/>
       <inertial pos="{_fmt(half_travel)} 0 0" mass="{_fmt(s.screw_mass)}"
                 diaginertia="{_fmt(s.screw_inertia)} 0.05 0.05"/>
       <geom type="cylinder" fromto="0 0 0 {_fmt(axis.travel)} 0 0" size="{_fmt(s.root_diameter / 2)}"
             contype="0" conaffinity="0" mass="0" rgba="0.7 0.7 0.75 1"/>
     </body>
     <body name="carriage" pos="0 0 {_fmt(c.com_height)}">
-      <joint name="carriage_x" type="slide" axis="1 0 0" frictionloss="{_fmt(c.rail_friction)}"/>
+      <joint name="carriage_x" type="slide" axis="1 0 0" frictionloss="{_fmt(c.rail_friction)}"{fric}/>
       <joint name="carriage_y" type="slide" axis="0 1 0"/>
       <joint name="carriage_z" type="slide" axis="0 0 1"/>
       <joint name="carriage_roll" type="hinge" axis="1 0 0"/>

@@ -14,7 +14,7 @@ import copy
 import json
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -61,6 +61,13 @@ class AxisConfig(_Section):
     velocity_integral_time_s: float = Field(0.01, gt=0)
     torque_ripple_Nm: float = Field(0.01, ge=0, description="motor torque ripple amplitude")
     torque_ripple_per_rev: int = Field(8, ge=1)
+    friction_timeconst_ms: float | None = Field(None, gt=0, description=(
+        "time constant of MuJoCo's soft friction constraint (the joints' solreffriction) of the "
+        "nut drag and the rail friction, ms; null = MuJoCo's default (20 ms), under which the "
+        "Coulomb friction acts as a damper at low speed; at least two simulation steps"))
+    friction_impedance: float | None = Field(None, ge=0.0001, le=0.9999, description=(
+        "impedance d of that constraint (solimpfriction): the fraction of an applied force that "
+        "static friction cancels, the rest creeps; null = MuJoCo's default (0.9 to 0.95)"))
 
     @model_validator(mode="after")
     def _preload_rated(self) -> AxisConfig:
@@ -195,6 +202,10 @@ class Phase2Config(_Section):
     origin_offset_max_mm: float = Field(2.0, ge=0, le=20)
     session_hours: list[float] = Field(
         default_factory=list, description="explicit session hours; overrides the interval")
+    start_flank: Literal["first", "last"] = Field("first", description=(
+        "the nut flank the carriage rests on before a run: that of the run's first motion "
+        "(\"first\") or of its last (\"last\": the run follows an identical run, so every move "
+        "starts by crossing the clearance)"))
 
     @model_validator(mode="after")
     def _speeds(self) -> Phase2Config:
@@ -287,6 +298,16 @@ class Scenario(_Section):
             if a == b:
                 raise ValueError(f"{key}.start_mm = {a:g} equals {key}.end_mm: the stroke must "
                                  "have a non-zero length")
+        return self
+
+    @model_validator(mode="after")
+    def _friction_timeconst(self) -> Scenario:
+        tc = self.axis.friction_timeconst_ms
+        step = max(self.phase1.timestep_s, self.phase2.timestep_s)
+        if tc is not None and tc * 1e-3 < 2.0 * step - 1e-15:
+            raise ValueError(f"axis.friction_timeconst_ms = {tc:g} is shorter than two simulation "
+                             f"steps: allowed >= {2e3 * step:g} ms (2 × the larger of "
+                             "phase1.timestep_s and phase2.timestep_s)")
         return self
 
     @model_validator(mode="after")
@@ -412,7 +433,9 @@ def to_axis(s: Scenario) -> Axis:
     servo = Servo(motor_inertia=a.motor_inertia_kg_m2, position_bandwidth_hz=a.position_bandwidth_hz,
                   velocity_bandwidth_hz=a.velocity_bandwidth_hz,
                   velocity_integral_time=a.velocity_integral_time_s)
-    return Axis(travel=a.travel_mm * 1e-3, screw=screw, carriage=carriage, servo=servo)
+    return Axis(travel=a.travel_mm * 1e-3, screw=screw, carriage=carriage, servo=servo,
+                friction_timeconst=None if a.friction_timeconst_ms is None else a.friction_timeconst_ms * 1e-3,
+                friction_impedance=a.friction_impedance)
 
 
 def nominal_axis_description(s: Scenario) -> dict[str, Any]:

@@ -351,9 +351,10 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     direction = np.sign(cmd.v)
     if moving.size:
         held = np.maximum.accumulate(np.where(direction != 0, np.arange(direction.size), -1))
-        direction = np.where(held >= 0, direction[np.maximum(held, 0)], np.sign(cmd.v[moving[0]]))
+        before = cmd.rest_direction or np.sign(cmd.v[moving[0]])
+        direction = np.where(held >= 0, direction[np.maximum(held, 0)], before)
     else:
-        direction = np.ones_like(cmd.v)
+        direction = np.full_like(cmd.v, cmd.rest_direction or 1.0)
     models, s0s, x_rails, used = [], [], [], set()
     for (sim, cond), xc in zip(items, x_cmd, strict=True):
         model = sim.model if id(sim) not in used else copy.deepcopy(sim.model)
@@ -482,8 +483,14 @@ def phase2_moves(cfg) -> list[Move]:
 
 
 def phase2_command(sim: Simulator, cfg) -> Profile:
-    """The commanded profile of one Phase II run at the simulation rate."""
-    return command_profile(phase2_moves(cfg), sim.fs, lead_in=PHASE2_LEAD_IN)
+    """The commanded profile of one Phase II run at the simulation rate. With
+    ``cfg.start_flank`` = "last" the carriage rests before the run on the flank of the run's last
+    motion, as it does when the run follows an identical one."""
+    moves = phase2_moves(cfg)
+    cmd = command_profile(moves, sim.fs, lead_in=PHASE2_LEAD_IN)
+    if cfg.start_flank == "last" and moves:
+        cmd = replace(cmd, rest_direction=math.copysign(1.0, moves[-1].end - moves[-1].start))
+    return cmd
 
 
 def phase2_trajectory(sim: Simulator, cfg, cond: Condition) -> Trajectory:
