@@ -54,13 +54,30 @@ def _check_new(label: str, key: str, parent: h5py.Group, name: str, what: str) -
         raise DatasetError(f"{label}: {key} is given twice; expected unique {what} names")
 
 
+#: Largest chunk of a written dataset, bytes (HDF5's default chunk cache is 1 MiB).
+CHUNK_BYTES = 512 * 1024
+
+
+def chunk_shape(shape: tuple[int, ...], itemsize: int) -> tuple[int, ...] | None:
+    """Chunks of whole rows (all columns of a sample together, as the readers take them), at
+    most :data:`CHUNK_BYTES` each and of equal length, so that the last chunk is not mostly
+    padding; None for an empty or scalar dataset (HDF5 picks)."""
+    if not shape or shape[0] == 0:
+        return None
+    row = itemsize * int(np.prod(shape[1:], dtype=np.int64))
+    most = max(CHUNK_BYTES // max(row, 1), 1)
+    n_chunks = -(-shape[0] // most)
+    return (-(-shape[0] // n_chunks), *shape[1:])
+
+
 def _put(label: str, key: str, g: h5py.Group, name: str, arr: np.ndarray, attrs: Mapping[str, Any]) -> None:
     _check_finite(label, key, arr)
     if name in schema.PHYSICAL_RANGE and g.file.attrs.get("format") == schema.MEASUREMENTS_FORMAT:
         _check_range(label, key, arr, schema.PHYSICAL_RANGE[name], str(attrs.get("unit", "")))
     # Fletcher-32: every chunk carries a checksum that the reader verifies, so bytes changed after
     # writing (a corrupt copy, a bad disk) raise an error instead of being analysed.
-    ds = g.create_dataset(name, data=arr, fletcher32=True)
+    arr = np.asarray(arr)
+    ds = g.create_dataset(name, data=arr, fletcher32=True, chunks=chunk_shape(arr.shape, arr.dtype.itemsize))
     write_attrs(ds, attrs)
 
 
