@@ -30,6 +30,7 @@ CASES = [
      ["axis.friction_timeconst_ms", "0.1", "shorter than two simulation steps", ">= 0.4 ms"]),
     (["--set", "axis.friction_impedance=1.0"], ["axis.friction_impedance", "1", "0.9999"]),
     (["--set", "phase2.start_flank=\"middle\""], ["phase2.start_flank", "middle", "'first'", "'last'"]),
+    (["--set", "phase2.rail_passes=0"], ["phase2.rail_passes", "0", ">= 1"]),
 ]
 
 

@@ -333,14 +333,15 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
         for g in groups:
             _, sim0, _, cmd0, _, _ = items[g[0]]
             if sim.structure() == sim0.structure() and cmd.x.shape == cmd0.x.shape \
+                    and items[i][0].phase2.rail_passes == items[g[0]][0].phase2.rail_passes \
                     and np.array_equal(cmd.x, cmd0.x) and np.array_equal(cmd.v, cmd0.v) \
                     and cmd.rest_direction == cmd0.rest_direction:
                 g.append(i)
                 break
         else:
             groups.append([i])
-    passes = 1 if unit.kind == "phase1" else 2
     for g in groups:
+        passes = 1 if unit.kind == "phase1" else items[g[0]][0].phase2.rail_passes
         trajs = run_many([(items[i][1], items[i][2]) for i in g], items[g[0]][3], passes)
         for i, traj in zip(g, trajs, strict=True):
             s, sim, cond, _, rng, store = items[i]

@@ -202,6 +202,11 @@ class Phase2Config(_Section):
     origin_offset_max_mm: float = Field(2.0, ge=0, le=20)
     session_hours: list[float] = Field(
         default_factory=list, description="explicit session hours; overrides the interval")
+    rail_passes: int = Field(2, ge=1, le=3, description=(
+        "rollout passes of a session: 1 looks the rails up at the command shifted by the known "
+        "backlash lag, 2 at the first pass's true position (the fixed point to below a nm; "
+        "docs/validation.md, 'Simulation speed': one pass is 2.5 s of a 90-run session faster "
+        "and moves the carriage by at most 41 nm)"))
     start_flank: Literal["first", "last"] = Field("first", description=(
         "the nut flank the carriage rests on before a run: that of the run's first motion "
         "(\"first\") or of its last (\"last\": the run follows an identical run, so every move "

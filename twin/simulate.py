@@ -16,9 +16,9 @@ travel x(t), and a second rollout with the rails looked up at that x(t) is the f
 steady speed a third pass changes x by far less than a nm, and passes 1 and 2 differ by a
 fraction of a nm rms (asserted in ``tests/test_twin_physics.py``; figures in docs/validation.md).
 Phase II, where the micrometre shift between the forward and reverse traces is the measured
-quantity, always does both passes. Phase I does one pass with the rails at the commanded
-position plus the known backlash lag: the residual error in
-the rail input is (slope of the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm,
+quantity, does both passes unless the scenario's ``phase2.rail_passes`` asks for one. Phase I
+does one pass with the rails at the commanded position plus the known backlash lag: the
+residual error in the rail input is (slope of the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm,
 far below anything the nut accelerometers see.
 """
 
@@ -494,8 +494,9 @@ def phase2_command(sim: Simulator, cfg) -> Profile:
 
 
 def phase2_trajectory(sim: Simulator, cfg, cond: Condition) -> Trajectory:
-    """The deterministic motion of one Phase II run (two passes, see module docstring)."""
-    return sim.run(cond, phase2_command(sim, cfg), passes=2)
+    """The deterministic motion of one Phase II run (``cfg.rail_passes`` passes, 2 by default;
+    see the module docstring)."""
+    return sim.run(cond, phase2_command(sim, cfg), passes=cfg.rail_passes)
 
 
 def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -> dict:
