@@ -43,9 +43,12 @@ class _Table:
         self.rows.append((key, value, source + (f": {note}" if note else "")))
 
     def text(self) -> str:
+        """The table as TOML; a key whose value is None (unset: TOML has no null) is written as a
+        comment, so that the author sees it and the twin's own default applies."""
         lines = [f"[{self.name}]"] if self.name else []
-        width = max((len(f"{k} = {_fmt(v)}") for k, v, _ in self.rows), default=0)
-        lines += [f"{f'{k} = {_fmt(v)}':<{width}}  # {c}" for k, v, c in self.rows]
+        shown = [(f"{k} = {_fmt(v)}" if v is not None else f"# {k} = (unset)", c) for k, v, c in self.rows]
+        width = max((len(kv) for kv, _ in shown), default=0)
+        lines += [f"{kv:<{width}}  # {c}" for kv, c in shown]
         return "\n".join(lines)
 
 
