@@ -92,14 +92,19 @@ def _acceptance(tmp: Path, overrides: tuple[str, ...], wrong_lead: bool) -> dict
         "is 360 mm, not within the travel /@axis.travel_mm = 300 mm" in " ".join(r.stderr.split())
     if not wrong_lead:
         return out
-    # Eq. 9's comb: the screw's pitch observed through lead_mm
+    # Eq. 9's comb: the screw's pitch observed through lead_mm. On these 10-run sessions E_XX's
+    # comb peaks reach 0.61-0.72 of the main peak (docs/import.md), below the paper's 75 %
+    # threshold, so the comb is read at half of it here (the estimator parameter `threshold`).
+    comb = ("--no-plots", "--set-param", "threshold=0.5")
+    run_twin("backlash", campaign, *comb, "-o", campaign / "comb")
+    doc = json.loads((campaign / "comb" / "backlash.json").read_text())
     pitches = [s["observed_pitch_mm"] for s in doc["sessions"] if s["observed_pitch_mm"] is not None]
     assert pitches and all(p == pytest.approx(5.0, rel=1e-3) for p in pitches), pitches
-    run_twin("backlash", wrong / "campaign", "--no-plots")
-    bad = json.loads((wrong / "campaign" / "backlash" / "backlash.json").read_text())
+    run_twin("backlash", wrong / "campaign", *comb, "-o", wrong / "campaign" / "comb")
+    bad = json.loads((wrong / "campaign" / "comb" / "backlash.json").read_text())
     bad_pitches = [s["observed_pitch_mm"] for s in bad["sessions"] if s["observed_pitch_mm"] is not None]
     print(f"observed pitch with lead 5 mm: {pitches} mm; with lead 10 mm: {bad_pitches}")
-    assert all(abs(p - 5.0) > 0.05 * 5.0 for p in bad_pitches)
+    assert bad_pitches and all(abs(p - 5.0) > 0.05 * 5.0 for p in bad_pitches)
     return out
 
 
