@@ -36,7 +36,10 @@ __all__ = ["Pulse", "StrokeError", "TIMINGS", "centroid_delay", "find_pulses", "
            "imu_segments", "routine_pulses", "imu_run_segments"]
 
 TIMINGS = ("travel", "centroid", "half_velocity")
-"""How :func:`find_pulses` times a pulse: by its centroid (default) or its half-velocity instant."""
+"""How :func:`find_pulses` times a pulse (see the module docstring): ``travel`` (default; pulses
+shorter than ``EDGE_MIN_S`` by their half-velocity instant), ``centroid``, ``half_velocity``."""
+EDGE_MIN_S = 0.05
+"""Pulses at least this long (s) are timed by their cruise-side edge and rest-side travel."""
 
 
 class StrokeError(BadRunError):
@@ -85,9 +88,8 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float | Mapping[float,
                 speeds_m_s: tuple[float, ...],
                 accel_m_s2: float, stroke_m: float, dwell_s: float, *, first_after_s: float = 0.0,
                 window_fraction: float = 0.02, timing: str = "travel",
-                bandwidth_hz: float | None = None, edge_min_s: float = 0.05,
-                deficit_window_s: float = 0.1, revolution_m: float | None = None,
-                label: str = "imu_acc") -> list[Pulse]:
+                bandwidth_hz: float | None = None, edge_min_s: float = EDGE_MIN_S,
+                deficit_window_s: float = 0.05, label: str = "imu_acc") -> list[Pulse]:
     """Find and time every acceleration pulse of a run (see the module docstring).
 
     Args:
@@ -172,13 +174,10 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float | Mapping[float,
             lost = rest_side_deficit(a, fs_hz, sign, accel_m_s2, length, rest_edge, delay, from_rest,
                                      deficit_window_s, pad / fs_hz)
             centre = (edge - 0.5 * length + lost / v) if from_rest else (edge + 0.5 * length - lost / v)
-        elif timing in ("centroid", "travel"):
-            # the pulse's centroid ∫t·a dt / ∫a dt over the window (samples at t_i = i/fs), of
-            # the acceleration averaged over one screw revolution (centred: the centroid stays)
-            h = int(round(0.5 * revolution_m / v * fs_hz)) if revolution_m else 0
-            lo, hi = max(c0 - h, h), min(c1 + h, a.size - h)
-            seg = np.convolve(a[lo - h:hi + h], np.full(2 * h + 1, 1.0 / (2 * h + 1)), mode="valid")
-            centre = float(np.sum(t[lo:hi] * seg) / np.sum(seg)) - delay
+        elif timing == "centroid":
+            # the pulse's centroid ∫t·a dt / ∫a dt over the window (samples at t_i = i/fs)
+            seg = a[c0:c1]
+            centre = float(np.sum(t[c0:c1] * seg) / np.sum(seg)) - delay
         else:
             # half-velocity time: when the velocity change, integrated from before the pulse,
             # reaches half the nominal v (sub-sample by linear interpolation)
@@ -325,7 +324,7 @@ def half_velocity_delay(length_s: float, bandwidth_hz: float, order: int = 2) ->
 
 def imu_segments(acc_x: np.ndarray, fs_hz: float, speeds_mm_s: tuple[float, ...], routine: Mapping[str, float],
                  acc_bandwidth_hz: float, *, settle_s: float = 0.2, timing: str = "travel",
-                 revolution_m: float | None = None, label: str = "imu_acc") -> RunSegments:
+                 edge_min_s: float = EDGE_MIN_S, label: str = "imu_acc") -> RunSegments:
     """The cruises and stationary parts of a run on the IMU-based position axis.
 
     The strokes are timed from the accelerometer (:func:`find_pulses`, the sensor's delay from its
@@ -355,13 +354,13 @@ def imu_segments(acc_x: np.ndarray, fs_hz: float, speeds_mm_s: tuple[float, ...]
     accel = routine["accel_mm_s2"] * 1e-3
     start, end = routine["start_mm"] * 1e-3, routine["end_mm"] * 1e-3
     speeds = tuple(v * 1e-3 for v in speeds_mm_s)
-    if timing != "half_velocity":
-        delays = {v: centroid_delay(acc_bandwidth_hz) for v in speeds}
-    else:
-        delays = {v: half_velocity_delay(v / accel, acc_bandwidth_hz) for v in speeds}
+    # the pulses timed by their travel or centroid show the filter's DC group delay, the short ones
+    # timed by their half-velocity instant a little more (see find_pulses)
+    delays = {v: centroid_delay(acc_bandwidth_hz)
+              if timing == "centroid" or (timing == "travel" and v / accel >= edge_min_s)
+              else half_velocity_delay(v / accel, acc_bandwidth_hz) for v in speeds}
     pulses = find_pulses(acc_x, fs_hz, delays, speeds, accel, abs(end - start), routine["dwell_s"],
-                         timing=timing, bandwidth_hz=acc_bandwidth_hz, revolution_m=revolution_m,
-                         label=label)
+                         timing=timing, bandwidth_hz=acc_bandwidth_hz, edge_min_s=edge_min_s, label=label)
     motions = []
     for acc_p, dec_p in zip(pulses[0::2], pulses[1::2], strict=True):
         v = acc_p.speed_m_s
@@ -382,14 +381,13 @@ def imu_segments(acc_x: np.ndarray, fs_hz: float, speeds_mm_s: tuple[float, ...]
 
 
 
-def imu_run_segments(run, acc_bandwidth_hz: float, *, timing: str = "travel",
-                     revolution_m: float | None = None, label: str = "imu_acc"
+def imu_run_segments(run, acc_bandwidth_hz: float, *, timing: str = "travel", label: str = "imu_acc"
                      ) -> tuple[RunSegments, list[tuple[float, float]]]:
     """:func:`imu_segments` of a Phase II run (an :class:`analysis.dataset.Phase2Run`, its
     speeds and routine metadata), and the intervals (t0, t1) s in which the axis moves: each
     cruise widened by its ramp time v/a. ``acc_bandwidth_hz``: the accelerometer's half-power
     frequency, Hz."""
     seg = imu_segments(run.imu_acc[:, 0], run.imu_acc_fs_hz, run.speeds_mm_s or (), run.routine,
-                       acc_bandwidth_hz, timing=timing, revolution_m=revolution_m, label=label)
+                       acc_bandwidth_hz, timing=timing, label=label)
     accel = run.routine["accel_mm_s2"] * 1e-3
     return seg, [(mo.t0_s - mo.speed_m_s / accel, mo.t1_s + mo.speed_m_s / accel) for mo in seg.motions]
