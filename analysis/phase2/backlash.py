@@ -149,24 +149,24 @@ PITCH_METHODS = ("harmonic", "comb")
 
 def tone_frequency(y: np.ndarray, dx: float, f0: float, half_range: float) -> float:
     """Frequency (cycles per m) of the sinusoid in ``y`` nearest ``f0``, searched within
-    ``f0`` ± ``half_range``: the maximum of the Hann-windowed periodogram.
+    ``f0`` ± ``half_range``: the maximum of the periodogram |Σ y_n·exp(−j2πf·n·dx)|.
 
     The periodogram's maximum is the maximum-likelihood frequency of one sinusoid in white noise
     (Rife & Boorstyn, "Single-tone parameter estimation from discrete-time observations", IEEE
     Trans. Inf. Theory 20(5), 1974; Kay, *Fundamentals of Statistical Signal Processing:
-    Estimation Theory*, 1993, sec. 7.10). Its variance falls as N⁻³, so over a whole stroke it
-    resolves a small part of a bin. The Hann window keeps the leakage of the trace's other
-    components (the other harmonics, the rails' waviness) from pulling the peak: its sidelobes
-    fall as 1/f³ (Harris, "On the use of windows for harmonic analysis with the discrete Fourier
-    transform", Proc. IEEE 66(1), 1978). The search: |DTFT| on a grid of a quarter of a bin over
-    the range, then a bounded scalar maximisation (``scipy.optimize.minimize_scalar``) within a
-    quarter of a bin of the best grid point. NaN when the maximum lies on the range's edge.
+    Estimation Theory*, 1993, sec. 7.10); its variance falls as N⁻³, so over a whole stroke it
+    resolves a small part of a bin. No taper: the rectangular window is the likelihood's, and its
+    slowly falling sidelobes (Harris, "On the use of windows for harmonic analysis with the
+    discrete Fourier transform", Proc. IEEE 66(1), 1978) find little to leak here, because the
+    traces come high-passed by winfilt (the long wavelengths, the largest content, are gone).
+    The search: the periodogram on a grid of a quarter of a bin over the range, then a bounded
+    scalar maximisation (``scipy.optimize.minimize_scalar``) within a quarter of a bin of the
+    best grid point. NaN when the maximum lies on the range's edge.
     """
     from scipy.optimize import minimize_scalar
-    from scipy.signal import get_window
 
     y = np.asarray(y, dtype=float)
-    y = (y - y.mean()) * get_window("hann", y.size)
+    y = y - y.mean()
     x = np.arange(y.size) * dx
 
     def mag(f: float) -> float:
