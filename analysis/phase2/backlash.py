@@ -36,10 +36,14 @@ Weighted sum (Eqs. 6–7): γ_ij = min(γ_ij1, γ_ij2), ΔBacklash_i = Σ_j γ_i
 five non-positioning DOFs with ``dofs=NON_POSITIONING``, see :class:`BacklashEstimator`).
 
 Perceived pitch (Eqs. 8–9): for every DOF and direction whose correlation shows a comb of peaks
-(:class:`analysis.phase2.shifts.ShiftResult.spacing_m`), the observed pitch p_ijk is the peak
-spacing times its order h = round(lead / spacing) (peaks of an h-per-revolution feature are lead/h
-apart; the twin's comb is the motor's 8-per-revolution torque ripple, 1.25 mm). The spacing is
-taken from the session's own autocorrelation: the comb of the *cross*-correlation of two traces
+(:class:`analysis.phase2.shifts.ShiftResult.spacing_m`), the observed pitch p_ijk is h times the
+period of the h-per-revolution feature, h = round(lead / spacing) (peaks of an h-per-revolution
+feature are lead/h apart; the twin's comb is the motor's 8-per-revolution torque ripple,
+1.25 mm). The comb finds the feature and its order; its period comes by default from the
+feature's frequency in the trace (``pitch_method="harmonic"``, :func:`tone_frequency`, the
+maximum-likelihood frequency of a sinusoid), with ``pitch_method="comb"`` from the spacing of the
+comb's line fit, which the trace's broadband content and noise move through every peak. The comb
+is taken from the session's own autocorrelation: the comb of the *cross*-correlation of two traces
 with periods P_0 and P_i has the mean spacing (P_0 + P_i)/2 (the sum over x of two slightly
 detuned combs; checked in tests/test_phase2_backlash.py), which would halve Eq. 9. Then
 p_i = Σ γ_ijk^σ p_ijk / Σ γ_ijk^σ over (j, k) with the γ of the correlation against the reference
@@ -212,6 +216,8 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
             fraction of a µm (figures: docs/validation.md). At 20 mm/s the angles hardly
             correlate and the two choices agree.
         pitch_dofs: DOFs of the perceived pitch (Eq. 8).
+        pitch_method: "harmonic" (default) or "comb": how each trace's pitch is read
+            (:meth:`observed_pitch`).
         stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
         travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).
     """

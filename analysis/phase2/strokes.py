@@ -12,12 +12,34 @@ move). Each move leaves two rectangular pulses of height ±a and length T = v/a 
 acceleration: + then − forward, − then + in reverse. The pulses are looked for in that order,
 each within a window around where the nominal routine puts it after the previous one (the
 cruise takes (L − v²/a)/v, the dwell is known), by a matched filter (a moving sum of length T of
-the signed acceleration). Each pulse is then timed by its centroid over the matched window
-widened by the sensor's response time: a linear low-pass of unit DC gain moves a pulse's centroid
-by exactly its group delay at DC, so the pulse's true centre is the measured centroid minus the
-delay, and the start of the pulse half its length earlier. The carriage's axial mode rings after
-each pulse and biases the centroid by a fixed amount for a given axis state; the bias is common to
-every session with the same dynamics.
+the signed acceleration). Each pulse is then timed (``timing``):
+
+- ``half_velocity``: the instant the velocity change, integrated from before the pulse, reaches
+  v/2, less the sensor's delay for such a pulse (:func:`half_velocity_delay`). Precise for short
+  pulses (the paper's 19.6 m/s²: within 0.1 IMU sample), but on a slow ramp it does not move with
+  the travel the carriage makes: a carriage that first crosses a clearance b reaches half speed
+  when it would have without it.
+- ``centroid``: the pulse's centroid ∫t·a dt / ∫a dt, less the filter's DC group delay
+  (:func:`centroid_delay`). The centroid is t_end − (travel during the pulse)/v, so it moves by
+  b/v with the travel; but the window's edges weigh the cruise's vibration (the velocity there
+  times half the window), which moves it with the origin, and its noise grows as the window^1.5.
+- ``travel`` (default): pulses shorter than ``EDGE_MIN_S`` as ``half_velocity``; longer ones (a
+  slow ramp) by the two things that decide where the cruise lies on the carriage's path. (1) The
+  pulse's *cruise-side* edge (the end of an acceleration, the start of a deceleration), which a
+  clearance does not move: a step detector, then a least-squares fit of the sensor's step
+  response with a local level and slope (:func:`edge_time`). (2) The travel the carriage lost
+  against the nominal ramp on its *rest* side, where it first crosses the clearance: the velocity
+  integrated from the rest (zero there) against the ramp placed by the edge, over the first
+  ``deficit_window_s`` of the ramp (:func:`rest_side_deficit`). The pulse is placed where a
+  nominal pulse with the same travel would lie (the centroid's definition, without its window):
+  start = edge − T + lost/v for an acceleration, edge − lost/v for a deceleration. A carriage
+  that travels D = L − b between rests then stretches the axis by L/(L − b), as the paper's
+  Eq. 9 assumes.
+
+A linear low-pass of unit DC gain moves any pulse's centroid, and delays a ramp, by exactly its
+group delay at DC, which is removed. The carriage's axial mode rings after each edge and biases
+the timing by a fixed amount for a given axis state; the bias is common to every session with
+the same dynamics.
 
 Units SI: s, m/s, m/s².
 """
@@ -95,12 +117,21 @@ def find_pulses(acc_x: np.ndarray, fs_hz: float, delay_s: float | Mapping[float,
     Args:
         acc_x: (n,) accelerometer samples along the travel, m/s² (bias included; the median,
             the standstill reading of a run that mostly rests or cruises, is removed).
-        fs_hz: its sampling rate, Hz; delay_s: how late the sensor shows a pulse's
-            half-velocity instant, s (:func:`half_velocity_delay`), or {speed: delay}.
+        fs_hz: its sampling rate, Hz; delay_s: how late the sensor shows the pulses of each
+            speed, s, or {speed: delay}: the half-velocity instant's delay
+            (:func:`half_velocity_delay`) for pulses timed by it, the DC group delay
+            (:func:`centroid_delay`) for those timed by their travel or centroid.
         speeds_m_s, accel_m_s2, stroke_m, dwell_s: the routine (from the recording's metadata).
         first_after_s: the first pulse is searched after this time, s.
         window_fraction: each later pulse is searched within ± (50 ms + this fraction of its
             nominal delay after the previous one); a window must not reach the pulse after it.
+        timing: ``travel``, ``centroid`` or ``half_velocity`` (module docstring).
+        bandwidth_hz: the sensor's half-power frequency, Hz (2nd-order Butterworth): needed by
+            ``travel`` for pulses of ``edge_min_s`` or longer (the step response of their edges).
+        edge_min_s: pulses at least this long are timed by their travel (``travel``), s.
+        deficit_window_s: the part of a slow ramp next to the rest over which the travel lost to
+            a clearance is measured, s (0.05 s at 0.05 m/s² covers a clearance of 62 µm; the
+            double integral's noise grows as its 1.5 power).
         label: names the channel in errors.
 
     Returns:
