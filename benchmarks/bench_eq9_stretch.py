@@ -10,13 +10,15 @@ gates). Printed:
 1. per session of the noise-free pair, how much shorter the backlash makes the forward and reverse
    cruise of the first run on the IMU axis (:func:`analysis.phase2.strokes.imu_run_segments`), ms,
    for each stroke timing (``half_velocity``: the earlier one; ``travel``: the default), against
-   b/v, which D = L − b requires;
+   b/v, which D = L − b requires; then, for every timing (``centroid`` too), how much the cruise
+   without backlash spreads over the sessions (the origin alone) and its run-to-run scatter with
+   the IMU's noise;
 2. per campaign, stroke timing and pitch method (``comb``: the spacing of the comb's line fit,
    the earlier one; ``harmonic``: the default), the observed pitch (Eq. 8) relative to the first
    session, µm, and Eq. 9's change of backlash, µm. Without backlash the pitch's change is the
    scatter the origin alone causes.
 
-Run: ``python benchmarks/bench_eq9_stretch.py`` (about 2 minutes on one core).
+Run: ``python benchmarks/bench_eq9_stretch.py`` (about 3 minutes on one core).
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 from analysis.dataset import open_measurements, open_truth
 from analysis.phase2.backlash import BacklashEstimator
@@ -36,6 +40,7 @@ SCENARIO = REPO / "scenarios/backlash-slow-reversal.toml"
 NOISE_FREE = ("sensors.imu_acc_noise_ug_per_rthz=0.0", "sensors.imu_gyro_noise_urad_s_per_rthz=0.0",
               "phase2.runs_per_session=1")
 TIMINGS = ("half_velocity", "travel")
+ALL_TIMINGS = ("half_velocity", "centroid", "travel")
 PITCH_METHODS = ("comb", "harmonic")
 
 
@@ -46,16 +51,18 @@ def simulate(out: Path, *sets: str) -> Path:
     return out
 
 
-def cruises(path: Path) -> dict:
-    """{(session, timing): (forward, reverse) cruise duration of the first run, s}."""
+def cruises(path: Path, all_runs: bool = False) -> dict:
+    """{(session, timing): (runs, 2) forward and reverse cruise durations, s} (the first run only
+    unless ``all_runs``)."""
     out = {}
     with open_measurements(path / "measurements.h5") as m:
         abw = m.axis()["sensors"]["imu_accelerometer"]["bandwidth_hz"]
         for s in m.phase2_sessions():
-            run = m.phase2(s, m.phase2_runs(s)[0])
-            for timing in TIMINGS:
-                seg, _ = imu_run_segments(run, abw, timing=timing)
-                out[(s, timing)] = tuple(mo.t1_s - mo.t0_s for mo in seg.motions)
+            runs = m.phase2_runs(s) if all_runs else m.phase2_runs(s)[:1]
+            for timing in ALL_TIMINGS:
+                out[(s, timing)] = np.array([[mo.t1_s - mo.t0_s for mo in
+                                              imu_run_segments(m.phase2(s, r), abw, timing=timing)[0].motions]
+                                             for r in runs])
     return out
 
 
@@ -89,9 +96,18 @@ def main() -> None:
         print("1. cruise shortened by the backlash, first run, forward | reverse (ms), noise-free")
         print("session  b (µm)  b/v (ms)  " + "  ".join(f"{t:>22}" for t in TIMINGS))
         for s in sorted(b):
-            cells = [" | ".join(f"{(n - w) * 1e3:+.3f}" for w, n in zip(cw[(s, t)], cn[(s, t)], strict=True))
+            cells = [" | ".join(f"{(n - w) * 1e3:+.3f}" for w, n in zip(cw[(s, t)][0], cn[(s, t)][0], strict=True))
                      for t in TIMINGS]
             print(f"{s}  {b[s]:6.1f}  {b[s] * 1e-6 / 0.02 * 1e3:8.3f}  " + "  ".join(f"{c:>22}" for c in cells))
+        cq = cruises(noisy, all_runs=True)
+        print("\n   without backlash: spread of the cruise over the sessions, forward | reverse (ms, "
+              "noise-free); run-to-run sd of the cruise with the IMU's noise (ms, the scenario)")
+        for t in ALL_TIMINGS:
+            spread = np.ptp(np.array([cn[(s, t)][0] for s in sorted(b)]), axis=0)
+            resid = np.concatenate([cq[(s, t)] - cq[(s, t)].mean(axis=0) for s in sorted(b)])
+            dof = resid.size - 2 * len(b)
+            print(f"   {t:>13}: {spread[0] * 1e3:.3f} | {spread[1] * 1e3:.3f}   "
+                  f"sd {np.sqrt(np.sum(resid ** 2) / dof) * 1e3:.3f}")
         print("\n2. observed pitch − first session (µm) and Eq. 9 (µm) per session, IMU axis")
         for name, path in (("noise-free, backlash steps", steps), ("noise-free, no backlash", none),
                            ("the scenario (IMU noise, 4 runs)", noisy)):

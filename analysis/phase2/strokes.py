@@ -33,8 +33,8 @@ the signed acceleration). Each pulse is then timed (``timing``):
   ``deficit_window_s`` of the ramp (:func:`rest_side_deficit`). The pulse is placed where a
   nominal pulse with the same travel would lie (the centroid's definition, without its window):
   start = edge − T + lost/v for an acceleration, edge − lost/v for a deceleration. A carriage
-  that travels D = L − b between rests then stretches the axis by L/(L − b), as the paper's
-  Eq. 9 assumes.
+  that travels D = L − b between rests then stretches the axis by L/(L − b), as Eq. 9 of
+  Pandhare et al., "Ball Screw Health Monitoring with Inertial Sensors", assumes.
 
 A linear low-pass of unit DC gain moves any pulse's centroid, and delays a ramp, by exactly its
 group delay at DC, which is removed. The carriage's axial mode rings after each edge and biases
