@@ -1,23 +1,28 @@
-"""Why Eq. 9 on the IMU axis misses the backlash on ``scenarios/backlash-slow-reversal.toml``,
-where the carriage does travel D = L − b (prints figures; not a test).
+"""Eq. 9 on the IMU axis on ``scenarios/backlash-slow-reversal.toml``, where the carriage does
+travel D = L − b: the stroke timing and the pitch estimate, old and new (prints figures; not a
+test).
 
-Two noise-free campaigns of that scenario, one run per session, with the same origins: one
-with the scenario's backlash steps, one without backlash. For each session it prints:
+Three campaigns of that scenario with the same origins: two without IMU noise and with one run per
+session (one with the scenario's backlash steps, one without backlash), and the scenario as it is
+(the paper's IMU noise, 4 runs per session, what ``test_eq9_on_the_imu_axis_where_d_is_l_minus_b``
+gates). Printed:
 
-- the forward start pulse found from the IMU alone (:func:`analysis.phase2.strokes.imu_run_segments`,
-  the half-velocity instant that places the IMU axis): its change with backlash, ms;
-- the centroid ∫t·a dt / ∫a dt of the same pulse in the accelerometer's x axis: its change
-  with backlash, ms (a carriage that travels b less during the pulse has it b/v later);
-- the observed pitch of Eq. 8 (``observed_pitch_mm`` of ``twin backlash --position-reference
-  imu``) relative to the first session, µm, and Eq. 9's change of backlash, µm, in both
-  campaigns.
+1. per session of the noise-free pair, how much shorter the backlash makes the forward and reverse
+   cruise of the first run on the IMU axis (:func:`analysis.phase2.strokes.imu_run_segments`), ms,
+   for each stroke timing (``half_velocity``: the earlier one; ``travel``: the default), against
+   b/v, which D = L − b requires; then, for every timing (``centroid`` too), how much the cruise
+   without backlash spreads over the sessions (the origin alone) and its run-to-run scatter with
+   the IMU's noise;
+2. per campaign, stroke timing and pitch method (``comb``: the spacing of the comb's line fit,
+   the earlier one; ``harmonic``: the default), the observed pitch (Eq. 8) relative to the first
+   session, µm, and Eq. 9's change of backlash, µm. Without backlash the pitch's change is the
+   scatter the origin alone causes.
 
-Run: ``python benchmarks/bench_eq9_stretch.py`` (about a minute on one core).
+Run: ``python benchmarks/bench_eq9_stretch.py`` (about 3 minutes on one core).
 """
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 import tempfile
@@ -26,55 +31,91 @@ from pathlib import Path
 import numpy as np
 
 from analysis.dataset import open_measurements, open_truth
+from analysis.phase2.backlash import BacklashEstimator
+from analysis.phase2.error_motions import session_error_motions
 from analysis.phase2.strokes import imu_run_segments
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIO = REPO / "scenarios/backlash-slow-reversal.toml"
 NOISE_FREE = ("sensors.imu_acc_noise_ug_per_rthz=0.0", "sensors.imu_gyro_noise_urad_s_per_rthz=0.0",
               "phase2.runs_per_session=1")
+TIMINGS = ("half_velocity", "travel")
+ALL_TIMINGS = ("half_velocity", "centroid", "travel")
+PITCH_METHODS = ("comb", "harmonic")
 
 
-def twin(*args: str) -> None:
-    subprocess.run([sys.executable, "-m", "twin.cli", *args], check=True, cwd=REPO, capture_output=True)
+def simulate(out: Path, *sets: str) -> Path:
+    subprocess.run([sys.executable, "-m", "twin.cli", "simulate", str(SCENARIO), "-o", str(out),
+                    "--workers", "1", *[a for s in sets for a in ("--set", s)]],
+                   check=True, cwd=REPO, capture_output=True)
+    return out
 
 
-def campaign(out: Path, *sets: str) -> dict:
-    """Simulate, analyse; per session: backlash µm, start instant s, centroid s, pitch mm, Eq. 9 µm."""
-    twin("simulate", str(SCENARIO), "-o", str(out), "--workers", "1",
-         *[a for s in (*NOISE_FREE, *sets) for a in ("--set", s)])
-    twin("backlash", str(out), "-o", str(out / "bl"), "--no-plots", "--position-reference", "imu")
-    doc = {r["session"]: r for r in json.loads((out / "bl" / "backlash.json").read_text())["sessions"]}
-    rows = {}
-    with open_measurements(out / "measurements.h5") as m, open_truth(out / "truth.h5") as t:
+def cruises(path: Path, all_runs: bool = False) -> dict:
+    """{(session, timing): (runs, 2) forward and reverse cruise durations, s} (the first run only
+    unless ``all_runs``)."""
+    out = {}
+    with open_measurements(path / "measurements.h5") as m:
         abw = m.axis()["sensors"]["imu_accelerometer"]["bandwidth_hz"]
         for s in m.phase2_sessions():
-            run = m.phase2(s, m.phase2_runs(s)[0])
-            seg, moves = imu_run_segments(run, abw)
-            a = run.imu_acc[:, 0].astype(float)
-            a -= np.median(a)
-            tt = np.arange(a.size) / run.imu_acc_fs_hz
-            t0, t1 = moves[0][0], seg.motions[0].t0_s
-            sel = (tt > t0 - 0.05) & (tt < t1 + 0.05)
-            rows[s] = {"b_um": t.session(s)[2]["backlash_um"], "start_s": seg.motions[0].t0_s,
-                       "centroid_s": float(np.sum(tt[sel] * a[sel]) / np.sum(a[sel])),
-                       "pitch_mm": doc[s]["observed_pitch_mm"], "eq9_um": doc[s]["delta_backlash_um_pitch"]}
-    return rows
+            runs = m.phase2_runs(s) if all_runs else m.phase2_runs(s)[:1]
+            for timing in ALL_TIMINGS:
+                out[(s, timing)] = np.array([[mo.t1_s - mo.t0_s for mo in
+                                              imu_run_segments(m.phase2(s, r), abw, timing=timing)[0].motions]
+                                             for r in runs])
+    return out
+
+
+def eq9(path: Path) -> dict:
+    """{(timing, method): [(session, pitch − first µm, Eq. 9 µm)]} on the IMU axis."""
+    out = {}
+    with open_measurements(path / "measurements.h5") as m:
+        for timing in TIMINGS:
+            ems = [session_error_motions(m, s, position_reference="imu", stroke_timing=timing)
+                   for s in m.phase2_sessions()]
+            for method in PITCH_METHODS:
+                est = BacklashEstimator(pitch_method=method).fit(ems[0])
+                rows = [est.estimate(e) for e in ems]
+                out[(timing, method)] = [(r.session, (r.observed_pitch_m - est.reference_pitch_m_) * 1e6,
+                                          r.delta_backlash_pitch_m * 1e6) for r in rows]
+    return out
+
+
+def injected(path: Path) -> dict:
+    with open_truth(path / "truth.h5") as t:
+        return {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
 
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
-        steps = campaign(Path(tmp) / "steps")
-        none = campaign(Path(tmp) / "none", "degradation.table_backlash_um=[0.0, 0.0, 0.0, 0.0]")
-    ref = min(steps)
-    print("session  b (µm)  Δ start, half-velocity (ms)  Δ centroid (ms)  b/v (ms)  "
-          "pitch − first, with b | without (µm)  Eq. 9 with b | without (µm)")
-    for s in sorted(steps):
-        w, n = steps[s], none[s]
-        print(f"{s}  {w['b_um']:6.1f}  {(w['start_s'] - n['start_s']) * 1e3:+8.3f}  "
-              f"{(w['centroid_s'] - n['centroid_s']) * 1e3:+8.3f}  {w['b_um'] * 1e-6 / 0.02 * 1e3:6.3f}  "
-              f"{(w['pitch_mm'] - steps[ref]['pitch_mm']) * 1e3:+7.3f} | "
-              f"{(n['pitch_mm'] - none[ref]['pitch_mm']) * 1e3:+7.3f}  "
-              f"{w['eq9_um']:+7.2f} | {n['eq9_um']:+7.2f}")
+        steps = simulate(Path(tmp) / "steps", *NOISE_FREE)
+        none = simulate(Path(tmp) / "none", *NOISE_FREE, "degradation.table_backlash_um=[0.0, 0.0, 0.0, 0.0]")
+        noisy = simulate(Path(tmp) / "noisy")
+        b = injected(steps)
+        cw, cn = cruises(steps), cruises(none)
+        print("1. cruise shortened by the backlash, first run, forward | reverse (ms), noise-free")
+        print("session  b (µm)  b/v (ms)  " + "  ".join(f"{t:>22}" for t in TIMINGS))
+        for s in sorted(b):
+            cells = [" | ".join(f"{(n - w) * 1e3:+.3f}" for w, n in zip(cw[(s, t)][0], cn[(s, t)][0], strict=True))
+                     for t in TIMINGS]
+            print(f"{s}  {b[s]:6.1f}  {b[s] * 1e-6 / 0.02 * 1e3:8.3f}  " + "  ".join(f"{c:>22}" for c in cells))
+        cq = cruises(noisy, all_runs=True)
+        print("\n   without backlash: spread of the cruise over the sessions, forward | reverse (ms, "
+              "noise-free); run-to-run sd of the cruise with the IMU's noise (ms, the scenario)")
+        for t in ALL_TIMINGS:
+            spread = np.ptp(np.array([cn[(s, t)][0] for s in sorted(b)]), axis=0)
+            resid = np.concatenate([cq[(s, t)] - cq[(s, t)].mean(axis=0) for s in sorted(b)])
+            dof = resid.size - 2 * len(b)
+            print(f"   {t:>13}: {spread[0] * 1e3:.3f} | {spread[1] * 1e3:.3f}   "
+                  f"sd {np.sqrt(np.sum(resid ** 2) / dof) * 1e3:.3f}")
+        print("\n2. observed pitch − first session (µm) and Eq. 9 (µm) per session, IMU axis")
+        for name, path in (("noise-free, backlash steps", steps), ("noise-free, no backlash", none),
+                           ("the scenario (IMU noise, 4 runs)", noisy)):
+            inj = injected(path)
+            print(f"{name}: injected {[inj[s] for s in sorted(inj)]} µm")
+            for (timing, method), rows in eq9(path).items():
+                print(f"  {timing:>13} + {method:<8}  pitch {' '.join(f'{p:+.4f}' for _, p, _ in rows)}"
+                      f"   Eq. 9 {' '.join(f'{e:+6.2f}' for _, _, e in rows)}")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import REPO
 
-from analysis.phase2.strokes import StrokeError, find_pulses, half_velocity_delay
+from analysis.phase2.strokes import StrokeError, centroid_delay, find_pulses, half_velocity_delay
 from twin import campaign as cp
 from twin.scenario import load
 from twin.simulate import Simulator, phase2_command, phase2_measure
@@ -79,3 +79,62 @@ def test_a_run_cut_before_its_last_pulse_names_the_channel_and_the_time(runs):
     with pytest.raises(StrokeError, match=r"pulse 1 of 12 .* not found in 0\.000–[0-9.]+ s: the largest "
                                           r"velocity change there is"):
         find_pulses(np.zeros(5000), fs, 0.00075, SPEEDS, accel, 0.45, dwell)
+
+
+def slow_routine(b: float, fs_sim: float = 16130.0, ripple: float = 2e-3):
+    """The accelerometer's x axis (1613 Hz, 300 Hz 2nd-order Butterworth) for a forward and a
+    reverse move of 450 mm at 20 mm/s with 50 mm/s² ramps and a 1 s dwell, where the carriage first
+    crosses a clearance ``b`` at each start (it rests until the screw has moved b, then takes up
+    the screw's speed within 5 ms, a Hann pulse centred on the contact, about the axial mode's
+    half period: the same travel as a jump) and stops with the screw; plus a 16 Hz vibration of
+    ``ripple`` m/s² while moving (the torque ripple of 8 per revolution at 20 mm/s)."""
+    from scipy import signal
+
+    a, v, L, dwell = 0.05, 0.02, 0.45, 1.0
+    T = v / a
+    cruise = (L - v * T) / v
+    t = np.arange(int(50.0 * fs_sim)) / fs_sim
+    acc = np.zeros_like(t)
+    t_s = 0.5
+    for sign in (1, -1):
+        t_c = t_s + math.sqrt(2.0 * b / a)  # the screw has crossed the clearance
+        ramp = (t >= t_c) & (t < t_s + T)
+        acc[ramp] = sign * a
+        catch = np.abs(t - t_c) < 2.5e-3  # taking up the screw's speed
+        acc[catch] += sign * a * (t_c - t_s) / 2.5e-3 * np.cos(math.pi * (t[catch] - t_c) / 5e-3) ** 2
+        t_d = t_s + T + cruise
+        acc[(t >= t_d) & (t < t_d + T)] = -sign * a
+        moving = (t >= t_s) & (t < t_d + T)
+        acc[moving] += ripple * np.sin(2 * math.pi * 16.0 * t[moving] + 0.3)
+        t_s = t_d + T + dwell
+    b_f, a_f = signal.butter(2, 300.0, fs=fs_sim)
+    return signal.lfilter(b_f, a_f, acc)[::10], fs_sim / 10, (v,), a, L, dwell
+
+
+def test_slow_ramps_are_timed_by_the_travel_the_carriage_makes():
+    """On a 50 mm/s² ramp the carriage that first crosses a clearance b starts its cruise b/v
+    later on the IMU axis (so that a travel D = L − b stretches the axis by L/(L − b), the paper's
+    Eq. 9): with the travel timing within 10 µs (0.5 µm at 20 mm/s) for 5 and 20 µm, with the
+    half-velocity instant by less than half of it; the cruise's end does not move."""
+    found = {}
+    for b in (0.0, 5e-6, 20e-6):
+        acc, fs, speeds, a, L, dwell = slow_routine(b)
+        for timing, delay in (("travel", centroid_delay(300.0)),
+                              ("half_velocity", half_velocity_delay(speeds[0] / a, 300.0))):
+            p = find_pulses(acc, fs, delay, speeds, a, L, dwell, timing=timing, bandwidth_hz=300.0)
+            found[(b, timing)] = np.array([p[0].end_s, p[1].start_s, p[2].end_s, p[3].start_s])
+    for b in (5e-6, 20e-6):
+        d_travel = found[(b, "travel")] - found[(0.0, "travel")]
+        d_half = found[(b, "half_velocity")] - found[(0.0, "half_velocity")]
+        print(f"\n[slow ramps] b = {b * 1e6:g} µm: cruise start/end moved by (µs) travel "
+              f"{np.round(d_travel * 1e6, 1).tolist()}, half-velocity {np.round(d_half * 1e6, 1).tolist()}; "
+              f"b/v = {b / 0.02 * 1e6:g} µs")
+        assert np.all(np.abs(d_travel[[0, 2]] - b / 0.02) < 10e-6)
+        assert np.all(np.abs(d_travel[[1, 3]]) < 10e-6)
+        assert np.all(np.abs(d_half[[0, 2]]) < 0.5 * b / 0.02)
+
+
+def test_find_pulses_needs_the_bandwidth_for_slow_ramps():
+    acc, fs, speeds, a, L, dwell = slow_routine(0.0)
+    with pytest.raises(ValueError, match="needs the sensor's bandwidth_hz"):
+        find_pulses(acc, fs, centroid_delay(300.0), speeds, a, L, dwell)

@@ -36,10 +36,14 @@ Weighted sum (Eqs. 6–7): γ_ij = min(γ_ij1, γ_ij2), ΔBacklash_i = Σ_j γ_i
 five non-positioning DOFs with ``dofs=NON_POSITIONING``, see :class:`BacklashEstimator`).
 
 Perceived pitch (Eqs. 8–9): for every DOF and direction whose correlation shows a comb of peaks
-(:class:`analysis.phase2.shifts.ShiftResult.spacing_m`), the observed pitch p_ijk is the peak
-spacing times its order h = round(lead / spacing) (peaks of an h-per-revolution feature are lead/h
-apart; the twin's comb is the motor's 8-per-revolution torque ripple, 1.25 mm). The spacing is
-taken from the session's own autocorrelation: the comb of the *cross*-correlation of two traces
+(:class:`analysis.phase2.shifts.ShiftResult.spacing_m`), the observed pitch p_ijk is h times the
+period of the h-per-revolution feature, h = round(lead / spacing) (peaks of an h-per-revolution
+feature are lead/h apart; the twin's comb is the motor's 8-per-revolution torque ripple,
+1.25 mm). The comb finds the feature and its order; its period comes by default from the
+feature's frequency in the trace (``pitch_method="harmonic"``, :func:`tone_frequency`, the
+maximum-likelihood frequency of a sinusoid), with ``pitch_method="comb"`` from the spacing of the
+comb's line fit, which the trace's broadband content and noise move through every peak. The comb
+is taken from the session's own autocorrelation: the comb of the *cross*-correlation of two traces
 with periods P_0 and P_i has the mean spacing (P_0 + P_i)/2 (the sum over x of two slightly
 detuned combs; checked in tests/test_phase2_backlash.py), which would halve Eq. 9. Then
 p_i = Σ γ_ijk^σ p_ijk / Σ γ_ijk^σ over (j, k) with the γ of the correlation against the reference
@@ -142,6 +146,46 @@ def weighted_sum(values, gammas, sigma: int = SIGMA) -> float:
     return float(np.sum(w[ok] * v[ok]) / np.sum(w[ok]))
 
 
+PITCH_METHODS = ("harmonic", "comb")
+"""How Eq. 8's observed pitch is read from a comb of correlation peaks (see
+:meth:`BacklashEstimator.comb_pitch` and :func:`tone_frequency`)."""
+
+
+def tone_frequency(y: np.ndarray, dx: float, f0: float, half_range: float) -> float:
+    """Frequency (cycles per m) of the sinusoid in ``y`` nearest ``f0``, searched within
+    ``f0`` ± ``half_range``: the maximum of the periodogram |Σ y_n·exp(−j2πf·n·dx)|.
+
+    The periodogram's maximum is the maximum-likelihood frequency of one sinusoid in white noise
+    (Rife & Boorstyn, "Single-tone parameter estimation from discrete-time observations", IEEE
+    Trans. Inf. Theory 20(5), 1974; Kay, *Fundamentals of Statistical Signal Processing:
+    Estimation Theory*, 1993, sec. 7.10); its variance falls as N⁻³, so over a whole stroke it
+    resolves a small part of a bin. No taper: the rectangular window is the likelihood's, and its
+    slowly falling sidelobes (Harris, "On the use of windows for harmonic analysis with the
+    discrete Fourier transform", Proc. IEEE 66(1), 1978) find little to leak here, because the
+    traces come high-passed by winfilt (the long wavelengths, the largest content, are gone).
+    The search: the periodogram on a grid of a quarter of a bin over the range, then a bounded
+    scalar maximisation (``scipy.optimize.minimize_scalar``) within a quarter of a bin of the
+    best grid point. NaN when the maximum lies on the range's edge.
+    """
+    from scipy.optimize import minimize_scalar
+
+    y = np.asarray(y, dtype=float)
+    y = y - y.mean()
+    x = np.arange(y.size) * dx
+
+    def mag(f: float) -> float:
+        return -abs(np.sum(y * np.exp(-2j * np.pi * f * x)))
+
+    step = 0.25 / (y.size * dx)
+    grid = f0 + np.arange(-math.ceil(half_range / step), math.ceil(half_range / step) + 1) * step
+    k = int(np.argmin([mag(f) for f in grid]))
+    if k in (0, grid.size - 1):
+        return float("nan")
+    res = minimize_scalar(mag, bounds=(grid[k] - step, grid[k] + step), method="bounded",
+                          options={"xatol": 1e-9 * f0})
+    return float(res.x)
+
+
 @register("backlash_estimators", "shift", label="Signal shifts (Eq. 6)", color="tab:blue",
           marker="o", default=True)
 class BacklashEstimator(InheritedParams, BaseEstimator):
@@ -172,6 +216,8 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
             fraction of a µm (figures: docs/validation.md). At 20 mm/s the angles hardly
             correlate and the two choices agree.
         pitch_dofs: DOFs of the perceived pitch (Eq. 8).
+        pitch_method: "harmonic" (default) or "comb": how each trace's pitch is read
+            (:meth:`observed_pitch`).
         stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
         travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).
     """
@@ -183,7 +229,7 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
                  fit_fraction: float = 0.8, upsample: int = 8, min_peaks: int = 3,
                  max_lag_m: float = 5e-3, sigma: int = SIGMA, dofs: tuple = STRAIGHTNESS,
                  pitch_dofs: tuple = DOFS, stationary: str = "command", travel_m: float = 0.45,
-                 lead_m: float = 0.010):
+                 lead_m: float = 0.010, pitch_method: str = "harmonic"):
         self.cutoff_wavelength_m = cutoff_wavelength_m
         self.window_definition = window_definition
         self.threshold = threshold
@@ -197,9 +243,12 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
         self.stationary = stationary
         self.travel_m = travel_m
         self.lead_m = lead_m
+        self.pitch_method = pitch_method
 
     # -- helpers ---------------------------------------------------------------------------
     def _check_params(self) -> None:
+        if self.pitch_method not in PITCH_METHODS:
+            raise ValueError(f"pitch_method is {self.pitch_method!r}; expected one of {PITCH_METHODS}")
         if self.stationary not in ("command", "E_XX"):
             raise ValueError(f"stationary is {self.stationary!r}; expected 'command' or 'E_XX'")
         for d in (*self.dofs, *self.pitch_dofs):
@@ -232,6 +281,22 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
         p = spacing * max(1, round(self.lead_m / spacing))
         return p if abs(p - self.lead_m) <= COMB_TOLERANCE * self.lead_m else float("nan")
 
+    def observed_pitch(self, r: ShiftResult, trace: np.ndarray, dx: float) -> float:
+        """Eq. 8's p_ijk of one (winfiltered) trace whose autocorrelation is ``r``, m.
+
+        ``pitch_method="comb"``: :meth:`comb_pitch`, the spacing of the comb's line fit.
+        ``"harmonic"`` (default): where the comb shows an h-per-revolution feature, the
+        frequency f of that harmonic in the trace itself (:func:`tone_frequency`, searched
+        within ± ``COMB_TOLERANCE`` of 1/spacing) gives p = h/f. The autocorrelation's peaks are
+        the sum of every component and of the noise, so a broadband noise moves each peak's
+        quadratic fit; the narrowband estimate reads only the harmonic."""
+        p_comb = self.comb_pitch(r)
+        if self.pitch_method == "comb" or not math.isfinite(p_comb):
+            return p_comb
+        h = max(1, round(self.lead_m / r.spacing_m))
+        f = tone_frequency(trace, dx, 1.0 / r.spacing_m, COMB_TOLERANCE / r.spacing_m)
+        return h / f if math.isfinite(f) and f > 0 else float("nan")
+
     # -- scikit-learn API ------------------------------------------------------------------
     def fit(self, X, y=None) -> BacklashEstimator:
         """Use ``X`` (the first session) as the reference. Returns self."""
@@ -245,7 +310,7 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
             j = DOFS.index(d)
             for k in DIRECTIONS:
                 r = self._shift(self.reference_, self.reference_, j, k)
-                pitches.append(self.comb_pitch(r))
+                pitches.append(self.observed_pitch(r, self.reference_[k][j], self.reference_["dx"]))
                 gammas.append(r.gamma)
         self.reference_pitch_m_ = weighted_sum(pitches, gammas, self.sigma)
         return self
@@ -268,7 +333,8 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
         dbl = {d: dps[d] - ref for d in self.dofs}
         by_shift = weighted_sum([dbl[d] for d in self.dofs], [gamma[d] for d in self.dofs],
                                 self.sigma)
-        pitch_by = {(d, k): self.comb_pitch(self._shift(cur, cur, DOFS.index(d), k))
+        pitch_by = {(d, k): self.observed_pitch(self._shift(cur, cur, DOFS.index(d), k),
+                                                cur[k][DOFS.index(d)], cur["dx"])
                     for d in self.pitch_dofs for k in DIRECTIONS}
         p_i = weighted_sum(list(pitch_by.values()),
                            [shifts[key].gamma for key in pitch_by], self.sigma)

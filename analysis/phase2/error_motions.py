@@ -147,7 +147,8 @@ def _match_speed(speed_mm_s: float, expected: tuple[float, ...]) -> float | None
 
 def _prepare_run(m: Measurements, session: str, run: str, expected: tuple[float, ...] | None,
                  position_reference: str = "command",
-                 sm: SensorModel | None = None) -> tuple[_Prepared, tuple[float, ...]]:
+                 sm: SensorModel | None = None,
+                 stroke_timing: str = "travel") -> tuple[_Prepared, tuple[float, ...]]:
     """Read, check, segment and de-bias one run; raises :class:`BadRunError` naming the channel.
 
     ``position_reference``: "command" segments the run by ``position_cmd``; "imu" finds its
@@ -158,7 +159,8 @@ def _prepare_run(m: Measurements, session: str, run: str, expected: tuple[float,
     if position_reference == "imu":
         routine, speeds = run_routine(m, r)
         seg = imu_segments(r.imu_acc[:, 0], r.imu_acc_fs_hz, speeds, routine,
-                           (sm or SensorModel()).acc_bandwidth_hz, label=f"{where}, channel imu_acc")
+                           (sm or SensorModel()).acc_bandwidth_hz, timing=stroke_timing,
+                           label=f"{where}, channel imu_acc")
     elif r.position_cmd is None:
         raise BadRunError(f"{where}, channel position_cmd: absent (a recording of a stand-alone IMU); "
                           "expected the controller's position for the command position reference, or "
@@ -354,7 +356,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
                           pool_wavelength_m: float | None = 0.05,
                           sensors: SensorModel | None = None,
                           runs: Sequence[str] | None = None,
-                          position_reference: str = "auto") -> SessionErrorMotions:
+                          position_reference: str = "auto",
+                          stroke_timing: str = "travel") -> SessionErrorMotions:
     """Error motions of one Phase II session, averaged over its runs.
 
     Args:
@@ -382,6 +385,8 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
             "imu". "command": positions are the controller's ``position_cmd``;
             "imu": the IMU-based position, strokes found from the accelerometer and placed on the
             routine's nominal trapezoid (the run's metadata; ``position_cmd`` is not read).
+        stroke_timing: how the IMU axis times the strokes
+            (:data:`analysis.phase2.strokes.TIMINGS`; "travel" by default).
 
     Returns:
         :class:`SessionErrorMotions`; ``combined`` on the stretch every speed covers at constant
@@ -413,7 +418,7 @@ def session_error_motions(m: Measurements, session: str, *, dx_m: float = 0.5e-3
     for name in names:
         label = f"{m.label}: session {session}, run {name}"
         try:
-            p, exp = _prepare_run(m, session, name, expected, position_reference, sm)
+            p, exp = _prepare_run(m, session, name, expected, position_reference, sm, stroke_timing)
             if not layers:
                 speeds = tuple(sorted(exp))
                 layers = [_new_layer(p, speeds, dx_m, trim_s, trim_end_s, "all speeds"),
