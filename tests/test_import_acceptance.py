@@ -92,10 +92,12 @@ def _acceptance(tmp: Path, overrides: tuple[str, ...], wrong_lead: bool) -> dict
         "is 360 mm, not within the travel /@axis.travel_mm = 300 mm" in " ".join(r.stderr.split())
     if not wrong_lead:
         return out
-    # Eq. 9's comb: the screw's pitch observed through lead_mm. On these 10-run sessions E_XX's
+    # Eq. 8's comb: the screw's pitch observed through lead_mm. On these 10-run sessions E_XX's
     # comb peaks reach 0.61-0.72 of the main peak (docs/import.md), below the paper's 75 %
-    # threshold, so the comb is read at half of it here (the estimator parameter `threshold`).
-    comb = ("--no-plots", "--set-param", "threshold=0.5")
+    # threshold, so the comb is read at half of it here (the estimator parameter `threshold`),
+    # and its spacing by the paper's line fit (`pitch_method="comb"`): the default harmonic
+    # frequency reads this axis's 5 mm lead 0.44 % short (docs/import.md).
+    comb = ("--no-plots", "--set-param", "threshold=0.5", "--set-param", 'pitch_method="comb"')
     run_twin("backlash", campaign, *comb, "-o", campaign / "comb")
     doc = json.loads((campaign / "comb" / "backlash.json").read_text())
     pitches = [s["observed_pitch_mm"] for s in doc["sessions"] if s["observed_pitch_mm"] is not None]
