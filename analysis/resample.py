@@ -51,14 +51,18 @@ def _solve_141(r: np.ndarray) -> np.ndarray:
 
 
 def not_a_knot_cubic_rows(y: np.ndarray, position: np.ndarray) -> np.ndarray:
-    """The not-a-knot cubic spline through each row of ``y`` (c, n) (n >= 4, C-contiguous) on
-    the grid 0..n-1, at the fractional indices ``position`` (m,): (c, m).
+    """The not-a-knot cubic spline through each row of ``y`` (c, n) on the grid 0..n-1, at the
+    fractional indices ``position`` (m,): (c, m). Raises ValueError for n < 4 (a cubic needs
+    four samples).
 
     The interpolant of ``make_interp_spline(k=3)`` (to rounding), computed from its second
     derivatives M (moments): ``M_{i-1} + 4 M_i + M_{i+1} = 6 δ²y_i`` inside, and on a unit grid
     the not-a-knot conditions give ``M_1 = δ²y_1``, ``M_{n-2} = δ²y_{n-2}`` and the end moments by
     linear extrapolation; the tridiagonal system is solved by :func:`_solve_141` in O(n)."""
+    y = np.ascontiguousarray(y, dtype=float)
     n = y.shape[1]
+    if n < 4:
+        raise ValueError(f"a not-a-knot cubic spline needs at least 4 samples per row, got {n}")
     moments = np.empty_like(y)
     rhs = y[:, 2:] - 2.0 * y[:, 1:-1]
     rhs += y[:, :-2]  # δ²y_1 .. δ²y_{n-2}

@@ -153,5 +153,6 @@ def test_keep_freed_memory_stops_refaulting_pages():
                          cwd=REPO).stdout.split()
     applied, before, after = out[0] == "True", float(out[1]), float(out[2])
     print(f"\npage faults per 8 MB allocate-and-free: {before:.0f} before, {after:.0f} after")
-    if sys.platform.startswith("linux") and applied:
-        assert before > 500 and after < 50
+    if not applied:
+        pytest.skip("mallopt is not available here (not Linux with glibc): nothing to check")
+    assert before > 500 and after < 50

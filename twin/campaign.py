@@ -584,7 +584,7 @@ class _Assembler:
             self._thread.join()
 
     def finish(self) -> None:
-        if not self._thread.is_alive() and self._thread.ident is None:
+        if self._thread.ident is None:  # never started
             assemble(*self._args)
             return
         self._thread.join()

@@ -29,7 +29,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import interpolate, signal
+from scipy import signal
 
 from analysis.resample import not_a_knot_cubic_rows
 
@@ -437,8 +437,8 @@ def decimate_to(values: np.ndarray, fs_in: float, fs_out: float, t0: float = 0.0
             return t_out, np.interp(position, grid, values)
         return t_out, np.column_stack([np.interp(position, grid, col) for col in values.T])
     if values.ndim == 1:
-        return t_out, _cubic_rows(values[None, :], position)[0]
-    return t_out, _cubic_rows(values.T, position).T
+        return t_out, not_a_knot_cubic_rows(values[None, :], position)[0]
+    return t_out, not_a_knot_cubic_rows(values.T, position).T
 
 
 def _sampling_plan(n_in: int, fs_in: float, fs_out: float, t0: float
@@ -545,22 +545,13 @@ def _instrument_chain(true_values: np.ndarray, fs_sim: float, spec, rng: np.rand
     return t_out, out[0]
 
 
-def _cubic_rows(rows: np.ndarray, position: np.ndarray) -> np.ndarray:
-    """The not-a-knot cubic spline through each row of ``rows`` (c, n) on the grid 0..n-1, at
-    the fractional indices ``position`` (m,): (c, m); scipy's for n < 4, else the O(n) one."""
-    n = rows.shape[1]
-    if n < 4:
-        return interpolate.make_interp_spline(np.arange(n, dtype=float), rows, k=3, axis=1)(position)
-    return not_a_knot_cubic_rows(np.ascontiguousarray(rows), position)
-
-
 def _sample_rows(rows: np.ndarray, fs_sim: float, fs_out: float, t0: float) -> np.ndarray:
     """Rows (c, n) of a signal at ``fs_sim`` read at the instants of :func:`decimate_to`:
-    (c, m), by an exact pick or the cubic spline (:func:`_cubic_rows`)."""
+    (c, m), by an exact pick or the cubic spline (:func:`analysis.resample.not_a_knot_cubic_rows`)."""
     t_out, step, position = _sampling_plan(rows.shape[1], fs_sim, fs_out, t0)
     if step:
         return rows[:, : (t_out.size - 1) * step + 1: step]
-    return _cubic_rows(rows, position)
+    return not_a_knot_cubic_rows(rows, position)
 
 
 def _instrument_chains(true_values: list[np.ndarray], fs_sim: float, spec,
