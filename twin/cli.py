@@ -393,14 +393,14 @@ def backlash(
                                                 "record position_cmd, else imu), 'command' (the controller's "
                                                 "position_cmd) or 'imu' (strokes from the accelerometer and "
                                                 "the run's routine metadata; Eq. 5)"),
-    workers: Workers = None,
-    scheduler: Scheduler = None,
     estimator: str | None = typer.Option(None, "--estimator",
                                          help="backlash estimator: a registered name or module:Class "
                                               "(default: the paper's, 'shift'); other than the default "
                                               "it writes to OUT/NAME/"),
     set_param: list[str] = typer.Option([], "--set-param",
                                         help="estimator parameter KEY=VALUE (TOML value), repeatable"),
+    workers: Workers = None,
+    scheduler: Scheduler = None,
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.

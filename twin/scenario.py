@@ -32,35 +32,53 @@ class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
 
 
+def _per_axis(description: str):
+    """A field of three values, one per sensor axis (x, y, z), zero by default."""
+    return Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3, description=description)
+
+
 class AxisConfig(_Section):
-    travel_mm: float = Field(450.0, gt=0, le=5000)
-    lead_mm: float = Field(10.0, gt=0, le=100)
-    pitch_diameter_mm: float = Field(25.5, gt=0, le=200)
-    root_diameter_mm: float = Field(21.5, gt=0, le=200)
-    shaft_length_mm: float = Field(500.0, gt=0, le=6000)
-    rated_dynamic_load_N: float = Field(21000.0, gt=0)
+    """The testbed: drive, carriage, guideway and servo (the paper's section III; catalogue values
+    of a 25×10 preloaded nut). Converted to the SI dataclasses of :mod:`twin.axis` by :func:`to_axis`."""
+
+    travel_mm: float = Field(450.0, gt=0, le=5000, description="length of rail the carriage travels, mm")
+    lead_mm: float = Field(10.0, gt=0, le=100, description="screw lead: carriage travel per screw revolution, mm")
+    pitch_diameter_mm: float = Field(25.5, gt=0, le=200, description="ball pitch-circle diameter D_pw of the screw, mm")
+    root_diameter_mm: float = Field(21.5, gt=0, le=200, description=(
+        "screw root diameter, mm; sets the shaft's axial stiffness A·E/L"))
+    shaft_length_mm: float = Field(500.0, gt=0, le=6000, description=(
+        "fixed bearing to the nut at mid-stroke, mm (fixed–free shaft stiffness)"))
+    rated_dynamic_load_N: float = Field(21000.0, gt=0, description="catalogue rated dynamic load C_a of the nut, N")
     preload_N: float = Field(1500.0, gt=0, description="nominal preload when new; at most 10 % of rated_dynamic_load_N")
     nut_stiffness_N_per_um: float = Field(400.0, gt=0, description="catalogue nut stiffness at 10 % C_a")
-    bearing_stiffness_N_per_um: float = Field(750.0, gt=0)
-    screw_inertia_kg_m2: float = Field(1.8e-4, gt=0)
-    no_load_torque_Nm: float = Field(0.05, ge=0)
-    drag_viscous_Nm_s_per_rad: float = Field(2.0e-4, ge=0)
-    contact_damping_ratio: float = Field(0.03, gt=0, lt=1)
-    radial_stiffness_N_per_um: float = Field(100.0, gt=0)
-    carriage_mass_kg: float = Field(120.0, gt=0)
-    truck_spacing_mm: float = Field(120.0, gt=0)
-    rail_spacing_mm: float = Field(200.0, gt=0)
-    truck_stiffness_vertical_N_per_um: float = Field(300.0, gt=0)
-    truck_stiffness_lateral_N_per_um: float = Field(200.0, gt=0)
-    truck_damping_ratio: float = Field(0.05, gt=0, lt=1)
-    rail_friction_N: float = Field(12.0, ge=0)
-    imu_height_mm: float = Field(200.0, ge=0)
-    motor_inertia_kg_m2: float = Field(1.5e-4, gt=0)
-    position_bandwidth_hz: float = Field(20.0, gt=0)
-    velocity_bandwidth_hz: float = Field(60.0, gt=0)
-    velocity_integral_time_s: float = Field(0.01, gt=0)
+    bearing_stiffness_N_per_um: float = Field(750.0, gt=0, description="axial stiffness of the support bearings, N/µm")
+    screw_inertia_kg_m2: float = Field(1.8e-4, gt=0, description="rotational inertia of the screw, kg·m²")
+    no_load_torque_Nm: float = Field(0.05, ge=0, description=(
+        "seal and viscous drag torque of the nut without preload, N·m"))
+    drag_viscous_Nm_s_per_rad: float = Field(2.0e-4, ge=0, description=(
+        "viscous drag coefficient on the screw, N·m·s/rad"))
+    contact_damping_ratio: float = Field(0.03, gt=0, lt=1, description="damping ratio of the axial ball-nut mode")
+    radial_stiffness_N_per_um: float = Field(100.0, gt=0, description=(
+        "radial nut stiffness through which the screw's runout pushes the carriage, N/µm"))
+    carriage_mass_kg: float = Field(120.0, gt=0, description="moving mass: carriage plate, nut housing and load, kg")
+    truck_spacing_mm: float = Field(120.0, gt=0, description=(
+        "distance between the front and rear trucks along the axis, mm"))
+    rail_spacing_mm: float = Field(200.0, gt=0, description="distance between the two rails, mm")
+    truck_stiffness_vertical_N_per_um: float = Field(300.0, gt=0, description=(
+        "vertical contact stiffness of one truck when new, N/µm"))
+    truck_stiffness_lateral_N_per_um: float = Field(200.0, gt=0, description=(
+        "lateral contact stiffness of one truck when new, N/µm"))
+    truck_damping_ratio: float = Field(0.05, gt=0, lt=1, description=(
+        "damping ratio of the carriage's suspension modes on the trucks"))
+    rail_friction_N: float = Field(12.0, ge=0, description="Coulomb friction of the four trucks and their seals, N")
+    imu_height_mm: float = Field(200.0, ge=0, description=(
+        "height of the IMU (on top of the load) above the rail plane, mm"))
+    motor_inertia_kg_m2: float = Field(1.5e-4, gt=0, description="rotor inertia of the servo motor, kg·m²")
+    position_bandwidth_hz: float = Field(20.0, gt=0, description="position-loop gain Kp/2π of the servo, Hz")
+    velocity_bandwidth_hz: float = Field(60.0, gt=0, description="velocity-loop crossover Kv/(2π·J_total), Hz")
+    velocity_integral_time_s: float = Field(0.01, gt=0, description="velocity-loop integral time Kv/Ki, s")
     torque_ripple_Nm: float = Field(0.01, ge=0, description="motor torque ripple amplitude")
-    torque_ripple_per_rev: int = Field(8, ge=1)
+    torque_ripple_per_rev: int = Field(8, ge=1, description="motor torque ripple periods per motor revolution")
     friction_timeconst_ms: float | None = Field(None, gt=0, description=(
         "time constant of MuJoCo's soft friction constraint (the joints' solreffriction) of the "
         "nut drag and the rail friction, ms; null = MuJoCo's default (20 ms), under which the "
@@ -80,35 +98,46 @@ class AxisConfig(_Section):
 
 
 class GeometryConfig(_Section):
-    straightness_rms_um: float = Field(0.5, ge=0, le=100)
-    lateral_straightness_rms_um: float = Field(0.5, ge=0, le=100)
-    spectrum_exponent: float = Field(2.0, ge=0, le=4)
-    bolt_pitch_mm: float = Field(60.0, gt=0)
-    bolt_amplitude_um: float = Field(0.5, ge=0, le=20)
-    cumulative_lead_error_um_per_m: float = Field(8.0, ge=-200, le=200)
+    """Geometric errors of the rails and the screw: waviness, bolt pitch, lead errors, runout."""
+
+    straightness_rms_um: float = Field(0.5, ge=0, le=100, description="RMS of the rails' vertical waviness, µm")
+    lateral_straightness_rms_um: float = Field(0.5, ge=0, le=100, description="RMS of the rails' lateral waviness, µm")
+    spectrum_exponent: float = Field(2.0, ge=0, le=4, description="p of the waviness spectrum PSD ∝ 1/k^p")
+    bolt_pitch_mm: float = Field(60.0, gt=0, description=(
+        "spacing of the rail bolts, mm: period of the bolt-pitch waviness"))
+    bolt_amplitude_um: float = Field(0.5, ge=0, le=20, description=(
+        "vertical amplitude of the bolt-pitch waviness, µm (lateral: 0.6 of it)"))
+    cumulative_lead_error_um_per_m: float = Field(8.0, ge=-200, le=200, description=(
+        "cumulative lead error of the screw, µm per m of travel"))
     cyclic_lead_error_um: list[float] = Field(default_factory=lambda: [0.3, 0.15, 0.1],
                                               max_length=20)
-    runout_um: float = Field(0.3, ge=0, le=50)
-    ball_pass_amplitude_um: float = Field(0.03, ge=0, le=5)
-    ball_diameter_mm: float = Field(3.969, gt=0)
-    contact_angle_deg: float = Field(45.0, gt=0, lt=90)
+    runout_um: float = Field(0.3, ge=0, le=50, description="radial runout of the screw, µm")
+    ball_pass_amplitude_um: float = Field(0.03, ge=0, le=5, description=(
+        "axial amplitude of the ball-passing excitation, µm"))
+    ball_diameter_mm: float = Field(3.969, gt=0, description=(
+        "ball diameter, mm; with the contact angle sets the ball-pass frequency"))
+    contact_angle_deg: float = Field(45.0, gt=0, lt=90, description="ball contact angle, degrees")
 
 
 class SensorsConfig(_Section):
-    imu_acc_fs_hz: float = Field(1613.0, gt=0)
-    imu_acc_bandwidth_hz: float = Field(300.0, gt=0)
-    imu_acc_noise_ug_per_rthz: float = Field(7.0, ge=0)
-    imu_gyro_fs_hz: float = Field(1000.0, gt=0)
-    imu_gyro_bandwidth_hz: float = Field(200.0, gt=0)
-    imu_gyro_noise_urad_s_per_rthz: float = Field(35.0, ge=0)
-    imu_acc_bias_ug: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
-    imu_acc_scale_error: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
-    imu_gyro_bias_urad_s: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
-    imu_misalignment_urad: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0], min_length=3, max_length=3)
-    nut_acc_noise_ug_per_rthz: float = Field(20.0, ge=0)
-    encoder_counts_per_rev: int = Field(2**20, ge=16)
-    torque_noise_Nm: float = Field(0.005, ge=0)
-    position_cmd_fs_hz: float = Field(1000.0, gt=0)
+    """Sensor models: the IMU on the carriage (Phase II), the nut accelerometers and the controller's
+    signals (Phase I)."""
+
+    imu_acc_fs_hz: float = Field(1613.0, gt=0, description="IMU accelerometer sampling rate, Hz")
+    imu_acc_bandwidth_hz: float = Field(300.0, gt=0, description="IMU accelerometer bandwidth, Hz")
+    imu_acc_noise_ug_per_rthz: float = Field(7.0, ge=0, description="IMU accelerometer noise density, µg/√Hz")
+    imu_gyro_fs_hz: float = Field(1000.0, gt=0, description="IMU gyroscope sampling rate, Hz")
+    imu_gyro_bandwidth_hz: float = Field(200.0, gt=0, description="IMU gyroscope bandwidth, Hz")
+    imu_gyro_noise_urad_s_per_rthz: float = Field(35.0, ge=0, description="IMU gyroscope noise density, µrad/s/√Hz")
+    imu_acc_bias_ug: list[float] = _per_axis("IMU accelerometer bias per axis (x, y, z), µg")
+    imu_acc_scale_error: list[float] = _per_axis("IMU accelerometer scale-factor error per axis (fraction, 0 = exact)")
+    imu_gyro_bias_urad_s: list[float] = _per_axis("IMU gyroscope bias per axis, µrad/s")
+    imu_misalignment_urad: list[float] = _per_axis("IMU mounting misalignment about x, y, z, µrad")
+    nut_acc_noise_ug_per_rthz: float = Field(20.0, ge=0, description=(
+        "noise density of the two nut accelerometers, µg/√Hz"))
+    encoder_counts_per_rev: int = Field(2**20, ge=16, description="motor encoder counts per revolution")
+    torque_noise_Nm: float = Field(0.005, ge=0, description="RMS noise of the controller's torque signal, N·m")
+    position_cmd_fs_hz: float = Field(1000.0, gt=0, description="rate of the recorded position command in Phase II, Hz")
     position_cmd_lead_ms_per_kh: float = Field(0.0, ge=-100.0, le=100.0, description=(
         "how far the recorded position_cmd runs ahead of the IMU's clock, ms per 1000 operating "
         "hours (a trigger latency between the controller and a separately clocked IMU that "
@@ -130,19 +159,26 @@ class DegradationConfig(_Section):
     law: str = Field(default_factory=laws.default_name, description=(
         "a registered degradation law (twin.laws: built-in or installed; default: the "
         "registered default) or module:Class"))
-    onset_hours: float = Field(2500.0, ge=0)
-    interference_um: float = Field(4.0, gt=0, le=100)
-    wear_rate_um_per_kh: float = Field(1.4, ge=0, le=1000)
-    scatter_um: float = Field(2.0, ge=0, le=100)
-    backlash_gain: float = Field(2.83, gt=0, le=20)
+    onset_hours: float = Field(2500.0, ge=0, description="running-in hours before wear removes interference")
+    interference_um: float = Field(4.0, gt=0, le=100, description=(
+        "mean initial elastic interference of the balls that makes the preload, µm"))
+    wear_rate_um_per_kh: float = Field(1.4, ge=0, le=1000, description="Archard wear-depth rate after the onset, µm/kh")
+    scatter_um: float = Field(2.0, ge=0, le=100, description=(
+        "standard deviation of the balls' interference, µm (0: all lose contact at once)"))
+    backlash_gain: float = Field(2.83, gt=0, le=20, description=(
+        "axial clearance per unit of radial wear beyond the interference (2/sin 45° ≈ 2.83)"))
     truck_wear_coupling: float = Field(
         0.0, ge=0, le=1, description="fraction of the nut's preload loss that the trucks share")
-    table_hours: list[float] = Field(default_factory=list)
-    table_preload_fraction: list[float] = Field(default_factory=list)
-    table_backlash_um: list[float] = Field(default_factory=list)
-    thermal_rise_K: float = Field(3.0, ge=0, le=50)
-    thermal_time_constant_hours: float = Field(1.5, gt=0)
-    thermal_expansion_per_K: float = Field(11.5e-6, ge=0)
+    table_hours: list[float] = Field(default_factory=list, description=(
+        "law 'table': operating hours of the table's rows"))
+    table_preload_fraction: list[float] = Field(default_factory=list, description=(
+        "law 'table': preload as a fraction of the nominal at those hours"))
+    table_backlash_um: list[float] = Field(default_factory=list, description="law 'table': backlash at those hours, µm")
+    thermal_rise_K: float = Field(3.0, ge=0, le=50, description="steady temperature rise of the screw in operation, K")
+    thermal_time_constant_hours: float = Field(1.5, gt=0, description=(
+        "time constant of the screw's warming and cooling, h"))
+    thermal_expansion_per_K: float = Field(11.5e-6, ge=0, description=(
+        "thermal expansion coefficient of the screw (lead growth), 1/K"))
     drag_temperature_coefficient_per_K: float = Field(0.0, ge=0, le=0.2, description=(
         "β in drag = drag(20 °C)·exp(−β·ΔT): the nut's lubricant thins as the screw warms "
         "(0 = drag independent of temperature; about 0.03 /K for mineral greases)"))
@@ -174,32 +210,38 @@ class DegradationConfig(_Section):
 
 
 class Phase1Config(_Section):
-    speed_mm_s: float = Field(400.0, gt=0, le=2000)
-    accel_mm_s2: float = Field(4087.44, gt=0, le=100000)
-    start_mm: float = Field(110.0, ge=0)
-    end_mm: float = Field(330.0, ge=0)
-    dwell_s: float = Field(1.0, ge=0)
-    capture_s: float = Field(10.0, gt=0, le=120)
+    """Phase I: the online routine (back and forth at one speed) and its captures (Table I)."""
+
+    speed_mm_s: float = Field(400.0, gt=0, le=2000, description="traverse speed of the Phase I routine, mm/s")
+    accel_mm_s2: float = Field(4087.44, gt=0, le=100000, description="acceleration of the Phase I routine, mm/s²")
+    start_mm: float = Field(110.0, ge=0, description="start of the Phase I stroke, mm from the travel's origin")
+    end_mm: float = Field(330.0, ge=0, description="end of the Phase I stroke, mm")
+    dwell_s: float = Field(1.0, ge=0, description="pause at each end of the Phase I stroke, s")
+    capture_s: float = Field(10.0, gt=0, le=120, description="length of one Phase I capture, s")
     fs_hz: float = Field(
         10000.0, ge=2000, le=100000, description="DAQ and controller rate of all eight Phase I signals")
-    captures_per_sample: int = Field(10, ge=1)
-    capture_interval_minutes: float = Field(30.0, gt=0)
-    sample_interval_hours: float = Field(84.0, gt=0)
+    captures_per_sample: int = Field(10, ge=1, description="captures of one Phase I sample")
+    capture_interval_minutes: float = Field(30.0, gt=0, description="time between the captures of a sample, min")
+    sample_interval_hours: float = Field(84.0, gt=0, description="operating hours between Phase I samples")
     timestep_s: float = Field(
         2e-4, gt=0, le=1e-3,
         description="simulation step; the nut accelerometers are upsampled to their DAQ rate when it is coarser")
 
 
 class Phase2Config(_Section):
-    speeds_mm_s: list[float] = Field(default_factory=lambda: [20.0, 100.0, 500.0])
-    accel_mm_s2: float = Field(19600.0, gt=0, le=100000)
-    start_mm: float = Field(0.0, ge=0)
-    end_mm: float = Field(450.0, ge=0)
-    dwell_s: float = Field(10.0, ge=0)
-    runs_per_session: int = Field(90, ge=1)
-    session_interval_hours: float = Field(84.0, gt=0)
-    timestep_s: float = Field(2e-4, gt=0, le=1e-3)
-    origin_offset_max_mm: float = Field(2.0, ge=0, le=20)
+    """Phase II: the IMU routine (forward and back at several speeds) and its sessions (Table I)."""
+
+    speeds_mm_s: list[float] = Field(default_factory=lambda: [20.0, 100.0, 500.0], description=(
+        "traverse speeds of the Phase II runs, mm/s (one run: forward and back at each)"))
+    accel_mm_s2: float = Field(19600.0, gt=0, le=100000, description="acceleration of the Phase II routine, mm/s²")
+    start_mm: float = Field(0.0, ge=0, description="start of the Phase II stroke, mm from the travel's origin")
+    end_mm: float = Field(450.0, ge=0, description="end of the Phase II stroke, mm")
+    dwell_s: float = Field(10.0, ge=0, description="pause at each end of the Phase II stroke, s")
+    runs_per_session: int = Field(90, ge=1, description="runs of one Phase II session")
+    session_interval_hours: float = Field(84.0, gt=0, description="operating hours between Phase II sessions")
+    timestep_s: float = Field(2e-4, gt=0, le=1e-3, description="simulation step of the Phase II runs")
+    origin_offset_max_mm: float = Field(2.0, ge=0, le=20, description=(
+        "largest error of the origin set by hand before a session, mm (uniform ±)"))
     session_hours: list[float] = Field(
         default_factory=list, description="explicit session hours; overrides the interval")
     rail_passes: int = Field(2, ge=1, le=3, description=(
@@ -223,23 +265,29 @@ class Phase2Config(_Section):
 
 
 class DialConfig(_Section):
-    gradation_um: float = Field(12.7, gt=0)
+    """The dial-indicator backlash test, the reference of the Phase II estimates (the paper's ground truth)."""
+
+    gradation_um: float = Field(12.7, gt=0, description="gradation of the dial indicator, µm")
     reading_noise_um: float = Field(1.5, ge=0, description="1-sigma error of a by-eye sub-gradation reading")
-    step_um: float = Field(1.0, gt=0)
-    repeats: int = Field(3, ge=1)
-    every_n_sessions: int = Field(1, ge=1)
+    step_um: float = Field(1.0, gt=0, description="step of the commanded position in the dial test, µm")
+    repeats: int = Field(3, ge=1, description="repetitions of the dial test, averaged")
+    every_n_sessions: int = Field(1, ge=1, description="a dial test after every n-th Phase II session")
 
 
 class PauseConfig(_Section):
+    """A stop of the machine within the campaign."""
+
     hours: float = Field(ge=0, description="operating hours at which the axis stopped")
     days: float = Field(gt=0, description="length of the stop; the screw cools towards ambient meanwhile")
 
 
 class CampaignConfig(_Section):
+    """The run-to-failure campaign: its length, its stops and which phases it records."""
+
     scale: float = Field(
         1.0, gt=0, le=1, description="reduced scale: multiplies captures per sample and runs per session")
-    total_hours: float = Field(8693.0, gt=0)
-    warmup_hours: float = Field(2.0, ge=0)
+    total_hours: float = Field(8693.0, gt=0, description="operating hours of the whole campaign")
+    warmup_hours: float = Field(2.0, ge=0, description="operating hours before the first sample")
     pauses: list[PauseConfig] = Field(default_factory=lambda: [
         PauseConfig(hours=855.5, days=78.0), PauseConfig(hours=4033.0, days=122.0)])
     phase1: bool = True
@@ -248,7 +296,8 @@ class CampaignConfig(_Section):
 
 class EffectsConfig(_Section):
     """Physical effects the nominal twin leaves out (all off by default; off = the nominal twin,
-    bit for bit). Used by the sim-to-real gap diagnosis (issue 6) as candidate explanations."""
+    bit for bit). The sim-to-real gap diagnosis (docs/gap-diagnosis.md) adds them as candidate
+    explanations."""
 
     cogging_Nm: float = Field(0.0, ge=0, le=1, description=(
         "amplitude of the motor cogging torque, N·m, a second ripple component "
@@ -264,7 +313,8 @@ class EffectsConfig(_Section):
         "static friction of the rails in excess of their Coulomb friction, N: "
         "F = −ΔF·exp(−(v/v_s)²)·sign(v) at the commanded carriage velocity v "
         "(Armstrong-Hélouvry, Dupont, Canudas de Wit, Automatica 30(7), 1994)"))
-    stribeck_velocity_mm_s: float = Field(2.0, ge=0.1, le=50, description="Stribeck velocity v_s, mm/s")
+    stribeck_velocity_mm_s: float = Field(2.0, ge=0.1, le=50, description=(
+        "Stribeck velocity v_s, mm/s: the speed below which the excess friction acts"))
     base_frequency_hz: float = Field(120.0, ge=10, le=1000, description=(
         "natural frequency of a structural mode of the machine base along X, Hz"))
     base_modal_mass_kg: float = Field(0.0, ge=0, le=1e5, description=(

@@ -35,8 +35,7 @@ class TorqueAutoencoder(PhaseIDetector):
 
     phase1_input = "torque_windows"
 
-    def __init__(self, hidden_units: int = 10, alpha: float = 1.0, max_iter: int = 3000,
-                 random_state: int = 0):
+    def __init__(self, hidden_units: int = 10, alpha: float = 1.0, max_iter: int = 3000, random_state: int = 0):
         self.hidden_units = hidden_units
         self.alpha = alpha
         self.max_iter = max_iter

@@ -112,7 +112,9 @@ def _scenario_rows(s: dict) -> list[tuple[str, str]]:
         return _dig(s, keys)
 
     d = s.get("degradation", {})
-    rows = [("name", g("name")), ("description", g("description")), ("seed", g("seed"))]
+    rows = [("name", g("name")), ("description", g("description")), ("seed", g("seed")),
+            ("travel / lead (mm)", f"{g('axis', 'travel_mm')} / {g('axis', 'lead_mm')}"),
+            ("preload when new (N)", g("axis", "preload_N"))]
     if d.get("law") == "table":
         rows += [("degradation law", "table"),
                  ("table: hours", d.get("table_hours")),
@@ -143,8 +145,6 @@ def _scenario_rows(s: dict) -> list[tuple[str, str]]:
         ("IMU gyroscope noise (µrad/s/√Hz)", g("sensors", "imu_gyro_noise_urad_s_per_rthz")),
         ("rail straightness RMS vertical / lateral (µm)",
          f"{g('geometry', 'straightness_rms_um')} / {g('geometry', 'lateral_straightness_rms_um')}"),
-        ("preload when new (N)", g("axis", "preload_N")),
-        ("travel / lead (mm)", f"{g('axis', 'travel_mm')} / {g('axis', 'lead_mm')}"),
     ]
     return [(k, _show(v)) for k, v in rows]
 

@@ -15,13 +15,16 @@ slot/pole combinations). It acts on Phase I torque/speed/acc at N_c·f_rot (f_ro
 
 from twin.effects.base import Effect, Param, register_effect
 
+#: cogging orders N_c = LCM(slots, poles) of common slot/pole combinations: 4/2, 3/2, 6/4, 9/6, 12/8
+COMMON_ORDERS = (4.0, 6.0, 12.0, 18.0, 24.0)
+
 EFFECT = register_effect(Effect(
     name="cogging",
     title="motor cogging torque",
     params=(Param("torque_Nm", keys=("effects.cogging_Nm",), mode="add", low=0.03, high=0.15,
                   grid=(0.0, 0.03, 0.07, 0.15), label="cogging torque", unit="N·m"),
-            Param("per_rev", keys=("effects.cogging_per_rev",), mode="set", low=4, high=24,
-                  grid=(4.0, 6.0, 12.0, 18.0, 24.0), off=None, discrete=True,
+            Param("per_rev", keys=("effects.cogging_per_rev",), mode="set", grid=COMMON_ORDERS,
+                  low=min(COMMON_ORDERS), high=max(COMMON_ORDERS), off=None, discrete=True,
                   label="cogging order", unit="per revolution")),
     source="PM motor cogging, period LCM(slots, poles) per revolution (Zhu & Howe 2000)",
     amplitude="torque_Nm",
