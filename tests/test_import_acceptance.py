@@ -68,6 +68,9 @@ def _acceptance(tmp: Path, overrides: tuple[str, ...], wrong_lead: bool) -> dict
     assert re.search(r"^speed_mm_s = 200.0 +# measured: from the motor speed and the lead$", text, re.M)
     assert re.search(r"^fs_hz = 25600.0 +# measured$", text, re.M)
     assert re.search(r"^carriage_mass_kg = 120.0 +# twin default: not in /@axis$", text, re.M)
+    # a default says what it means, so the owner knows what to check
+    assert re.search(r"^rail_friction_N = 12.0 +# twin default: Coulomb friction of the four trucks and their "
+                     r"seals, N$", text, re.M)
     r = run_twin("backlash", campaign, "--no-plots")
     doc = json.loads((campaign / "backlash" / "backlash.json").read_text())
     injected = _injected_um(twin_dir)

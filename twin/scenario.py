@@ -132,7 +132,7 @@ class SensorsConfig(_Section):
     imu_acc_bias_ug: list[float] = _per_axis("IMU accelerometer bias per axis (x, y, z), µg")
     imu_acc_scale_error: list[float] = _per_axis("IMU accelerometer scale-factor error per axis (fraction, 0 = exact)")
     imu_gyro_bias_urad_s: list[float] = _per_axis("IMU gyroscope bias per axis, µrad/s")
-    imu_misalignment_urad: list[float] = _per_axis("IMU mounting misalignment about x, y, z, µrad")
+    imu_misalignment_urad: list[float] = _per_axis("rotation (roll, pitch, yaw) of the IMU case on the carriage, µrad")
     nut_acc_noise_ug_per_rthz: float = Field(20.0, ge=0, description=(
         "noise density of the two nut accelerometers, µg/√Hz"))
     encoder_counts_per_rev: int = Field(2**20, ge=16, description="motor encoder counts per revolution")

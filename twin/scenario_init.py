@@ -16,9 +16,20 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from pydantic import BaseModel
+
 from analysis.files import write_text
 from analysis.ingest.routine import measure_recording
-from twin.scenario import AxisConfig, Phase1Config, Phase2Config, ScenarioError, SensorsConfig, load
+from twin.scenario import (
+    AxisConfig,
+    CampaignConfig,
+    DegradationConfig,
+    Phase1Config,
+    Phase2Config,
+    ScenarioError,
+    SensorsConfig,
+    load,
+)
 
 MEASURED, AXIS, DEFAULT = "measured", "axis description", "twin default"
 
@@ -36,10 +47,15 @@ def _fmt(v: Any) -> str:
 
 
 class _Table:
-    def __init__(self, name: str):
-        self.name, self.rows = name, []
+    """One TOML table; ``section`` (a scenario section's model) gives the meaning of a key whose
+    value is a twin default, so the owner knows what to check."""
+
+    def __init__(self, name: str, section: type[BaseModel] | None = None):
+        self.name, self.section, self.rows = name, section, []
 
     def add(self, key: str, value: Any, source: str, note: str = "") -> None:
+        if not note and source == DEFAULT and self.section is not None and key in self.section.model_fields:
+            note = self.section.model_fields[key].description or ""
         self.rows.append((key, value, source + (f": {note}" if note else "")))
 
     def text(self) -> str:
@@ -64,7 +80,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
     head.add("description", f"the layout and routine of {meas['file']}", MEASURED)
     head.add("seed", 0, DEFAULT, "the seed of the twin's random draws")
 
-    ax = _Table("axis")
+    ax = _Table("axis", AxisConfig)
     d_axis = AxisConfig()
     for key in ("travel_mm", "lead_mm", "carriage_mass_kg", "truck_spacing_mm", "rail_spacing_mm"):
         v = getattr(axis, key, None)
@@ -81,7 +97,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
         if key not in {r[0] for r in ax.rows}:
             ax.add(key, value, DEFAULT)
 
-    sens = _Table("sensors")
+    sens = _Table("sensors", SensorsConfig)
     d_sens = SensorsConfig()
     if p2:
         for ch in ("imu_acc", "imu_gyro", "position_cmd"):
@@ -97,8 +113,8 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
         if key not in {r[0] for r in sens.rows}:
             sens.add(key, value, DEFAULT)
 
-    camp = _Table("campaign")
-    ph1 = _Table("phase1")
+    camp = _Table("campaign", CampaignConfig)
+    ph1 = _Table("phase1", Phase1Config)
     d1 = Phase1Config()
     last_hours = 0.0
     if p1:
@@ -148,7 +164,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
         if key not in {r[0] for r in ph1.rows}:
             ph1.add(key, value, DEFAULT, "not measurable from the recording" if key == "dwell_s" else "")
 
-    ph2 = _Table("phase2")
+    ph2 = _Table("phase2", Phase2Config)
     d2 = Phase2Config()
     if p2:
         r2 = p2.get("routine", {})
@@ -173,7 +189,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
     camp.add("total_hours", float(last_hours or 1.0), MEASURED, "covers every sample and session")
     camp.add("pauses", [], DEFAULT, "none known")
 
-    deg = _Table("degradation")
+    deg = _Table("degradation", DegradationConfig)
     hours = sorted({0.0, float(last_hours or 1.0)})
     deg.add("law", "table", DEFAULT, "a nominal machine: no preload loss, no backlash growth")
     deg.add("table_hours", hours, DEFAULT)
