@@ -65,6 +65,29 @@ def test_skewness_and_kurtosis_of_known_distributions():
     assert float(skewness(expo)) == pytest.approx(2.0, rel=0.03)
 
 
+def test_moments_equal_scipy_and_a_flat_column_is_nan_without_warning():
+    """The numpy moments give scipy.stats' skew and kurtosis (bias=True, Pearson) to the last bit
+    on ordinary columns; a flat column (a clipped channel, a constant offset with rounding
+    noise) is NaN without the warning scipy prints."""
+    import warnings
+
+    from scipy import stats
+
+    rng = np.random.default_rng(7)
+    for x in (rng.standard_normal((2000, 7)) * [1, 2, 3, 1e-3, 1e3, 5, 0.1] + [0, 1, -4, 9, 0, 1e3, -2],
+              rng.exponential(1.0, 513), rng.uniform(-1, 1, (64, 3))):
+        np.testing.assert_array_equal(skewness(x), stats.skew(x, axis=0, bias=True))
+        np.testing.assert_array_equal(kurtosis(x), stats.kurtosis(x, axis=0, fisher=False, bias=True))
+    flat = np.column_stack([np.full(100, 3.0), 3.0 + 1e-16 * rng.standard_normal(100), np.zeros(100),
+                            rng.standard_normal(100)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sk, ku = skewness(flat), kurtosis(flat)
+    assert np.isnan(sk[:3]).all() and np.isnan(ku[:3]).all(), (sk, ku)
+    assert np.isfinite(sk[3]) and np.isfinite(ku[3])
+    assert np.ndim(skewness(flat[:, 3])) == 0
+
+
 def _profile(n_moves=3, plateau=251.327, fs=FS, rng=None):
     """Reciprocating speed profile: dwell 1 s, ramp 0.1 s, steady 0.45 s, ramp down 0.1 s."""
     parts = [np.zeros(int(0.5 * fs))]

@@ -216,13 +216,20 @@ class Measurements(_Reader):
         """Names of the Phase I captures, sorted by (hours, name)."""
         return _sorted_by_hours(self, "/phase1", self._names("/phase1"))
 
+    def phase1_sample(self, name: str) -> int:
+        """The Phase I sample a capture belongs to (its ``sample`` attribute), without reading
+        its signals."""
+        gkey = f"/phase1/{name}"
+        g = self._obj(gkey, h5py.Group, "a Phase I capture group")
+        return _attr_int(self.label, self._attrs(g, gkey), gkey, "sample", "an integer Phase I sample index")
+
     def phase1(self, name: str) -> Phase1Capture:
         """One Phase I capture, validated (see :class:`Phase1Capture`)."""
         gkey = f"/phase1/{name}"
         g = self._obj(gkey, h5py.Group, "a Phase I capture group")
         attrs = self._attrs(g, gkey)
         hours = _attr_hours(self.label, attrs, gkey)
-        sample = _attr_int(self.label, attrs, gkey, "sample", "an integer Phase I sample index")
+        sample = self.phase1_sample(name)
         fs = _attr_fs(self.label, attrs, gkey)
         arrays, n = {}, None
         for ch, (unit, desc, cols) in schema.PHASE1_CHANNELS.items():

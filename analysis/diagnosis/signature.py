@@ -188,17 +188,17 @@ def _phase1(m: Measurements, part: str, b: _Builder) -> None:
     names = m.phase1_captures()
     if not names:
         return
-    by_sample: dict[int, list] = {}
+    by_sample: dict[int, list[str]] = {}
     for n in names:
-        c = m.phase1(n)
-        by_sample.setdefault(c.sample, []).append(c)
+        by_sample.setdefault(m.phase1_sample(n), []).append(n)
     templates = None
     for sample in sorted(by_sample):
-        caps = _part_of(by_sample[sample], part)
-        if not caps:
+        chosen = _part_of(by_sample[sample], part)
+        if not chosen:
             raise SignatureError(
                 f"{m.label}: Phase I sample {sample} has {len(by_sample[sample])} capture(s); the "
                 "diagnosis needs at least 2 per sample (even ones to fit, odd ones held out)")
+        caps = [m.phase1(n) for n in chosen]
         hours = float(np.mean([c.hours for c in caps]))
         stats = np.nanmean([_phase1_capture_stats(c) for c in caps], axis=0)
         for v, r in zip(stats, _phase1_regions(hours), strict=True):

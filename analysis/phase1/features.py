@@ -48,7 +48,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import signal, stats
+from scipy import signal
 
 from analysis.phase1.segmentation import Segmentation, segment_capture
 
@@ -124,14 +124,40 @@ def band_energy(f: np.ndarray, psd: np.ndarray, f_high: float) -> np.ndarray:
     return psd[sel].sum(axis=0) * df
 
 
+def _central_moments(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centred x, the biased second moment m2 along axis 0, and where the column is degenerate.
+
+    The moments are formed as scipy.stats forms them (mean removed, products of squares), so
+    that ordinary columns give scipy's values to the last bit, without its per-call overhead.
+    Degenerate: constant to within 10 machine epsilons of its mean (where scipy warns of
+    catastrophic cancellation, or returns NaN), e.g. a clipped channel.
+    """
+    x = np.asarray(x, dtype=float)
+    mean = np.mean(x, axis=0, keepdims=True)
+    d = x - mean
+    m2 = np.mean(d ** 2, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        spread = np.max(np.abs(d), axis=0) / np.abs(mean[0])
+        degenerate = (spread < 10.0 * np.finfo(float).eps) | (m2 <= (np.finfo(float).eps * mean[0]) ** 2)
+    return d, m2, degenerate
+
+
 def skewness(x: np.ndarray) -> np.ndarray:
-    """Skewness m3 / m2^1.5 along axis 0 (biased moments) [scipy.stats.skew]."""
-    return stats.skew(x, axis=0, bias=True)
+    """Skewness m3 / m2^1.5 along axis 0 (biased moments) [scipy.stats.skew, ``bias=True``];
+    NaN for a degenerate (constant) column. x: (n,) or (n, c) → scalar or (c,)."""
+    d, m2, degenerate = _central_moments(x)
+    m3 = np.mean(d ** 2 * d, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(degenerate, np.nan, m3 / m2 ** 1.5)[()]
 
 
 def kurtosis(x: np.ndarray) -> np.ndarray:
-    """Pearson kurtosis m4 / m2^2 along axis 0 (3 for a Gaussian) [scipy.stats.kurtosis]."""
-    return stats.kurtosis(x, axis=0, fisher=False, bias=True)
+    """Pearson kurtosis m4 / m2^2 along axis 0 (3 for a Gaussian) [scipy.stats.kurtosis,
+    ``fisher=False, bias=True``]; NaN for a degenerate (constant) column. x: (n,) or (n, c)."""
+    d, m2, degenerate = _central_moments(x)
+    m4 = np.mean((d ** 2) ** 2, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(degenerate, np.nan, m4 / m2 ** 2.0)[()]
 
 
 @dataclass
@@ -245,7 +271,8 @@ def sample_features(captures: list[CaptureSummary], templates: dict[int, np.ndar
     for d in (1, -1):
         rows = [x for c in captures for x in c.transients[d]]
         if d in templates and rows:
-            corr.append(float(np.mean([np.corrcoef(x, templates[d])[0, 1] for x in rows])))
+            with np.errstate(divide="ignore", invalid="ignore"):  # a flat (clipped) transient: NaN
+                corr.append(float(np.mean([np.corrcoef(x, templates[d])[0, 1] for x in rows])))
         else:
             corr.append(np.nan)
     stats_ = np.column_stack([skew, kurt]).ravel()
