@@ -332,7 +332,7 @@ def export_model(
     console.print(f"wrote {out}")
 
 
-# --- Phase I detection (issue 3) -------------------------------------------------------------
+# --- Phase I detection ----------------------------------------------------------------------------
 @app.command()
 def detect(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
@@ -372,10 +372,10 @@ def detect(
     Console(width=max(100, Console().width)).print(table)
     console.print(f"selected features: {', '.join(details['selected_features'])}")
     console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}")
-# --- end of Phase I detection ---------------------------------------------------------------
+# --- end of Phase I detection ---------------------------------------------------------------------
 
 
-# --- Phase II backlash (issue 4) -------------------------------------------------------------
+# --- Phase II backlash ----------------------------------------------------------------------------
 @app.command()
 def backlash(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 only for the plot)"),
@@ -481,10 +481,10 @@ def backlash(
                       f"{fmt(p['band_hours'][0], '{:.0f}')}–{fmt(p['band_hours'][1], '{:.0f}')} h)",
                       markup=False, highlight=False)
     console.print(f"wrote {out / 'backlash.json'}" + (f" and {len(figures)} figures" if figures else ""))
-# --- end of Phase II backlash ----------------------------------------------------------------
+# --- end of Phase II backlash ---------------------------------------------------------------------
 
 
-# --- bringing a real axis's recordings in: import, check (issue 14) ---------------------------
+# --- bringing a real axis's recordings in: import, check ------------------------------------------
 @app.command("import")
 def import_(
     spec: Path = typer.Argument(..., help="import spec (TOML; docs/import.md)"),
@@ -600,10 +600,10 @@ def scenario_init(
     for n in notes:
         console.print(f"note: {n}", style="yellow", markup=False, highlight=False)
     console.print(f"wrote {out}; next: twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
-# --- end of import, check, scenario init -------------------------------------------------------
+# --- end of import, check, scenario init ----------------------------------------------------------
 
 
-# --- twin sweep (helper: sweep) ----------------------------------------------------------------
+# --- twin sweep -----------------------------------------------------------------------------------
 @app.command()
 def sweep(
     sweep_file: Path = typer.Argument(..., help="sweep TOML file (see docs/usage.md and scenarios/sweeps/)"),
@@ -700,10 +700,10 @@ def sweep(
     if end["failed"]:
         _fail(f"{end['failed']} point(s) failed (see the warnings and {out / 'sweep-log.jsonl'}); "
               "rerun the same command to retry them", code=1)
-# --- end of twin sweep -------------------------------------------------------------------------
+# --- end of twin sweep ----------------------------------------------------------------------------
 
 
-# --- twin diagnose (issue 6) -------------------------------------------------------------------
+# --- twin diagnose --------------------------------------------------------------------------------
 def _progress_callback(progress: Progress, tasks: dict):
     def on_progress(what: str, done: int, total: int) -> None:
         if what not in tasks:
@@ -891,10 +891,10 @@ def diagnose_benchmark(
                   f"{fmt(res['pair_both_top3_fraction'])}; top-1 per kind: "
                   + ", ".join(f"{k} {fmt(v)}" for k, v in res["per_kind_top1"].items() if v is not None)
                   + f"; wrote {out / 'benchmark.json'}")
-# --- end of twin diagnose ----------------------------------------------------------------------
+# --- end of twin diagnose -------------------------------------------------------------------------
 
 
-# --- twin view (helper: view) ------------------------------------------------------------------
+# --- twin view ------------------------------------------------------------------------------------
 @app.command()
 def view(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5, phase1/, "
@@ -953,10 +953,10 @@ def view(
     except KeyboardInterrupt:
         rec.disconnect()
         console.print("stopped")
-# --- end of twin view --------------------------------------------------------------------------
+# --- end of twin view -----------------------------------------------------------------------------
 
 
-# --- twin report (helper: report) --------------------------------------------------------------
+# --- twin report ----------------------------------------------------------------------------------
 @app.command()
 def report(
     directory: Path = typer.Argument(
@@ -978,7 +978,7 @@ def report(
     for note in rep.notes:
         console.print(note, markup=False, highlight=False)
     console.print(f"wrote {rep.index} with {len(rep.figures)} figures", markup=False, highlight=False)
-# --- end of twin report ------------------------------------------------------------------------
+# --- end of twin report ---------------------------------------------------------------------------
 
 
 def main() -> None:

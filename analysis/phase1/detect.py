@@ -6,7 +6,7 @@ Files written to OUT, each as soon as it is computed (so a failure later loses n
 - ``reference_features.csv``, ``selection.json``: the reference table, Fisher scores, selection;
 - ``features.csv``: the campaign's raw features (or ``features.partial.csv`` with the complete
   samples before a capture that cannot be read; the error is then raised);
-- ``detection.json`` (schema of issue 3), ``detection_details.json`` (scores against the onset,
+- ``detection.json`` (schema in docs/usage.md), ``detection_details.json`` (scores against the onset,
   parameters), ``detection.png`` (one panel per detector like the paper's Fig. 6).
 
 The detectors see ``measurements.h5`` only; ``truth.h5`` of the campaign is read for scoring

@@ -1,4 +1,4 @@
-"""The six error motions of a Phase II session from its IMU runs (paper section V; issue 4).
+"""The six error motions of a Phase II session from its IMU runs (paper section V).
 
 :func:`session_error_motions` reads the runs of one session from ``measurements.h5`` and returns
 :class:`analysis.phase2.traces.SessionErrorMotions`:
