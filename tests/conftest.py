@@ -51,8 +51,18 @@ def demo_run(tmp_path_factory):
     return out, proc
 
 
+# The files whose session fixtures take minutes (the diagnosis benchmark, the parameter
+# responses), run first: with two test processes (`make test`, pytest-xdist's loadfile) the
+# other process works through the short files meanwhile, instead of waiting at the end.
+LONG_FILES = ("test_diagnosis.py", "test_diagnosis_parameters.py")
+
+
 def pytest_collection_modifyitems(config, items):
-    """`slow` campaigns may take up to an hour each; the default timeout (pyproject) is 15 min."""
+    """The long files first (:data:`LONG_FILES`, a stable sort: the order within and between
+    the other files is kept); `slow` campaigns may take up to an hour each, the default timeout
+    (pyproject) is 15 min."""
+    rank = {name: i for i, name in enumerate(LONG_FILES)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(LONG_FILES)))
     for item in items:
         if item.get_closest_marker("slow") and not item.get_closest_marker("timeout"):
             item.add_marker(pytest.mark.timeout(3600))
