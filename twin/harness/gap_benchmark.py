@@ -162,6 +162,7 @@ def _score_case(case: Case, res: dict) -> dict:
            "verdict": res["verdict"], "ranking": ranking[:3],
            "added": [a["effect"] for a in added],
            "fitted": {a["effect"]: a["params"] for a in added},
+           "intervals": {a["effect"]: a["interval"] for a in added},
            "heldout_gap_before": res["heldout_gap_before"],
            "heldout_gap_after": res["heldout_gap_after"],
            "heldout_shrink": res["heldout_shrink"],
@@ -205,6 +206,37 @@ def _fit_errors(singles: list[dict]) -> dict[str, float]:
             true, fit = r["values"][name][p.name], r["fitted"][name][p.name]
             errs.setdefault(f"{name}.{p.name}", []).append(abs(fit - true) / abs(true))
     return {k: float(np.median(v)) for k, v in sorted(errs.items())}
+
+
+def interval_coverage(rows: list[dict]) -> dict:
+    """How often the stated interval of a fitted parameter holds the injected value: over the
+    continuous parameters of the injected candidate in the single, artefact and parameter cases
+    where it was added first. Returns {"per_kind": {kind: fraction or None}, "per_parameter":
+    {candidate.param: fraction}, "n": {kind: count}, "missed": [[case, candidate.param, injected,
+    [lo, hi]], ...]}."""
+    effects = candidates()
+    kind_of_case = {"single": KIND_EFFECT, "artefact": KIND_ARTEFACT, "parameter": KIND_PARAMETER}
+    hits: dict[str, list[bool]] = {k: [] for k in kind_of_case.values()}
+    per_param: dict[str, list[bool]] = {}
+    missed = []
+    for r in rows:
+        if r["kind"] not in kind_of_case or not r.get("correct"):
+            continue
+        name = r["injected"][0]
+        for p in (effects.get(name) or PARAMETERS.get(name) or ARTEFACTS[name]).params:
+            if p.discrete:
+                continue
+            true = r["values"][name][p.name]
+            lo, hi = r["intervals"][name][p.name]
+            inside = bool(lo - 1e-9 * abs(true) <= true <= hi + 1e-9 * abs(true))
+            hits[kind_of_case[r["kind"]]].append(inside)
+            per_param.setdefault(f"{name}.{p.name}", []).append(inside)
+            if not inside:
+                missed.append([r["id"], f"{name}.{p.name}", true, [lo, hi]])
+    return {"per_kind": {k: (float(np.mean(v)) if v else None) for k, v in hits.items()},
+            "n": {k: len(v) for k, v in hits.items()},
+            "per_parameter": {k: float(np.mean(v)) for k, v in sorted(per_param.items())},
+            "missed": missed}
 
 
 def confusion(rows: list[dict]) -> list[dict]:
@@ -326,6 +358,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                                                 if ARTEFACTS[r["injected"][0]].artefact == k]))
                               for k in sorted({ARTEFACTS[r["injected"][0]].artefact for r in arts})},
         "fitted_relative_error": _fit_errors(singles + arts + pars),
+        "interval_coverage": interval_coverage(rows),
         "per_effect_top1": {name: float(np.mean([r["correct"] for r in singles if r["injected"] == [name]]))
                             for name in sorted({r["injected"][0] for r in singles})},
         "confusion": confusion(rows),
