@@ -349,6 +349,44 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
                worse=worse, penalty=penalty, kind=cand.kind)
 
 
+BOOTSTRAP_DRAWS = 200  # resamples of the regions for an added candidate's interval
+INTERVAL_LEVEL = 0.9  # the stated interval's nominal coverage
+
+
+def bootstrap_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray, regions: list,
+                       level: float = INTERVAL_LEVEL, draws: int = BOOTSTRAP_DRAWS, n_fine: int = 61,
+                       seed: int = 0) -> dict[str, tuple[float, float]]:
+    """The ``level`` interval of each parameter of ``cand`` by a block bootstrap over the regions.
+
+    The statistics of one region (:attr:`Region.key`, all hours) move together, and where the
+    candidate's one-seed, interpolated response is not exactly the recording's, different regions
+    prefer different parameter values; the Δχ² profile sees neither. Resampling whole regions
+    with replacement (the block bootstrap: Efron & Tibshirani, *An Introduction to the
+    Bootstrap*, 1993, ch. 8.6; Künsch, Ann. Statist. 17(3), 1989) and refitting on the same fine
+    grid gives the spread of the fitted value both cause: the interval is the (1 − level)/2 and
+    (1 + level)/2 quantiles of the ``draws`` refits (percentile interval). Deterministic (the
+    resamples come from ``seed``). z_cal: (n,) standardised differences from the current model;
+    sd_cal: (n,) prediction standard deviations; regions: (n,) the statistics' regions.
+    """
+    fine = _fine_axes(cand.params, n_fine)
+    if not fine:
+        return {}
+    grid = np.stack(np.meshgrid(*fine, indexing="ij"), axis=-1).reshape(-1, len(fine))
+    ok = np.isfinite(z_cal)
+    d_fine = _interpolator(cand.params, np.nan_to_num(cand.delta["cal"]))(grid) / sd_cal
+    r2 = (np.where(ok, z_cal, 0.0)[None, :] - np.where(ok, d_fine, 0.0)) ** 2  # (m, n)
+    keys: dict = {}
+    block = np.array([keys.setdefault(r.key, len(keys)) for r in regions])
+    order = np.argsort(block, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(block[order]) != 0])
+    per_block = np.add.reduceat(r2[:, order], starts, axis=1)  # (m, nb): Σ t² of each region
+    rng = np.random.default_rng(seed)
+    counts = rng.multinomial(len(keys), np.full(len(keys), 1.0 / len(keys)), size=draws)  # (draws, nb)
+    best = np.argmin(per_block @ counts.T, axis=0)  # (draws,)
+    q = ((1.0 - level) / 2.0, (1.0 + level) / 2.0)
+    return {a.name: tuple(float(v) for v in np.quantile(grid[best, i], q)) for i, a in enumerate(cand.params)}
+
+
 def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
              candidates: list[CandidateResponse], *, alpha: float = 0.01,
              min_gain: float = 0.1, max_effects: int = 3, explained_fraction: float = 0.9
@@ -392,6 +430,10 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
         if not best.significant(min_gain):
             break
         best.alternatives = alternatives(best, fits, select & np.isfinite(z["heldout"]), sd["heldout"], min_gain)
+        cand = next(c for c in remaining if c.name == best.name)
+        boot = bootstrap_interval(cand, z["cal"], sd["cal"], regions)
+        best.interval = {k: (min(lo, boot[k][0]), max(hi, boot[k][1])) for k, (lo, hi) in best.interval.items()}
+        best.at_grid_edge = {a.name: grid_edge(a, best.params[a.name], best.interval[a.name]) for a in cand.params}
         added.append(best)
         delta = {"cal": delta["cal"] + best.delta_cal, "heldout": delta["heldout"] + best.delta_heldout}
         z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}
