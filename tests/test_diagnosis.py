@@ -430,10 +430,35 @@ def test_interval_coverage_counts_the_injected_value_inside_the_stated_interval(
 
 def test_benchmark_reports_interval_coverage(benchmark):
     """Issue 15, item 5 (measured, not yet met): benchmark.json states the coverage of the
-    intervals per kind; today's Δχ² intervals are statistical only and cover the injected value
-    in few cases (docs/gap-diagnosis.md, "Intervals")."""
+    intervals per kind (profile ∪ region bootstrap: 45 % and 50 % measured, against 85 % asked;
+    docs/gap-diagnosis.md, "Intervals")."""
     _, res, _ = benchmark
     cov = res["interval_coverage"]
     print("interval coverage", cov["per_kind"], cov["n"])
     assert cov["n"]["physical effect"] >= 16 and cov["n"]["signal artefact"] >= 8
     assert set(cov["per_kind"]) == {"physical effect", "signal artefact", "parameter"}
+
+
+def test_region_bootstrap_interval_covers_what_the_regions_disagree_on():
+    """Issue 15, item 5: where regions prefer different values (a response whose shape is not
+    the recording's), the block bootstrap's 90 % interval spans them while the Δχ² profile is
+    narrow; it is deterministic, and a candidate the regions agree on keeps a narrow interval."""
+    from analysis.diagnosis import attribution as at
+
+    grid = (0.0, 1.0, 2.0, 3.0, 4.0)
+    n_regions, per = 40, 100
+    regions = [Region("phase1", f"ch{r}", "band", "x", float(h)) for r in range(n_regions) for h in range(per)]
+    slope = np.ones(n_regions * per)
+    delta = np.stack([v * slope for v in grid])  # (5, n): the response grows by 1 sd per unit
+    cand = at.CandidateResponse("c", [at.ParamAxis("p", grid)], {"cal": delta, "heldout": delta})
+    sd = np.ones(n_regions * per)
+    prefer = np.repeat(np.linspace(1.5, 2.5, n_regions), per)  # each region's own best value
+    boot = at.bootstrap_interval(cand, prefer, sd, regions)["p"]
+    fit = at.fit_candidate(cand, prefer, prefer, {"cal": sd, "heldout": sd}, np.ones_like(sd, bool), 0.01)
+    lo, hi = fit.interval["p"]
+    print("profile", (lo, hi), "bootstrap", boot)
+    assert hi - lo < 0.05 and abs(fit.params["p"] - 2.0) < 0.02
+    assert boot[0] < 1.95 and boot[1] > 2.05 and boot[1] - boot[0] < 0.3
+    assert at.bootstrap_interval(cand, prefer, sd, regions)["p"] == boot
+    agree = at.bootstrap_interval(cand, np.full_like(prefer, 2.0), sd, regions)["p"]
+    assert agree[1] - agree[0] < 0.02
