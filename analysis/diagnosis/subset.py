@@ -146,17 +146,19 @@ class Workload:
 
 
 def cost_s(size: Size, costs: UnitCosts, work: Workload) -> float:
-    """Estimated wall seconds of ``work`` on a subset of ``size``: the campaigns' and the
-    post-processings' unit costs summed, divided by the workers (the simulations and the
-    post-processings are independent tasks; the batching of campaigns only makes them
-    cheaper), plus the recording's own signature (one campaign's, in this process)."""
+    """Estimated wall seconds of ``work`` on a subset of ``size``: in this process the first
+    twin campaign (the layout check simulates it) and the recording's own signature; the
+    other campaigns' and the post-processings' unit costs summed and divided by the workers
+    (they are independent tasks; the batching of campaigns only makes them cheaper). Not
+    counted: starting the workers, the gap test and the report (seconds, whatever the size)."""
     p1 = size.samples * size.captures
     p1_sim, p1_sig = p1 * costs.capture, p1 * costs.capture_signature
     p2_sim = size.sessions * (costs.session + size.runs * costs.run)
     p2_sig = size.sessions * (costs.session_signature + size.runs * costs.run_signature)
-    parallel = (work.campaigns * (p1_sim + p2_sim) + work.phase1_signatures * p1_sig
+    first = min(work.campaigns, 1)
+    parallel = ((work.campaigns - first) * (p1_sim + p2_sim) + work.phase1_signatures * p1_sig
                 + work.phase2_signatures * p2_sig)
-    return parallel / max(work.workers, 1) + p1_sig + p2_sig
+    return parallel / max(work.workers, 1) + first * (p1_sim + p2_sim) + p1_sig + p2_sig
 
 
 @dataclass(frozen=True)

@@ -711,6 +711,7 @@ def subset_scenario(nominal: Scenario, sub: subset.Subset) -> Scenario:
 
 
 CALIBRATION_VERSION = 1
+CALIBRATION_RUNS = 10  # runs per session of the second Phase II calibration campaign
 
 
 def _timed_campaign(s: Scenario, d: Path) -> tuple[float, float]:
@@ -730,9 +731,9 @@ def _timed_campaign(s: Scenario, d: Path) -> tuple[float, float]:
 def calibrate(nominal: Scenario, inv: subset.Inventory, cache: Path) -> tuple[subset.UnitCosts, float]:
     """The unit costs of this machine for the recording's layout, measured: the minimum subset
     (:func:`analysis.diagnosis.subset.minimum`) simulated with the first twin seed as a Phase
-    I campaign, and as Phase II campaigns of 2 and (where the sessions have them) 4 runs per
-    session (a session's motion is simulated once for all its runs: the two give its fixed
-    and its per-run cost). Returns (costs, wall seconds spent now). Kept in
+    I campaign, and as Phase II campaigns of 2 and (where the sessions have them)
+    :data:`CALIBRATION_RUNS` runs per session (a session's motion is simulated once for all
+    its runs: the two give its fixed and its per-run cost). Returns (costs, wall seconds spent now). Kept in
     ``cache/calibration/`` by the scenario, so a diagnosis with the same cache reuses them
     (and sizes the same subset)."""
     sub = subset.minimum(inv)
@@ -753,7 +754,9 @@ def calibrate(nominal: Scenario, inv: subset.Inventory, cache: Path) -> tuple[su
     sess = run = sess_sig = run_sig = 0.0
     m = len(sub.sessions)
     if m and nominal.campaign.phase2:
-        runs = [sub.runs] + ([min(2 * sub.runs, inv.runs)] if inv.runs > sub.runs else [])
+        # A session's motion costs seconds, a run tens of ms: 10 runs set the per-run cost
+        # apart from the timing's scatter on a shared machine.
+        runs = [sub.runs] + ([min(CALIBRATION_RUNS, inv.runs)] if inv.runs > sub.runs else [])
         timed = []
         for r in runs:
             data = json.loads(s0.to_json())
@@ -770,7 +773,8 @@ def calibrate(nominal: Scenario, inv: subset.Inventory, cache: Path) -> tuple[su
             else:
                 sess_sig, run_sig = fixed, per_run
     shutil.rmtree(tmp, ignore_errors=True)
-    costs = subset.UnitCosts(cap, sess, run, cap_sig, sess_sig, run_sig)
+    # The signature is part of the whole cost (a scatter of the timings can say otherwise).
+    costs = subset.UnitCosts(cap, max(sess, sess_sig), max(run, run_sig), cap_sig, sess_sig, run_sig)
     write_json(f, dataclasses.asdict(costs))
     return costs, time.perf_counter() - t0
 

@@ -1,0 +1,143 @@
+"""Benchmark: `twin diagnose --budget-minutes` on a recording of the paper's full layout
+(issue 15, item 3). Prints figures; not a test.
+
+A recording of ``scenarios/paper-rtf.toml`` (104 Phase I samples of 10 captures, 103 Phase II
+sessions of 90 runs: about 46 GB) is not simulated: the diagnosis reads only the parts of the
+subset it chooses, and simulates only the subset's layout. So:
+
+1. the recording's layout is taken from the scenario's campaign plan (:func:`twin.campaign.plan`:
+   the capture and session names, sample indices and hours a recording of it holds, what
+   :func:`analysis.diagnosis.subset.inventory` reads from its attributes);
+2. the unit costs are measured as ``twin diagnose`` measures them at its start
+   (:func:`twin.harness.gap_runner.calibrate`, kept in ``OUT/cache``);
+3. for each budget, the subset chosen and its estimated time on ``--workers`` workers, and the
+   estimate of the chosen subset on N workers;
+4. with ``--measure``: a "real" recording holding exactly the parts of the subset chosen for
+   ``--budget-minutes`` (the paper's scenario with the subset's layout at the same hours,
+   another seed) is simulated, and ``twin diagnose REAL --scenario scenarios/paper-rtf.toml
+   --budget-minutes B --workers W`` is timed on it (the same cache: the calibration is reused,
+   and the subset of this recording within the same budget is all of it, the same
+   simulations as for the full recording); then the subset's inventory and writing, timed per
+   part, are projected to the full file.
+
+Usage: .venv/bin/python benchmarks/bench_diagnose_campaign.py [--out DIR] [--workers 1]
+       [--budget-minutes 60] [--measure]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from analysis.diagnosis import subset  # noqa: E402
+from twin.campaign import plan, simulate_campaign  # noqa: E402
+from twin.harness.gap_runner import calibrate, subset_scenario, with_seed, workload  # noqa: E402
+from twin.scenario import load  # noqa: E402
+
+PAPER = REPO / "scenarios" / "paper-rtf.toml"
+BUDGETS_MIN = (15, 30, 60, 120, 240, 480, 960, 1920)
+WORKERS = (1, 2, 4, 8, 16, 32, 64)
+
+
+def layout_of(s) -> subset.Inventory:
+    """The inventory a recording of ``s`` has (names, sample indices, hours), from its plan."""
+    samples: dict[int, list] = {}
+    sessions = []
+    for u in plan(s):
+        if u.kind == "phase1":
+            samples.setdefault(u.sample, []).append((u.hours, u.name))
+        elif u.kind == "phase2":
+            sessions.append((u.name, u.hours, [f"r{r:04d}" for r in range(s.runs_per_session)]))
+    return subset.Inventory([(k, c[0][0], [n for _, n in c]) for k, c in sorted(samples.items())], sessions)
+
+
+def describe(sub: subset.Subset) -> str:
+    return (f"{len(sub.samples)} samples × {sub.captures} captures, {len(sub.sessions)} sessions × "
+            f"{sub.runs} runs")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", type=Path, default=REPO / "runs" / "bench-diagnose-campaign")
+    ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--budget-minutes", type=float, default=60.0)
+    ap.add_argument("--measure", action="store_true")
+    a = ap.parse_args()
+    cache = a.out / "cache"
+    paper = load(PAPER)
+    inv = layout_of(paper)
+    print(f"paper layout: {len(inv.samples)} samples × {inv.captures} captures, {len(inv.sessions)} "
+          f"sessions × {inv.runs} runs")
+    costs, spent = calibrate(paper, inv, cache)
+    print(f"calibration: {spent:.1f} s (0: from the cache); unit costs (s, one worker): {costs}")
+    report: dict = {"unit_costs_s": costs.__dict__, "calibration_s": spent, "budgets": []}
+    for w in sorted({a.workers, 2}):
+        work = workload(paper, 8, None, None, None, w)
+        print(f"workload (default kinds, 8 seeds, 8 re-simulation seeds) on {w} worker(s): {work}")
+        for b in BUDGETS_MIN:
+            sub = subset.choose(inv, costs, work, b * 60.0)
+            print(f"  budget {b:5d} min: {describe(sub)}, estimated {sub.estimated_s / 60:.1f} min"
+                  + ("" if sub.fits else " (the minimum: does not fit)"))
+            report["budgets"].append({"workers": w, "budget_minutes": b, "size": describe(sub),
+                                      "estimated_minutes": sub.estimated_s / 60, "fits": sub.fits})
+        whole = subset.ladder(inv)[-1]
+        print(f"  the whole recording: estimated {subset.cost_s(whole, costs, work) / 3600:.1f} h")
+    work = workload(paper, 8, None, None, None, a.workers)
+    chosen = subset.choose(inv, costs, work, a.budget_minutes * 60.0)
+    size = subset.Size(len(chosen.samples), chosen.captures, len(chosen.sessions), chosen.runs)
+    print(f"chosen for {a.budget_minutes:g} min on {a.workers} worker(s): {describe(chosen)}; on N workers:")
+    for n in WORKERS:
+        est = subset.cost_s(size, costs, subset.Workload(work.campaigns, work.phase1_signatures,
+                                                         work.phase2_signatures, n))
+        print(f"  N = {n:3d}: {est / 60:.1f} min")
+    if not a.measure:
+        return
+    real = a.out / "real"
+    s_real = with_seed(subset_scenario(paper, chosen), paper.seed + 101)
+    t0 = time.perf_counter()
+    simulate_campaign(s_real, real, workers=1)
+    (real / "truth.h5").unlink(missing_ok=True)
+    print(f"the recording of the subset's parts: {time.perf_counter() - t0:.0f} s")
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "twin.cli", "diagnose", str(real), "--scenario", str(PAPER),
+                           "--budget-minutes", f"{a.budget_minutes:g}", "--workers", str(a.workers),
+                           "--cache", str(cache), "-o", str(a.out / "diagnosis")],
+                          cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        sys.exit(f"twin diagnose failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
+    res = json.loads((a.out / "diagnosis" / "diagnosis.json").read_text())
+    sub = res["subset"]
+    print(proc.stdout[-2500:])
+    print(f"twin diagnose: {wall / 60:.1f} min wall (estimated {sub['estimated_minutes']:.1f} min, "
+          f"diagnosis.json's actual {sub['actual_minutes']:.1f} min); verdict {res['verdict']}")
+    # Reading a full recording: the inventory reads every capture's and session's attributes,
+    # the subset writer only the chosen parts; both timed on this recording and projected.
+    src = real / "measurements.h5"
+    t0 = time.perf_counter()
+    for _ in range(20):
+        inv_real = subset.inventory(src)
+    t_inv = (time.perf_counter() - t0) / 20
+    groups = sum(len(c) for _, _, c in inv_real.samples) + len(inv_real.sessions)
+    groups_full = sum(len(c) for _, _, c in inv.samples) + len(inv.sessions)
+    print(f"inventory: {1e3 * t_inv:.1f} ms for {groups} capture and session groups; projected to the "
+          f"paper's {groups_full}: {t_inv * groups_full / groups:.2f} s")
+    print(f"writing the subset: {sub['subset_write_s']:.1f} s (the same parts from the full file)")
+    report.update(measured={"budget_minutes": a.budget_minutes, "workers": a.workers, "size": describe(chosen),
+                            "wall_minutes": wall / 60, "estimated_minutes": sub["estimated_minutes"],
+                            "actual_minutes": sub["actual_minutes"], "verdict": res["verdict"],
+                            "inventory_s_projected": t_inv * groups_full / groups,
+                            "subset_write_s": sub["subset_write_s"]})
+    (a.out / "bench.json").write_text(json.dumps(report, indent=1))
+
+
+if __name__ == "__main__":
+    main()
