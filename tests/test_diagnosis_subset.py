@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from conftest import REPO, run_twin
 
+from analysis.dataset import DatasetError
 from analysis.diagnosis import subset
 from analysis.diagnosis.signature import PARTS, signature
 
@@ -81,6 +82,15 @@ def test_more_workers_buy_a_larger_subset():
     one = subset.choose(inv, COSTS, subset.Workload(120, 150, 80, 1), 3600.0)
     eight = subset.choose(inv, COSTS, subset.Workload(120, 150, 80, 8), 3600.0)
     assert len(eight.sessions) > len(one.sessions) and len(eight.samples) > len(one.samples)
+
+
+def test_a_sample_or_session_without_a_held_out_part_is_named():
+    one = _inventory(3, 1, 2, 2)
+    with pytest.raises(DatasetError, match=r"Phase I sample 0 \(2 h\) has 1 capture\(s\); the diagnosis needs "
+                                           r"at least 2 per sample"):
+        subset.ladder(one)
+    with pytest.raises(DatasetError, match=r"Phase II session s0000 \(42 h\) has 1 run\(s\)"):
+        subset.ladder(_inventory(3, 2, 2, 1))
 
 
 @pytest.mark.parametrize("budget", [0.0, -5.0, math.inf, math.nan])

@@ -97,7 +97,16 @@ def ladder(inv: Inventory) -> list[Size]:
     """Every size tried, cheapest first and each part non-decreasing along the list: from the
     minimum (2 samples × 2 captures, 2 sessions × 2 runs, or fewer where the recording has
     fewer) the samples and sessions grow together to all of them, then the captures and runs
-    together to all of them."""
+    together to all of them. A sample with fewer than 2 captures or a session with fewer than
+    2 runs raises :class:`DatasetError` naming it (nothing could be held out)."""
+    for k, h, caps in inv.samples:
+        if len(caps) < MIN_REPEATS:
+            raise DatasetError(f"Phase I sample {k} ({h:g} h) has {len(caps)} capture(s); the diagnosis "
+                               "needs at least 2 per sample (even ones to fit, odd ones held out)")
+    for s, h, runs in inv.sessions:
+        if len(runs) < MIN_REPEATS:
+            raise DatasetError(f"Phase II session {s} ({h:g} h) has {len(runs)} run(s); the diagnosis "
+                               "needs at least 2 per session (even ones to fit, odd ones held out)")
     n1, n2, c_all, r_all = len(inv.samples), len(inv.sessions), inv.captures, inv.runs
     k0, m0 = min(MIN_PARTS, n1), min(MIN_PARTS, n2)
     c0, r0 = min(MIN_REPEATS, c_all), min(MIN_REPEATS, r_all)

@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.dataset import DatasetError
 from analysis.diagnosis import artefacts as art
 from analysis.diagnosis import attribution, layout, subset
 from analysis.diagnosis.artefacts import (
@@ -812,6 +813,10 @@ def prepare_subset(real_dir: Path, nominal: Scenario, out: Path, cache: Path, bu
     budget_s = subset.check_budget(float(budget_minutes) * 60.0)
     src = Path(real_dir) / "measurements.h5"
     inv = subset.inventory(src)
+    try:
+        subset.ladder(inv)
+    except DatasetError as exc:
+        raise DatasetError(f"{src}: {exc}") from None
     costs, spent = calibrate(nominal, inv, cache)
     work = workload(nominal, seeds, library, kinds, resim_seeds, workers)
     sub = subset.choose(inv, costs, work, max(budget_s - spent, 1e-9))
