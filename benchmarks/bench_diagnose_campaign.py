@@ -115,11 +115,17 @@ def main() -> None:
     work = workload(paper, 8, None, None, None, a.workers)
     chosen = subset.choose(inv, costs, work, a.budget_minutes * 60.0)
     size = subset.Size(len(chosen.samples), chosen.captures, len(chosen.sessions), chosen.runs)
-    print(f"chosen for {a.budget_minutes:g} min on {a.workers} worker(s): {describe(chosen)}; on N workers:")
+    print(f"chosen for {a.budget_minutes:g} min on {a.workers} worker(s): {describe(chosen)}; on N workers "
+          "it takes, and within the same budget N workers diagnose:")
     for n in WORKERS:
-        est = subset.cost_s(size, costs, subset.Workload(work.campaigns, work.phase1_signatures,
-                                                         work.phase2_signatures, n))
-        print(f"  N = {n:3d}: {est / 60:.1f} min")
+        wn = workload(paper, 8, None, None, None, n)
+        est = subset.cost_s(size, costs, wn)
+        more = subset.choose(inv, costs, wn, a.budget_minutes * 60.0)
+        whole = subset.cost_s(subset.ladder(inv)[-1], costs, wn)
+        print(f"  N = {n:3d}: {est / 60:.1f} min; {describe(more)} ({more.estimated_s / 60:.1f} min); "
+              f"the whole recording {whole / 3600:.1f} h")
+        report.setdefault("workers", []).append({"n": n, "chosen_minutes": est / 60, "within_budget": describe(more),
+                                                 "whole_hours": whole / 3600})
     t0 = time.perf_counter()
     sk = skeleton(a.out / "skeleton" / "measurements.h5", paper, inv)
     print(f"a file of the paper's layout with one-sample arrays: written in {time.perf_counter() - t0:.0f} s")

@@ -77,11 +77,16 @@ def test_sizes_grow_with_the_budget_and_the_minimum_is_used_when_nothing_fits():
     assert mid.fits and mid.estimated_s <= 20 * tiny.estimated_s and len(mid.samples) > 2
 
 
-def test_more_workers_buy_a_larger_subset():
+def test_more_workers_buy_a_larger_subset_down_to_one_campaign_per_stage():
     inv = _inventory(104, 10, 103, 90)
     one = subset.choose(inv, COSTS, subset.Workload(120, 150, 80, 1), 3600.0)
     eight = subset.choose(inv, COSTS, subset.Workload(120, 150, 80, 8), 3600.0)
     assert len(eight.sessions) > len(one.sessions) and len(eight.samples) > len(one.samples)
+    small = subset.Size(2, 2, 2, 2)
+    campaign = 4 * COSTS.capture + 2 * (COSTS.session + 2 * COSTS.run)
+    serial = campaign + 4 * COSTS.capture_signature + 2 * (COSTS.session_signature + 2 * COSTS.run_signature)
+    many = subset.cost_s(small, COSTS, subset.Workload(120, 150, 80, 10_000, stages=3))
+    assert many == pytest.approx(serial + 3 * campaign)
 
 
 def test_a_sample_or_session_without_a_held_out_part_is_named():
@@ -155,7 +160,8 @@ def test_diagnose_with_a_budget_uses_a_subset_and_finds_no_gap(recording, tmp_pa
     assert all(v >= 0 for v in sub["unit_costs_s"].values()) and sub["unit_costs_s"]["capture"] > 0
     # 3 seeds, no simulated candidate, 3 re-simulation seeds; gain:torque's 4 grid points
     # post-processed on Phase I, and the base campaign's signature
-    assert sub["workload"] == {"campaigns": 6, "phase1_signatures": 5, "phase2_signatures": 1, "workers": 1}
+    assert sub["workload"] == {"campaigns": 6, "phase1_signatures": 5, "phase2_signatures": 1, "workers": 1,
+                               "stages": 2}
     inv = subset.inventory(out / "subset" / "measurements.h5")
     assert [(k, h, names) for k, h, names in inv.samples] == [
         (0, 0.05, ["c000000", "c000001"]), (2, 200.05, ["c000006", "c000007"])]

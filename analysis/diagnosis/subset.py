@@ -146,20 +146,24 @@ class Workload:
     """What a diagnosis computes, in recordings of the subset's layout: ``campaigns`` twin
     campaigns simulated (seeds, candidate grid points, re-simulations), ``phase1_signatures`` /
     ``phase2_signatures`` recomputations of the Phase I / Phase II statistics (the signal
-    artefacts' grid points, post-processed), on ``workers`` workers at once."""
+    artefacts' grid points, post-processed), on ``workers`` workers at once; ``stages``: the
+    rounds of simulations that wait for the one before (each takes at least one campaign,
+    however many workers)."""
 
     campaigns: int
     phase1_signatures: int
     phase2_signatures: int
     workers: int
+    stages: int = 1
 
 
 def cost_s(size: Size, costs: UnitCosts, work: Workload) -> float:
     """Estimated wall seconds of ``work`` on a subset of ``size``: in this process the first
     twin campaign (the layout check simulates it) and the recording's own signature; the
     other campaigns' and the post-processings' unit costs summed and divided by the workers
-    (they are independent tasks; the batching of campaigns only makes them cheaper). Not
-    counted: starting the workers, the gap test and the report (seconds, whatever the size)."""
+    (they are independent tasks; the batching of campaigns only makes them cheaper), but no
+    less than one campaign per stage. Not counted: starting the workers, the gap test and the
+    report (seconds, whatever the size)."""
     p1 = size.samples * size.captures
     p1_sim, p1_sig = p1 * costs.capture, p1 * costs.capture_signature
     p2_sim = size.sessions * (costs.session + size.runs * costs.run)
@@ -167,7 +171,8 @@ def cost_s(size: Size, costs: UnitCosts, work: Workload) -> float:
     first = min(work.campaigns, 1)
     parallel = ((work.campaigns - first) * (p1_sim + p2_sim) + work.phase1_signatures * p1_sig
                 + work.phase2_signatures * p2_sig)
-    return parallel / max(work.workers, 1) + first * (p1_sim + p2_sim) + p1_sig + p2_sig
+    return (max(parallel / max(work.workers, 1), work.stages * (p1_sim + p2_sim))
+            + first * (p1_sim + p2_sim) + p1_sig + p2_sig)
 
 
 @dataclass(frozen=True)

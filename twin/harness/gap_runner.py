@@ -787,7 +787,8 @@ def workload(nominal: Scenario, seeds: int, library: list[str] | None, kinds, re
     other seeds' campaigns a seed-dependent artefact post-processes, and a re-simulation with
     ``resim_seeds`` seeds (default all: the cost when something is added); the artefacts'
     grid points post-processed (:func:`artefact_plans`), each recomputing the statistics of
-    the domains it touches, and each base campaign's signature."""
+    the domains it touches, and each base campaign's signature; the stages that wait for each
+    other."""
     effects, artefacts = resolve_library(library, kinds)
     seeded = [with_seed(nominal, sd) for sd in twin_seeds(nominal, seeds)]
     cand, _ = candidate_scenarios(seeded, effects)
@@ -799,7 +800,8 @@ def workload(nominal: Scenario, seeds: int, library: list[str] | None, kinds, re
             p1 += "phase1" in domains
             p2 += "phase2" in domains
     resim = seeds if resim_seeds is None else min(int(resim_seeds), seeds)
-    return subset.Workload(seeds + len(cand) + max(len(plans) - 1, 0) + resim, p1, p2, workers)
+    stages = 1 + (len(plans) > 1) + (resim > 0)  # the twin and grids; other seeds' campaigns; re-simulation
+    return subset.Workload(seeds + len(cand) + max(len(plans) - 1, 0) + resim, p1, p2, workers, stages)
 
 
 def prepare_subset(real_dir: Path, nominal: Scenario, out: Path, cache: Path, budget_minutes: float, *,
