@@ -220,3 +220,24 @@ def test_one_rail_pass_moves_phase2_by_nanometres(tmp_path):
         diff = np.abs(a[key][()] - b[key][()])
     print(f"\none rail pass against two: rest-to-rest travels differ by {np.round(diff * 1e9, 2)} nm")
     assert diff.size >= 2 and diff.max() < 0.1e-6
+
+
+def test_explicit_sample_hours_give_those_samples():
+    """``phase1.sample_hours`` (issue 15, item 3): each listed hour starts a sample whose
+    captures follow ``capture_interval_minutes`` apart; empty (the default) is the plan of the
+    interval, unit for unit."""
+    from twin.campaign import plan
+    from twin.scenario import load
+
+    quick = load(REPO / "scenarios/quick.toml")
+    old = [u for u in plan(quick) if u.kind == "phase1"]
+    assert [u.hours for u in old][:4] == [2.0, 2.5, 102.0, 102.5] and len(old) == 12
+    same = load(REPO / "scenarios/quick.toml", ["phase1.sample_hours=[]"])
+    assert plan(same) == plan(quick)
+    listed = load(REPO / "scenarios/quick.toml", ["phase1.sample_hours=[502.0, 7.5]",
+                                                  "phase1.captures_per_sample=3"])
+    p1 = [u for u in plan(listed) if u.kind == "phase1"]
+    assert [(u.name, u.sample, u.hours) for u in p1] == [
+        ("c000000", 0, 7.5), ("c000001", 0, 8.0), ("c000002", 0, 8.5),
+        ("c000003", 1, 502.0), ("c000004", 1, 502.5), ("c000005", 1, 503.0)]
+    assert [u for u in plan(listed) if u.kind != "phase1"] == [u for u in plan(quick) if u.kind != "phase1"]

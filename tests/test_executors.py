@@ -111,6 +111,34 @@ def test_diagnose_on_a_dask_scheduler_equals_local_processes(scheduler, tmp_path
     assert docs["dask"] == docs["local"]
 
 
+def test_budgeted_diagnosis_on_a_dask_scheduler_equals_local_processes(scheduler, tmp_path):
+    """`twin diagnose --budget-minutes --scheduler` (issue 15, item 3): the subset is chosen,
+    calibrated and simulated on the cluster's workers (2, as the local processes), and the
+    diagnosis is that of local processes, number for number; only the times differ."""
+    bench = REPO / "scenarios/diagnose-bench.toml"
+    sets = [a for kv in ("campaign.phase2=false", "phase1.capture_s=1.0") for a in ("--set", kv)]
+    run_twin("simulate", bench, "-o", tmp_path / "real", *sets, "--set", "axis.carriage_mass_kg=160",
+             "--set", "seed=3", "--set", "phase1.captures_per_sample=3")
+    cands = [a for c in ("axis.carriage_mass_kg", "gain:acc1") for a in ("--candidate", c)]
+    docs = {}
+    for label, where in (("local", ["--workers", "2"]), ("dask", ["--scheduler", scheduler])):
+        # 5 seeds: the minimum subset's 2 samples give the spread fewer degrees of freedom
+        r = run_twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, *cands, "--seeds", "5",
+                     "--budget-minutes", "0.01", *where, "-o", tmp_path / label,
+                     "--cache", tmp_path / f"cache-{label}")
+        assert "Traceback" not in r.stderr
+        docs[label] = json.loads((tmp_path / label / "diagnosis.json").read_text())
+    sub = docs["local"]["subset"]
+    assert sub["phase1"]["samples"] == [0, 2] and sub["phase1"]["captures_per_sample"] == 2
+    assert docs["dask"]["subset"]["workers"] == sub["workers"] == 2
+    assert docs["local"]["heldout_gap_before"] > docs["local"]["heldout_gap_critical"]
+    assert docs["local"]["added"] and docs["local"]["resimulation"]["done"]
+    for doc in docs.values():
+        for k in ("estimated_minutes", "actual_minutes", "calibration_s", "subset_write_s", "unit_costs_s"):
+            doc["subset"].pop(k)
+    assert docs["dask"] == docs["local"]
+
+
 def test_diagnose_scheduler_errors_are_exact(tmp_path):
     bench = REPO / "scenarios/diagnose-bench.toml"
     (tmp_path / "real").mkdir()

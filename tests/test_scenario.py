@@ -19,6 +19,7 @@ CASES = [
     (["--set", "phase1.fs_hz=0"], ["phase1.fs_hz", "= 0", ">= 2000"]),
     (["--set", "sensors.imu_acc_bias_ug=[1.0, 2.0]"], ["sensors.imu_acc_bias_ug", "[1.0, 2.0]", "at least 3"]),
     (["--set", "phase2.session_hours=[-5.0]"], ["`phase2.session_hours` = [-5.0]", "hours >= 0"]),
+    (["--set", "phase1.sample_hours=[3.0, -1.0]"], ["`phase1.sample_hours` = [3.0, -1.0]", "hours >= 0"]),
     (["--set", "degradation.law=\"table\"", "--set", "degradation.table_hours=[10.0, 0.0]",
       "--set", "degradation.table_preload_fraction=[1.0, 1.0]", "--set", "degradation.table_backlash_um=[0.0, 1.0]"],
      ["`degradation.table_hours` = [10.0, 0.0]", "strictly increasing"]),

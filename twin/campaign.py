@@ -212,19 +212,31 @@ def session_hours(s: Scenario) -> list[float]:
     return out
 
 
+def sample_hours(s: Scenario) -> list[float]:
+    """Operating hours of each Phase I sample's first capture: ``phase1.sample_hours`` when
+    given (sorted), else every ``sample_interval_hours`` from ``warmup_hours`` while the
+    sample's last capture is within ``total_hours``."""
+    p1 = s.phase1
+    if p1.sample_hours:
+        return sorted(float(h) for h in p1.sample_hours)
+    out, h = [], s.campaign.warmup_hours
+    step = p1.capture_interval_minutes / 60.0
+    while h + (s.captures_per_sample - 1) * step <= s.campaign.total_hours:
+        out.append(h)
+        h += p1.sample_interval_hours
+    return out
+
+
 def plan(s: Scenario) -> list[Unit]:
     """Every unit of the campaign, in time order within each kind."""
     units: list[Unit] = []
     if s.campaign.phase1:
-        p1 = s.phase1
-        h, sample, idx = s.campaign.warmup_hours, 0, 0
-        step = p1.capture_interval_minutes / 60.0
-        while h + (s.captures_per_sample - 1) * step <= s.campaign.total_hours:
+        step = s.phase1.capture_interval_minutes / 60.0
+        idx = 0
+        for sample, h in enumerate(sample_hours(s)):
             for j in range(s.captures_per_sample):
                 units.append(Unit("phase1", f"c{idx:06d}", idx, h + j * step, sample))
                 idx += 1
-            sample += 1
-            h += p1.sample_interval_hours
     if s.campaign.phase2:
         for i, h in enumerate(session_hours(s)):
             units.append(Unit("phase2", f"s{i:04d}", i, h))

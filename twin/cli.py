@@ -7,6 +7,7 @@ with code 2 and one message naming the file, key and value."""
 from __future__ import annotations
 
 import importlib.util
+import math
 import shlex
 import sys
 import time
@@ -713,9 +714,11 @@ def _progress_callback(progress: Progress, tasks: dict):
 
 
 def _print_diagnosis(res: dict) -> None:
-    from analysis.diagnosis.wording import added_phrase
+    from analysis.diagnosis.wording import added_phrase, subset_phrase
 
     out = Console(width=max(110, Console().width))
+    if res.get("subset"):
+        out.print(subset_phrase(res), markup=False, highlight=False)
     out.print(f"[bold]{res['verdict']}[/]: {res['n_significant_calibration']} of "
               f"{res['n_statistics']} statistics beyond the twin's seed-to-seed spread on the "
               f"calibration part (Holm, α = {res['alpha']:g}); held-out gap "
@@ -788,6 +791,10 @@ def diagnose(
         "twin seeds the twin is re-simulated with, the added candidates at their fitted values, "
         "for the re-simulated shrink the verdict follows (default: all --seeds; 0: none, the "
         "verdict then follows the interpolated shrink)")),
+    budget_minutes: float | None = typer.Option(None, "--budget-minutes", help=(
+        "diagnose a subset of the recording that fits this time (samples and sessions spread "
+        "over its hours, the first captures and runs of each; the costs measured on this "
+        "machine at the start): for a campaign-sized recording. Default: the whole recording")),
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
@@ -795,6 +802,9 @@ def diagnose(
     before and after)."""
     _require("diagnose", "sim", *(["cluster"] if scheduler is not None else []))
     _one_executor(scheduler, workers, "simulations")
+    if budget_minutes is not None and not (math.isfinite(budget_minutes) and budget_minutes > 0):
+        _fail(f"--budget-minutes {budget_minutes:g}: expected a positive number of minutes (the time "
+              "the diagnosis may take)")
     from analysis.dataset import DatasetError
     from twin.harness.gap_runner import check_kinds, run_diagnosis
 
@@ -822,7 +832,8 @@ def diagnose(
                                 cache=cache, library=list(candidates) or None,
                                 on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
                                 scheduler=scheduler, resim_seeds=resim_seeds,
-                                on_resim_progress=lambda d, n: cb("re-simulation with the added candidates", d, n))
+                                on_resim_progress=lambda d, n: cb("re-simulation with the added candidates", d, n),
+                                budget_minutes=budget_minutes)
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

@@ -222,6 +222,15 @@ def make_executor(processes: int | None = None, *, dask_workers: int | None = No
     return _Serial() if n == 1 else _LocalPool(n)
 
 
+def parallel_slots(processes: int | None = None, scheduler: str | None = None) -> int:
+    """How many tasks run at once: ``processes`` local processes (default ``os.cpu_count()``),
+    or the threads of the workers the Dask cluster at ``scheduler`` has now."""
+    if scheduler is None:
+        return processes or os.cpu_count() or 1
+    with make_executor(scheduler=scheduler) as ex:
+        return max(1, sum(ex.client.nthreads().values()))  # type: ignore[attr-defined]
+
+
 def map_ordered(executor: Executor, fn: Callable, args: Sequence[tuple], keys: Sequence[str],
                 on_done: Callable[[int, str], None] | None = None) -> list:
     """``[fn(*a) for a in args]`` on ``executor``, in the order of ``args``.

@@ -223,9 +223,19 @@ class Phase1Config(_Section):
     captures_per_sample: int = Field(10, ge=1, description="captures of one Phase I sample")
     capture_interval_minutes: float = Field(30.0, gt=0, description="time between the captures of a sample, min")
     sample_interval_hours: float = Field(84.0, gt=0, description="operating hours between Phase I samples")
+    sample_hours: list[float] = Field(
+        default_factory=list, description=(
+            "explicit operating hours of each sample's first capture; overrides the interval "
+            "(the others follow capture_interval_minutes apart)"))
     timestep_s: float = Field(
         2e-4, gt=0, le=1e-3,
         description="simulation step; the nut accelerometers are upsampled to their DAQ rate when it is coarser")
+
+    @model_validator(mode="after")
+    def _hours(self) -> Phase1Config:
+        if any(h < 0 for h in self.sample_hours):
+            raise ValueError(f"sample_hours = {self.sample_hours}: allowed hours >= 0")
+        return self
 
 
 class Phase2Config(_Section):

@@ -216,21 +216,20 @@ class Measurements(_Reader):
         """Names of the Phase I captures, sorted by (hours, name)."""
         return _sorted_by_hours(self, "/phase1", self._names("/phase1"))
 
-    def phase1_sample(self, name: str) -> int:
-        """The Phase I sample a capture belongs to (its ``sample`` attribute), without reading
-        its signals."""
+    def phase1_header(self, name: str) -> tuple[float, int, float]:
+        """(hours, sample index, fs_hz) of a Phase I capture, from its attributes only (no
+        array is read), validated."""
         gkey = f"/phase1/{name}"
         g = self._obj(gkey, h5py.Group, "a Phase I capture group")
-        return _attr_int(self.label, self._attrs(g, gkey), gkey, "sample", "an integer Phase I sample index")
+        attrs = self._attrs(g, gkey)
+        return (_attr_hours(self.label, attrs, gkey),
+                _attr_int(self.label, attrs, gkey, "sample", "an integer Phase I sample index"),
+                _attr_fs(self.label, attrs, gkey))
 
     def phase1(self, name: str) -> Phase1Capture:
         """One Phase I capture, validated (see :class:`Phase1Capture`)."""
         gkey = f"/phase1/{name}"
-        g = self._obj(gkey, h5py.Group, "a Phase I capture group")
-        attrs = self._attrs(g, gkey)
-        hours = _attr_hours(self.label, attrs, gkey)
-        sample = self.phase1_sample(name)
-        fs = _attr_fs(self.label, attrs, gkey)
+        hours, sample, fs = self.phase1_header(name)
         arrays, n = {}, None
         for ch, (unit, desc, cols) in schema.PHASE1_CHANNELS.items():
             what = f"a dataset of {desc} in {unit}, shape {_shape_pattern(_dims(cols, 'n'))}"

@@ -279,7 +279,7 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
         resim = ""
     return {"title": f"Gap diagnosis: {verdict}", "verdict": verdict, "verdict_class": cls, "resim": resim,
             "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
-            "facts": facts, "added": added, "ranking": ranking,
+            "facts": facts, "subset": w.subset_phrase(result) or "", "added": added, "ranking": ranking,
             "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}
 
 

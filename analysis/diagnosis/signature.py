@@ -190,7 +190,7 @@ def _phase1(m: Measurements, part: str, b: _Builder) -> None:
         return
     by_sample: dict[int, list[str]] = {}
     for n in names:
-        by_sample.setdefault(m.phase1_sample(n), []).append(n)
+        by_sample.setdefault(m.phase1_header(n)[1], []).append(n)
     templates = None
     for sample in sorted(by_sample):
         chosen = _part_of(by_sample[sample], part)

@@ -331,3 +331,35 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
                  f"than the twin as it is: {_places(worse)}.")
     out.append(("What is left", left))
     return out
+
+
+def _listed(names: list, k: int = 4) -> str:
+    """The first ``k`` − 1 names and the last, "…" between when there are more."""
+    shown = [str(n) for n in names]
+    return ", ".join(shown if len(shown) <= k else [*shown[:k - 1], "…", shown[-1]])
+
+
+def subset_phrase(result: dict) -> str | None:
+    """The parts of the recording a budgeted diagnosis used, in one sentence (None without a
+    ``subset`` entry): samples and sessions with their hours and counts, the budget, the
+    estimated and (when known) the actual time."""
+    sub = result.get("subset")
+    if not sub:
+        return None
+    parts = []
+    p1, p2 = sub["phase1"], sub["phase2"]
+    if p1["samples"]:
+        parts.append(f"Phase I samples {_listed(p1['samples'])} ({len(p1['samples'])} of {p1['of_samples']}, "
+                     f"{number(p1['hours'][0], 4)}–{number(p1['hours'][-1], 4)} h), the first "
+                     f"{p1['captures_per_sample']} of {p1['of_captures_per_sample']} captures of each")
+    if p2["sessions"]:
+        parts.append(f"Phase II sessions {_listed(p2['sessions'])} ({len(p2['sessions'])} of "
+                     f"{p2['of_sessions']}, {number(p2['hours'][0], 4)}–{number(p2['hours'][-1], 4)} h), "
+                     f"the first {p2['runs_per_session']} of {p2['of_runs_per_session']} runs of each")
+    took = (f", took {number(sub['actual_minutes'], 2)} min" if sub.get("actual_minutes") is not None else "")
+    fit = ("" if sub["fits"] else
+           "; the smallest subset does not fit the budget, so it was used")
+    return (f"Diagnosed on a subset of the recording ({sub['file']}): " + "; ".join(parts)
+            + f". Budget {number(sub['budget_minutes'], 3)} min on {sub['workers']} worker"
+            + ("s" if sub["workers"] != 1 else "")
+            + f", estimated {number(sub['estimated_minutes'], 2)} min{took}{fit}.")

@@ -32,18 +32,21 @@ nor on the number of workers.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import os
 import shutil
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from analysis.dataset import DatasetError
 from analysis.diagnosis import artefacts as art
-from analysis.diagnosis import attribution, layout
+from analysis.diagnosis import attribution, layout, subset
 from analysis.diagnosis.artefacts import (
     ARTEFACT_VERSION,
     ARTEFACTS,
@@ -67,7 +70,7 @@ from twin.campaign import simulate_campaigns_batched
 from twin.effects import Effect, candidate, candidates
 from twin.effects import parameters as twin_parameters
 from twin.effects.parameters import PARAMETERS
-from twin.executors import make_executor, map_ordered
+from twin.executors import make_executor, map_ordered, parallel_slots
 from twin.scenario import Scenario, from_dict
 
 DEFAULT_SEEDS = 8
@@ -399,14 +402,13 @@ def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int,
     run_tasks(_simulate_kept, args, workers, scheduler)
 
 
-def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, workers: int = 1,
-                       on_progress: Callable[[int, int], None] | None = None,
-                       scheduler: str | None = None) -> list[CandidateResponse]:
-    """The artefact candidates' responses: the change of every statistic when each grid point
-    is applied to the campaign of the twin's first seed, against that campaign; for a
-    ``seed_dependent`` artefact, the mean of that change over every seed of ``seeded``."""
-    n_bases = max([len(seeded) if ARTEFACTS[n].seed_dependent else 1 for n in names] + [1])
-    plans: list[tuple[list, list]] = []
+def artefact_plans(names: list[str], n_seeds: int) -> list[tuple[list[dict], list[tuple[str, tuple]]]]:
+    """Per base campaign (the first twin seed's, then, when a ``seed_dependent`` artefact is
+    among ``names``, those of the other ``n_seeds`` − 1 seeds) the artefact specs
+    ({name: values}) post-processed on it and where each goes (name, grid index): every grid
+    point where the artefact is present."""
+    n_bases = max([n_seeds if ARTEFACTS[n].seed_dependent else 1 for n in names] + [1])
+    plans: list[tuple[list[dict], list[tuple[str, tuple]]]] = []
     for k in range(n_bases):
         specs, where = [], []
         for name in names:
@@ -417,6 +419,17 @@ def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, wo
                     where.append((name, index))
                     specs.append({name: values})
         plans.append((specs, where))
+    return plans
+
+
+def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, workers: int = 1,
+                       on_progress: Callable[[int, int], None] | None = None,
+                       scheduler: str | None = None) -> list[CandidateResponse]:
+    """The artefact candidates' responses: the change of every statistic when each grid point
+    is applied to the campaign of the twin's first seed, against that campaign; for a
+    ``seed_dependent`` artefact, the mean of that change over every seed of ``seeded``."""
+    plans = artefact_plans(names, len(seeded))
+    n_bases = len(plans)
     # The seeds' campaigns simulated together where their post-processed signatures are missing.
     ensure_campaigns([seeded[k] for k in range(1, n_bases) if not artefact_cached(seeded[k], plans[k][0], cache)],
                      cache, workers, scheduler)
@@ -680,21 +693,168 @@ def library_json(names: list[str], effects: dict[str, Effect] | None = None,
     return {n: entry(n) for n in names}
 
 
+# ---------------------------------------------------------------------------------------------
+# A campaign-sized recording: a subset sized to a time budget
+
+
+def subset_scenario(nominal: Scenario, sub: subset.Subset) -> Scenario:
+    """The nominal scenario with the layout of the subset ``sub`` at its hours: Phase I samples
+    at ``phase1.sample_hours`` (each sample's first capture) of ``sub.captures`` captures,
+    Phase II sessions at ``phase2.session_hours`` of ``sub.runs`` runs (``campaign.scale`` 1,
+    so these counts are exact)."""
+    data = nominal.model_dump(mode="json")
+    data["campaign"]["scale"] = 1.0
+    if sub.samples:
+        data["phase1"].update(sample_hours=[h for _, h in sub.samples], captures_per_sample=sub.captures)
+    if sub.sessions:
+        data["phase2"].update(session_hours=[h for _, h in sub.sessions], runs_per_session=sub.runs)
+    return from_dict(data)
+
+
+CALIBRATION_VERSION = 1
+CALIBRATION_RUNS = 10  # runs per session of the second Phase II calibration campaign
+
+
+def _timed_campaign(s: Scenario, d: Path) -> tuple[float, float]:
+    """(wall seconds simulating the campaign of ``s`` into ``d``, computing its signature's two
+    parts), in this process with one BLAS thread, as a worker does."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        t0 = time.perf_counter()
+        simulate_campaigns_batched([s], [d])
+        t1 = time.perf_counter()
+        for p in PARTS:
+            signature(d / "measurements.h5", p)
+        return t1 - t0, time.perf_counter() - t1
+
+
+def calibrate(nominal: Scenario, inv: subset.Inventory, cache: Path) -> tuple[subset.UnitCosts, float]:
+    """The unit costs of this machine for the recording's layout, measured: the minimum subset
+    (:func:`analysis.diagnosis.subset.minimum`) simulated with the first twin seed as a Phase
+    I campaign, and as Phase II campaigns of 2 and (where the sessions have them)
+    :data:`CALIBRATION_RUNS` runs per session (a session's motion is simulated once for all
+    its runs: the two give its fixed and its per-run cost). Returns (costs, wall seconds spent now). Kept in
+    ``cache/calibration/`` by the scenario, so a diagnosis with the same cache reuses them
+    (and sizes the same subset)."""
+    sub = subset.minimum(inv)
+    s0 = with_seed(subset_scenario(nominal, sub), twin_seeds(nominal, 1)[0])
+    f = Path(cache) / "calibration" / f"{CALIBRATION_VERSION}-{_key(s0)}.json"
+    if f.exists():
+        return subset.UnitCosts(**json.loads(f.read_text())), 0.0
+    t0 = time.perf_counter()
+    tmp = Path(cache) / "calibration" / f"tmp-{_key(s0)}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    n_caps = len(sub.samples) * sub.captures
+    cap = cap_sig = 0.0
+    if n_caps and nominal.campaign.phase1:
+        data = json.loads(s0.to_json())
+        data["campaign"]["phase2"] = False
+        sim, sig = _timed_campaign(from_dict(data), tmp / "phase1")
+        cap, cap_sig = (sim + sig) / n_caps, sig / n_caps
+    sess = run = sess_sig = run_sig = 0.0
+    m = len(sub.sessions)
+    if m and nominal.campaign.phase2:
+        # A session's motion costs seconds, a run tens of ms: 10 runs set the per-run cost
+        # apart from the timing's scatter on a shared machine.
+        runs = [sub.runs] + ([min(CALIBRATION_RUNS, inv.runs)] if inv.runs > sub.runs else [])
+        timed = []
+        for r in runs:
+            data = json.loads(s0.to_json())
+            data["campaign"]["phase1"] = False
+            data["phase2"]["runs_per_session"] = r
+            timed.append(_timed_campaign(from_dict(data), tmp / f"phase2-{r}"))
+        total = [a + b for a, b in timed]
+        sigs = [b for _, b in timed]
+        for series, slot in ((total, "all"), (sigs, "signature")):
+            per_run = max((series[1] - series[0]) / (m * (runs[1] - runs[0])), 0.0) if len(runs) > 1 else 0.0
+            fixed = max(series[0] / m - runs[0] * per_run, 0.0)
+            if slot == "all":
+                sess, run = fixed, per_run
+            else:
+                sess_sig, run_sig = fixed, per_run
+    shutil.rmtree(tmp, ignore_errors=True)
+    # The signature is part of the whole cost (a scatter of the timings can say otherwise).
+    costs = subset.UnitCosts(cap, max(sess, sess_sig), max(run, run_sig), cap_sig, sess_sig, run_sig)
+    write_json(f, dataclasses.asdict(costs))
+    return costs, time.perf_counter() - t0
+
+
+def workload(nominal: Scenario, seeds: int, library: list[str] | None, kinds, resim_seeds: int | None,
+             workers: int) -> subset.Workload:
+    """What a diagnosis of ``nominal`` computes (:class:`analysis.diagnosis.subset.Workload`):
+    the twin's seeds, the simulated candidates' grid points (:func:`candidate_scenarios`), the
+    other seeds' campaigns a seed-dependent artefact post-processes, and a re-simulation with
+    ``resim_seeds`` seeds (default all: the cost when something is added); the artefacts'
+    grid points post-processed (:func:`artefact_plans`), each recomputing the statistics of
+    the domains it touches, and each base campaign's signature; the stages that wait for each
+    other."""
+    effects, artefacts = resolve_library(library, kinds)
+    seeded = [with_seed(nominal, sd) for sd in twin_seeds(nominal, seeds)]
+    cand, _ = candidate_scenarios(seeded, effects)
+    plans = artefact_plans(artefacts, seeds) if artefacts else []
+    p1 = p2 = len(plans)
+    for specs, _ in plans:
+        for spec in specs:
+            domains = {d for name in spec for d in ARTEFACTS[name].target.domains}
+            p1 += "phase1" in domains
+            p2 += "phase2" in domains
+    resim = seeds if resim_seeds is None else min(int(resim_seeds), seeds)
+    stages = 1 + (len(plans) > 1) + (resim > 0)  # the twin and grids; other seeds' campaigns; re-simulation
+    return subset.Workload(seeds + len(cand) + max(len(plans) - 1, 0) + resim, p1, p2, workers, stages)
+
+
+def prepare_subset(real_dir: Path, nominal: Scenario, out: Path, cache: Path, budget_minutes: float, *,
+                   seeds: int, library: list[str] | None, kinds, resim_seeds: int | None,
+                   workers: int) -> tuple[Path, Scenario, dict]:
+    """Choose the subset of the recording in ``real_dir`` that fits ``budget_minutes`` on
+    ``workers`` workers (:func:`analysis.diagnosis.subset.choose`, the unit costs measured by
+    :func:`calibrate`), write it to ``OUT/subset/measurements.h5`` and return (that directory,
+    the scenario with its layout: :func:`subset_scenario`, the ``subset`` entry of
+    ``diagnosis.json`` without the actual minutes)."""
+    budget_s = subset.check_budget(float(budget_minutes) * 60.0)
+    src = Path(real_dir) / "measurements.h5"
+    inv = subset.inventory(src)
+    try:
+        subset.ladder(inv)
+    except DatasetError as exc:
+        raise DatasetError(f"{src}: {exc}") from None
+    costs, spent = calibrate(nominal, inv, cache)
+    work = workload(nominal, seeds, library, kinds, resim_seeds, workers)
+    sub = subset.choose(inv, costs, work, max(budget_s - spent, 1e-9))
+    t0 = time.perf_counter()
+    subset.write_subset(src, Path(out) / "subset" / "measurements.h5", inv, sub)
+    entry = {**sub.to_json(inv), "file": "subset/measurements.h5", "budget_minutes": float(budget_minutes),
+             "estimated_minutes": (spent + sub.estimated_s) / 60.0, "calibration_s": spent,
+             "subset_write_s": time.perf_counter() - t0, "workers": work.workers,
+             "unit_costs_s": dataclasses.asdict(costs), "workload": dataclasses.asdict(work)}
+    return Path(out) / "subset", subset_scenario(nominal, sub), entry
+
+
 def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   library: list[str] | None = None, plots: bool = True,
                   on_progress: Callable[[int, int], None] | None = None,
                   kinds: tuple[str, ...] | list[str] | None = None,
                   scheduler: str | None = None, resim_seeds: int | None = None,
-                  on_resim_progress: Callable[[int, int], None] | None = None) -> dict:
+                  on_resim_progress: Callable[[int, int], None] | None = None,
+                  budget_minutes: float | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
     twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
-    0: none) and the verdict follows the re-simulated shrink (:func:`resimulate`)."""
+    0: none) and the verdict follows the re-simulated shrink (:func:`resimulate`). With
+    ``budget_minutes`` the diagnosis is that of a subset of the recording sized to that time
+    (:func:`prepare_subset`; ``subset`` in the result), else of the whole recording."""
+    t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
     resolve_library(library, kinds)  # an unknown candidate or kind stops before anything is simulated
+    recording, sub = str(real_dir), None
+    if budget_minutes is not None:
+        real_dir, nominal, sub = prepare_subset(
+            real_dir, nominal, out, cache, budget_minutes, seeds=seeds, library=library, kinds=kinds,
+            resim_seeds=resim_seeds, workers=parallel_slots(workers, scheduler))
     check_layout(real_dir, nominal, cache)
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler)
@@ -703,12 +863,16 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     if result["added"] and result["verdict"] != attribution.NO_GAP and resim_seeds != 0:
         resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_resim_progress)[0]
     result = add_resimulation(result, real, ens, resim, alpha)
-    result = {"recording": str(real_dir), "scenario": nominal.name, "twin_seeds": ens.seeds,
+    result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
               "kinds": sorted({c.kind for c in ens.candidates}),
               "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
               **result}
-    write_json(out / "diagnosis.json", result, nan_as_null=True)
+    if sub is not None:
+        result["subset"] = sub
     if plots:
         write_diagnosis_report(out / "report", result, real["heldout"].regions, t_heldout)
+    if sub is not None:
+        sub["actual_minutes"] = (time.perf_counter() - t0) / 60.0  # the report included
+    write_json(out / "diagnosis.json", result, nan_as_null=True)
     return result
 
