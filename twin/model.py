@@ -66,7 +66,8 @@ The ball-nut contact:
   approximate inverse inertia: for a tendon limit ``tendon_invweight0`` (the compiler's value
   at qpos0). In the direct format ``solreflimit`` = (−stiffness, −damping) the solver takes
   b = damping/d_max and k = stiffness·d/d_max²; with a constant impedance d = d_min = d_max the
-  force of the row is f = (a1 − a0)/Â = −(stiffness·r + damping·v)/Â − d·a0/Â, and the solver
+  force of the row is f = (a1 − a0)/A = −(stiffness·r + damping·v)/Â − d·a0/Â (A = J·M⁻¹·Jᵀ of
+  the row, equal to Â here up to the µrad changes of M with the pose), and the solver
   clamps it to f ≥ 0 (a limit only pushes). So ``solreflimit`` = (−K·Â, −C·Â) is the contact
   K, C, and d = 10⁻⁴ (MuJoCo's smallest impedance, ``solimplimit`` 1e-4 1e-4) makes the leak
   d·a0/Â of the other forces 10⁻⁴ of them. Â = 1/m + z_n²/I_yy + R²/(J_motor + J_screw)
