@@ -75,7 +75,8 @@ The ball-nut contact:
   that value, :func:`apply_state` the compiled model's own ``tendon_invweight0`` (the one the
   solver uses). The clamp applies to the whole contact force, so a rebounding flank is not
   pulled back by its damper; a damper alone in the constraint with a passive dead-band spring
-  would lose its pull on rebound and under-damp the contact. tests/test_nut_contact.py checks
+  would lose its pull on rebound and damp the contact half as much (ζ 0.014 instead of 0.028
+  in a ring on one flank, measured as in tests/test_nut_contact.py). tests/test_nut_contact.py checks
   the force against K·δ + C·δ', the damping ratio and the gap.
 
 Known simplifications: the clearance is the wear law's average over the balls and may coexist
@@ -527,7 +528,8 @@ def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> No
     """Write a degradation state into the model's fields (in place).
 
     Raises :class:`ModelLayoutError` when the model cannot carry the ball-nut contact as built
-    (tendon order, the screw's place in the ball-nut tendon, a limit margin, limits disabled)."""
+    (tendon order, the screw's place in the ball-nut tendon, a limit margin, limits disabled);
+    ValueError for a negative backlash (:func:`state_fields`)."""
     if model.tendon("ballnut").id != 0 or model.tendon("truck_l3").id != model.ntendon - 1:
         raise ModelLayoutError("the tendons are expected in the order ballnut, truck_v0, truck_l0, ..., "
                                "truck_l3 (state_fields writes their parameters as one array)")
