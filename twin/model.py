@@ -583,13 +583,13 @@ def accelerometer_implicit_correction(model: mujoco.MjModel, state: np.ndarray,
     with respect to the velocity (MuJoCo documentation, Computation chapter, "Numerical
     integration"; mujoco.readthedocs.io), while ``mjData.qacc``, from which the accelerometers
     are computed in ``mj_forward`` before the step, is the explicit a = M⁻¹·f. So
-    a = a_i − h·M⁻¹·D·a_i, and an accelerometer reads h·Sᵀ·J·M⁻¹·D·a_i too much
+    a = a_i − h·M⁻¹·D·a_i, and an accelerometer reads −h·Sᵀ·J·M⁻¹·D·a_i more than a_i gives
     (S the site's orientation, J its translational Jacobian; MuJoCo keeps in D only the entries
     of its sparsity pattern ``D_rownnz``/``D_colind``, within a kinematic tree: a tendon's
     damping between the carriage and the screw enters a_i through its carriage entries alone).
     The integrated velocity differs from the integral of the reading by that amount: 0.65 % of
     the carriage's acceleration along the travel with the nut's passive damper (b = 0), the
-    lever arm of the pitch acceleration 1.4 % long through the trucks' dampers.
+    lever arm of the pitch acceleration 1.3 % long through the trucks' dampers.
 
     D is MuJoCo's own (``mjData.qDeriv`` after one step from ``state`` under ``ctrl``); M, J and S
     at ``state`` (the pose changes by µrad, the passive and actuator damping of the carriage's
