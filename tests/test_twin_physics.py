@@ -32,7 +32,7 @@ from scipy import signal
 from twin import campaign as cp
 from twin import geometry as geo
 from twin.drive import Move, Profile, command_profile
-from twin.model import MechanicalState, ModelIndex, apply_state, build_model, stiffness_of
+from twin.model import MechanicalState, ModelIndex, apply_state, build_model, state_fields, stiffness_of
 from twin.scenario import DialConfig, Scenario, to_axis
 from twin.simulate import (
     PHASE2_LEAD_IN,
@@ -135,13 +135,18 @@ def _tendon(sim: Simulator, traj, cond: Condition, vel: bool = False) -> np.ndar
 
 
 def _nut_force(sim: Simulator, traj, cond: Condition) -> np.ndarray:
-    """Axial force of the ball nut on the carriage, N (spring outside the dead band ± b/2, plus
-    the tendon damping, which MuJoCo applies inside the dead band too)."""
-    m = sim.model
-    i = m.tendon("ballnut").id
-    length, half = _tendon(sim, traj, cond), cond.mech.backlash / 2.0
-    spring = np.where(length > half, length - half, np.where(length < -half, length + half, 0.0))
-    return -m.tendon_stiffness[i] * spring - m.tendon_damping[i] * _tendon(sim, traj, cond, True)
+    """Axial force of the ball nut on the carriage, N, by the model's contact law (twin.model):
+    with b = 0 the spring and damper −K·L − C·L'; with b > 0 the flank in contact pushes with
+    K·δ + C·δ' (δ the compression beyond b/2), never pulls, and nothing inside the gap
+    (tests/test_nut_contact.py checks this law against MuJoCo's constraint force)."""
+    f = state_fields(sim.world.axis, cond.mech, float(sim.model.tendon_invweight0[0]))
+    length, rate = _tendon(sim, traj, cond), _tendon(sim, traj, cond, True)
+    k, c, half = f.nut_stiffness, f.nut_damping, cond.mech.backlash / 2.0
+    if half == 0.0:
+        return -k * length - c * rate
+    upper = np.where(length > half, np.maximum(k * (length - half) + c * rate, 0.0), 0.0)
+    lower = np.where(length < -half, np.maximum(-k * (length + half) - c * rate, 0.0), 0.0)
+    return lower - upper
 
 
 def _gap_stats(sim: Simulator, traj, cond: Condition, idx: np.ndarray) -> tuple[float, float]:

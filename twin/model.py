@@ -11,9 +11,10 @@ Degrees of freedom (8, or 9 with a compliant machine base):
 
 Couplings, all fixed tendons (linear in the joint coordinates, exact for the µm/µrad motions here):
 - ``ballnut``: L = x + z_n·pitch − R·θ − ε with R = lead/2π, ε the lead flank (z_n: nut axis height below the centre of
-  mass). Its stiffness is the series axial stiffness of shaft, nut contact and support bearings,
-  which follows the nut preload (Hertz, k ∝ F^(1/3)). Its ``springlength`` is a dead band
-  [−b/2, +b/2]: the backlash b, with the contact stiffness at both ends.
+  mass). Its stiffness K is the series axial stiffness of shaft, nut contact and support bearings,
+  which follows the nut preload (Hertz, k ∝ F^(1/3)); its damping C = 2ζ·√(K·m) (ζ the axis's
+  ``contact_damping_ratio``, m the carriage). How the nut transmits force depends on the backlash
+  b, see *The ball-nut contact* below.
 - ``truck_v<i>`` / ``truck_l<i>`` (i = 0..3, FL, FR, RL, RR): vertical and lateral contact of each
   truck on its rail, L = z + y_i·roll − x_i·pitch and L = y + x_i·yaw + h·roll.
 
@@ -50,16 +51,43 @@ accelerometers (absolute) see the resonance; the encoder (rotor angle relative t
 through the servo's reaction. The rails, their Coulomb friction and the prescribed rail errors
 stay on the ground (simplification: only the drive's support moves).
 
-Known simplifications: tendon damping (the contact's structural damping, ζ = 3 %) also acts
-inside the backlash gap, where it adds a drag c·v_rel (about 55 N for the ~9 mm/s at which a
-10 µm gap is crossed at a 400 mm/s reversal); the clearance is the wear law's average over the
-balls and may coexist with the remaining preload of the others; the shaft stiffness is taken at
-mid-stroke.
+The ball-nut contact:
+- b = 0 (a preloaded nut, both flanks loaded): the tendon's passive spring and damper,
+  F = −K·L − C·L', linear through zero (``stiffness``, ``damping``, ``springlength`` 0 0).
+- b > 0 (clearance): one flank at a time, and inside the gap [−b/2, +b/2] no force at all. The
+  passive stiffness and damping are 0 and each flank is the tendon's limit constraint
+  (``limited``, ``range`` = ±b/2, margin 0, so that no constraint row exists inside the gap),
+  a no-tension Kelvin–Voigt contact F = max(0, K·δ + C·δ') of the compression δ beyond the
+  flank. MuJoCo's soft constraints (documentation, Computation chapter, "Parameters" of the
+  constraint solver, and Modeling chapter, "Solver parameters"; mujoco.readthedocs.io) give a
+  single scalar constraint the dynamics a1 + d·(b·v + k·r) = (1 − d)·a0 (a0, a1: the
+  acceleration in constraint space without and with the constraint force, r the residual,
+  negative in contact, v its rate), with the regulariser R = (1 − d)/d·Â, Â the constraint's
+  approximate inverse inertia: for a tendon limit ``tendon_invweight0`` (the compiler's value
+  at qpos0). In the direct format ``solreflimit`` = (−stiffness, −damping) the solver takes
+  b = damping/d_max and k = stiffness·d/d_max²; with a constant impedance d = d_min = d_max the
+  force of the row is f = (a1 − a0)/A = −(stiffness·r + damping·v)/Â − d·a0/Â (A = J·M⁻¹·Jᵀ of
+  the row, equal to Â here up to the µrad changes of M with the pose), and the solver
+  clamps it to f ≥ 0 (a limit only pushes). So ``solreflimit`` = (−K·Â, −C·Â) is the contact
+  K, C, and d = 10⁻⁴ (MuJoCo's smallest impedance, ``solimplimit`` 1e-4 1e-4) makes the leak
+  d·a0/Â of the other forces 10⁻⁴ of them. Â = 1/m + z_n²/I_yy + R²/(J_motor + J_screw)
+  + 1/M_flank (+ 1/M_base with the compliant base), :func:`ballnut_invweight0`; the MJCF uses
+  that value, :func:`apply_state` the compiled model's own ``tendon_invweight0`` (the one the
+  solver uses). The clamp applies to the whole contact force, so a rebounding flank is not
+  pulled back by its damper; a damper alone in the constraint with a passive dead-band spring
+  would lose its pull on rebound and damp the contact half as much (ζ 0.014 instead of 0.028
+  in a ring on one flank, measured as in tests/test_nut_contact.py). tests/test_nut_contact.py checks
+  the force against K·δ + C·δ', the damping ratio and the gap.
 
-Models in different degradation states differ only in float fields (``tendon_stiffness``,
-``tendon_damping``, ``tendon_lengthspring``, ``dof_frictionloss`` and the lead coefficient in
-``wrap_prm``), see :func:`apply_state`, so
-that any number of them can run in one ``mujoco.rollout`` call.
+Known simplifications: the clearance is the wear law's average over the balls and may coexist
+with the remaining preload of the others; the shaft stiffness is taken at mid-stroke; the
+contact switches from the bilateral law (b = 0) to the one-flank law at the first b > 0.
+
+Models in different degradation states differ only in model fields (the floats
+``tendon_stiffness``, ``tendon_damping``, ``tendon_lengthspring``, ``dof_frictionloss``, the lead
+coefficient in ``wrap_prm`` and the ball nut's ``tendon_range``, ``tendon_solref_lim``,
+``tendon_solimp_lim``, and the byte ``tendon_limited``), see :func:`apply_state`, so that any
+number of them can run in one ``mujoco.rollout`` call.
 """
 
 from __future__ import annotations
@@ -77,6 +105,9 @@ from twin.sensors.instruments import STANDARD_GRAVITY as GRAVITY  # m/s²
 TRUCKS = ("FL", "FR", "RL", "RR")
 
 FLANK_MASS = 1e5  # kg, see the module docstring
+# Impedance of the ball-nut contact's limit constraint: MuJoCo's smallest (mjMINIMP), constant
+# (d_min = d_max; width, midpoint and power then do not matter), see the module docstring.
+CONTACT_SOLIMP = (mujoco.mjMINIMP, mujoco.mjMINIMP, 0.001, 0.5, 2.0)
 _RAILS = range(4)
 
 
@@ -243,7 +274,7 @@ def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str
 
     Raises ValueError when the base is too light for the time step (:func:`check_base_mode`)."""
     c, s = axis.carriage, axis.screw
-    new = state_fields(axis, MechanicalState(preload=s.preload))
+    new = state_fields(axis, MechanicalState(preload=s.preload), ballnut_invweight0(axis, base))
     base_body, base_wrap = "", ""
     if base is not None:
         check_base_mode(axis, timestep, base)
@@ -259,6 +290,10 @@ def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str
         lo, hi = new.tendon_lengthspring[i]
         return (f'springlength="{_fmt(lo)} {_fmt(hi)}" stiffness="{_fmt(new.tendon_stiffness[i])}" '
                 f'damping="{_fmt(new.tendon_damping[i])}"')
+    lo, hi = new.ballnut_range
+    contact = (f'limited="{str(new.ballnut_limited).lower()}" range="{_fmt(lo)} {_fmt(hi)}" '
+               f'solreflimit="{" ".join(map(_fmt, new.ballnut_solreflimit))}" '
+               f'solimplimit="{" ".join(map(_fmt, new.ballnut_solimplimit))}"')
     r = s.radius_per_rad
     layout = TruckLayout.of(axis)
     zn = c.nut_height - c.com_height  # nut axis relative to the centre of mass (m, negative)
@@ -331,7 +366,8 @@ def build_mjcf(axis: Axis, timestep: float, base: BaseMode | None = None) -> str
     </body>
 {base_body}  </worldbody>
   <tendon>
-    <fixed name="ballnut" {spring(0)}>
+    <fixed name="ballnut" {spring(0)}
+           {contact}>
       <joint joint="carriage_x" coef="1"/>
       <joint joint="carriage_pitch" coef="{_fmt(zn)}"/>
       <joint joint="screw" coef="{_fmt(-r)}"/>
@@ -374,7 +410,7 @@ class MechanicalState:
 
     Attributes:
         preload: nut preload in N.
-        backlash: axial clearance of the ball nut in m (dead band width).
+        backlash: axial clearance of the ball nut in m (the gap between its flanks, >= 0).
         truck_preload_fraction: truck preload relative to new (1 = new), scales truck stiffness by
             the Hertz rule fraction^(1/3).
         drag_scale: multiplier on the nut drag torque (e.g. thermal viscosity change), 1 = nominal.
@@ -402,36 +438,74 @@ def stiffness_of(axis: Axis, state: MechanicalState) -> dict[str, float]:
     }
 
 
+def ballnut_invweight0(axis: Axis, base: BaseMode | None = None) -> float:
+    """Inverse effective mass of the ball-nut tendon at qpos0, 1/kg: what MuJoCo's compiler stores
+    as ``tendon_invweight0`` (J·M⁻¹·Jᵀ of L = x + z_n·pitch − R·θ − ε [− x_b]; the carriage's
+    joints sit at its centre of mass on its principal axes, so M is diagonal in these joints):
+    1/m + z_n²/I_yy + R²/(J_motor + J_screw) + 1/M_flank, plus 1/M_base with a compliant base."""
+    c, s = axis.carriage, axis.screw
+    zn = c.nut_height - c.com_height
+    inv = (1.0 / c.mass + zn**2 / c.inertia[1]
+           + s.radius_per_rad**2 / (axis.servo.motor_inertia + s.screw_inertia) + 1.0 / FLANK_MASS)
+    return inv + (1.0 / base.mass if base is not None else 0.0)
+
+
 @dataclass(frozen=True)
 class StateFields:
-    """The model's float fields for one state, in SI units.
+    """The model's fields for one state, in SI units.
 
     Attributes:
+        nut_stiffness, nut_damping: the ball-nut contact's K (N/m) and C = 2ζ·√(K·m) (N·s/m), of
+            both flanks together when b = 0, of the flank in contact when b > 0.
         tendon_stiffness, tendon_damping: (9,) N/m and N·s/m, tendon order ballnut,
-            truck_v0, truck_l0, ..., truck_v3, truck_l3 (as in :func:`build_mjcf`).
-        tendon_lengthspring: (9, 2) m (dead band of the ball nut; weight-carrying rest length of
+            truck_v0, truck_l0, ..., truck_v3, truck_l3 (as in :func:`build_mjcf`). The ball
+            nut's are K and C when b = 0 and 0 when b > 0 (its contact is then the limit
+            constraint).
+        tendon_lengthspring: (9, 2) m (0 0 for the ball nut; the weight-carrying rest length of
             the vertical trucks).
+        ballnut_limited: whether the ball nut's contact is its limit constraint (b > 0).
+        ballnut_range: (2,) −b/2, +b/2, m: the flanks.
+        ballnut_solreflimit: (2,) the direct solref (−K·Â, −C·Â), Â the tendon's
+            ``tendon_invweight0`` (see the module docstring).
+        ballnut_solimplimit: (5,) :data:`CONTACT_SOLIMP`.
         screw_frictionloss: nut drag torque, N·m.
         screw_coef: the ball-nut tendon's coefficient of the screw joint, −R·(1 + lead_stretch),
             m/rad.
     """
 
+    nut_stiffness: float
+    nut_damping: float
     tendon_stiffness: np.ndarray
     tendon_damping: np.ndarray
     tendon_lengthspring: np.ndarray
+    ballnut_limited: bool
+    ballnut_range: np.ndarray
+    ballnut_solreflimit: np.ndarray
+    ballnut_solimplimit: np.ndarray
     screw_frictionloss: float
     screw_coef: float
 
 
-def state_fields(axis: Axis, state: MechanicalState) -> StateFields:
-    """The float fields of the model in ``state`` (one source for the MJCF and for
-    :func:`apply_state`)."""
+def state_fields(axis: Axis, state: MechanicalState, ballnut_invweight: float) -> StateFields:
+    """The fields of the model in ``state`` (one source for the MJCF and for
+    :func:`apply_state`). ``ballnut_invweight``: Â of the ball-nut tendon, 1/kg (the model's
+    ``tendon_invweight0``, :func:`ballnut_invweight0` before compiling).
+
+    Raises ValueError for a negative backlash or a Â that is not positive and finite."""
+    if not state.backlash >= 0.0:
+        raise ValueError(f"backlash {state.backlash!r} m: the ball nut's clearance must be >= 0")
+    if not (math.isfinite(ballnut_invweight) and ballnut_invweight > 0.0):
+        raise ValueError(f"ball-nut inverse weight {ballnut_invweight!r} 1/kg: must be positive and "
+                         "finite (the compiled model's tendon_invweight0)")
     k = stiffness_of(axis, state)
     c = axis.carriage
     # Effective mass of the axial mode with the screw held by the servo: the carriage.
-    stiff = [k["axial"]]
-    damp = [2.0 * axis.screw.contact_damping_ratio * math.sqrt(k["axial"] * c.mass)]
-    rest = [(-state.backlash / 2.0, state.backlash / 2.0)]
+    k_nut = k["axial"]
+    c_nut = 2.0 * axis.screw.contact_damping_ratio * math.sqrt(k_nut * c.mass)
+    gap = state.backlash > 0.0
+    stiff = [0.0 if gap else k_nut]
+    damp = [0.0 if gap else c_nut]
+    rest = [(0.0, 0.0)]
     # The rest length carries the weight, so the equilibrium is at carriage_z = 0.
     sag = c.mass * GRAVITY / (4.0 * k["truck_vertical"])
     for _ in range(4):
@@ -440,24 +514,42 @@ def state_fields(axis: Axis, state: MechanicalState) -> StateFields:
             damp.append(2.0 * c.truck_damping_ratio * math.sqrt(k[key] * c.mass / 4.0))
             rest.append((length, length))
     return StateFields(
+        nut_stiffness=k_nut, nut_damping=c_nut,
         tendon_stiffness=np.array(stiff), tendon_damping=np.array(damp),
-        tendon_lengthspring=np.array(rest),
+        tendon_lengthspring=np.array(rest), ballnut_limited=gap,
+        ballnut_range=np.array([-state.backlash / 2.0, state.backlash / 2.0]),
+        ballnut_solreflimit=np.array([-k_nut * ballnut_invweight, -c_nut * ballnut_invweight]),
+        ballnut_solimplimit=np.array(CONTACT_SOLIMP),
         screw_frictionloss=axis.screw.drag_torque(state.preload) * state.drag_scale,
         screw_coef=-axis.screw.radius_per_rad * (1.0 + state.lead_stretch))
 
 
 def apply_state(model: mujoco.MjModel, axis: Axis, state: MechanicalState) -> None:
-    """Write a degradation state into the model's float fields (in place)."""
-    f = state_fields(axis, state)
+    """Write a degradation state into the model's fields (in place).
+
+    Raises :class:`ModelLayoutError` when the model cannot carry the ball-nut contact as built
+    (tendon order, the screw's place in the ball-nut tendon, a limit margin, limits disabled);
+    ValueError for a negative backlash (:func:`state_fields`)."""
     if model.tendon("ballnut").id != 0 or model.tendon("truck_l3").id != model.ntendon - 1:
         raise ModelLayoutError("the tendons are expected in the order ballnut, truck_v0, truck_l0, ..., "
                                "truck_l3 (state_fields writes their parameters as one array)")
+    ballnut = model.tendon("ballnut").id
+    if model.tendon_margin[ballnut] != 0.0:
+        raise ModelLayoutError(f"the ball-nut tendon has a limit margin {model.tendon_margin[ballnut]!r} m; "
+                               "it must be 0, or its flank contact would act inside the backlash gap")
+    if model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_LIMIT:
+        raise ModelLayoutError("limit constraints are disabled (mjDSBL_LIMIT): the ball nut's flank "
+                               "contact with backlash is a tendon limit and would vanish")
+    f = state_fields(axis, state, float(model.tendon_invweight0[ballnut]))
     model.tendon_stiffness[:] = f.tendon_stiffness
     model.tendon_damping[:] = f.tendon_damping
     model.tendon_lengthspring[:] = f.tendon_lengthspring
+    model.tendon_limited[ballnut] = f.ballnut_limited
+    model.tendon_range[ballnut] = f.ballnut_range
+    model.tendon_solref_lim[ballnut] = f.ballnut_solreflimit
+    model.tendon_solimp_lim[ballnut] = f.ballnut_solimplimit
     model.dof_frictionloss[model.joint("screw").dofadr[0]] = f.screw_frictionloss
     # The screw is the third joint of the ball-nut tendon (see build_mjcf).
-    ballnut = model.tendon("ballnut").id
     wrap = model.tendon_adr[ballnut] + 2
     if model.wrap_objid[wrap] != model.joint("screw").id:
         raise ModelLayoutError("the third joint of the ball-nut tendon is not the screw hinge; "
@@ -480,3 +572,61 @@ def initial_state(model: mujoco.MjModel, x0: float, theta0: float, flank0: float
     state = np.empty(mujoco.mj_stateSize(model, spec))
     mujoco.mj_getState(model, data, state, spec)
     return state
+
+
+def accelerometer_implicit_correction(model: mujoco.MjModel, state: np.ndarray,
+                                      ctrl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """What turns MuJoCo's accelerometer readings into the acceleration the integrator applies.
+
+    With the ``implicit`` and ``implicitfast`` integrators MuJoCo advances the velocity by
+    v' = v + h·a_i with (M − h·D)·a_i = f, D the derivative of the passive and actuator forces
+    with respect to the velocity (MuJoCo documentation, Computation chapter, "Numerical
+    integration"; mujoco.readthedocs.io), while ``mjData.qacc``, from which the accelerometers
+    are computed in ``mj_forward`` before the step, is the explicit a = M⁻¹·f. So
+    a = a_i − h·M⁻¹·D·a_i, and an accelerometer reads −h·Sᵀ·J·M⁻¹·D·a_i more than a_i gives
+    (S the site's orientation, J its translational Jacobian; MuJoCo keeps in D only the entries
+    of its sparsity pattern ``D_rownnz``/``D_colind``, within a kinematic tree: a tendon's
+    damping between the carriage and the screw enters a_i through its carriage entries alone).
+    The integrated velocity differs from the integral of the reading by that amount: 0.65 % of
+    the carriage's acceleration along the travel with the nut's passive damper (b = 0), the
+    lever arm of the pitch acceleration 1.3 % long through the trucks' dampers.
+
+    D is MuJoCo's own (``mjData.qDeriv`` after one step from ``state`` under ``ctrl``); M, J and S
+    at ``state`` (the pose changes by µrad, the passive and actuator damping of the carriage's
+    joints are linear). Returns (cols, G): the ``sensordata`` columns of every accelerometer and
+    G (len(cols), nv) such that the reading of the applied acceleration a_i (n, nv) is
+    ``sens[:, cols] + a_i @ G.T``.
+
+    Raises ValueError for another integrator (the axis model uses implicitfast)."""
+    if model.opt.integrator not in (mujoco.mjtIntegrator.mjINT_IMPLICIT,
+                                    mujoco.mjtIntegrator.mjINT_IMPLICITFAST):
+        raise ValueError(f"accelerometer_implicit_correction: integrator {model.opt.integrator}; "
+                         "expected implicitfast or implicit (the correction is theirs)")
+    acc = [i for i in range(model.nsensor) if model.sensor_type[i] == mujoco.mjtSensor.mjSENS_ACCELEROMETER]
+    cols = np.concatenate([np.arange(model.sensor_adr[i], model.sensor_adr[i] + 3) for i in acc]
+                          ) if acc else np.zeros(0, dtype=int)
+    nv = model.nv
+    gain = np.zeros((cols.size, nv))
+    if not acc:
+        return cols, gain
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    data = mujoco.MjData(model)
+    mujoco.mj_setState(model, data, state, spec)
+    data.ctrl[:] = ctrl
+    mujoco.mj_step(model, data)  # fills qDeriv, the D of this step
+    damping = np.zeros((nv, nv))
+    for i in range(nv):
+        a = model.D_rowadr[i]
+        damping[i, model.D_colind[a:a + model.D_rownnz[i]]] = data.qDeriv[a:a + model.D_rownnz[i]]
+    mujoco.mj_setState(model, data, state, spec)
+    mujoco.mj_forward(model, data)
+    minv_d = np.zeros((nv, nv))
+    mujoco.mj_solveM(model, data, minv_d, np.ascontiguousarray(damping.T))  # rows: M⁻¹·(columns of D)
+    minv_d = minv_d.T
+    jac = np.zeros((3, nv))
+    for k, i in enumerate(acc):
+        site = model.sensor_objid[i]
+        mujoco.mj_jacSite(model, data, jac, None, site)
+        rot = data.site_xmat[site].reshape(3, 3)
+        gain[3 * k:3 * k + 3] = model.opt.timestep * rot.T @ jac @ minv_d
+    return cols, gain

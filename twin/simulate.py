@@ -42,6 +42,7 @@ from twin.model import (
     BaseMode,
     MechanicalState,
     ModelIndex,
+    accelerometer_implicit_correction,
     apply_state,
     build_model,
     initial_state,
@@ -338,7 +339,9 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     item, copies the others. Each item's trajectory is the one a rollout of it alone gives.
 
     Row k of a trajectory is the state at t_k = k·dt, before step k, which is also when
-    MuJoCo evaluates the sensors of step k (``sens`` row k)."""
+    MuJoCo evaluates the sensors of step k (``sens`` row k). The accelerometers' rows are the
+    acceleration that step k applies, (v_{k+1} − v_k)/dt at the sensor
+    (:func:`twin.model.accelerometer_implicit_correction`)."""
     first = items[0][0]
     for sim, _ in items[1:]:
         if sim.structure() != first.structure():
@@ -392,11 +395,18 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
         s0[0] = 0.0  # time
     for _ in range(max(passes, 1)):
         ctrl = np.stack([sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)])
-        state, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+        after, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
         # Rollout row k is the state after step k; prepend the initial state so that row k
         # is the state at t_k, the one step k (its rails, its sensors) sees.
-        state = np.concatenate([np.stack(s0s)[:, None, :], state[:, :-1, :]], axis=1)
+        state = np.concatenate([np.stack(s0s)[:, None, :], after[:, :-1, :]], axis=1)
         x_rails = [st[:, 1 + sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
+    # The accelerometers read the acceleration of step k that the integrator applies,
+    # (v_{k+1} − v_k)/dt, not MuJoCo's explicit qacc (see accelerometer_implicit_correction).
+    vel = slice(1 + nq, 1 + nq + nv)
+    for j, model in enumerate(models):
+        cols, gain = accelerometer_implicit_correction(model, s0s[j], ctrl[j, 0])
+        applied = (after[j, :, vel] - state[j, :, vel]) / first.timestep
+        sens[j][:, cols] += applied @ gain.T
     t = np.arange(cmd.t.size) * first.timestep
     return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
                        cmd=cmd, theta_cmd=xc / sim.world.axis.screw.radius_per_rad, index=sim.index)
