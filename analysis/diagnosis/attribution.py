@@ -282,6 +282,19 @@ def _interpolator(params: list[ParamAxis], delta: np.ndarray):
     return RegularGridInterpolator(axes2, d, method="linear")
 
 
+def _calibration_residuals(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray, n_fine: int):
+    """The fine grid of ``cand``'s parameters and what is left of the calibration part at each
+    point: (fine axes, grid (m, k), the calibration response's interpolator, residual t (m, n),
+    zero where a statistic is not finite)."""
+    fine = _fine_axes(cand.params, n_fine)
+    grid = np.stack(np.meshgrid(*fine, indexing="ij"), axis=-1).reshape(-1, len(fine)) \
+        if fine else np.zeros((1, 0))
+    ok = np.isfinite(z_cal)
+    f_cal = _interpolator(cand.params, np.nan_to_num(cand.delta["cal"]))
+    d_fine = f_cal(grid) / sd_cal  # (m, n) change of t
+    return fine, grid, f_cal, np.where(ok, z_cal, 0.0)[None, :] - np.where(ok, d_fine, 0.0)
+
+
 def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
                   sd: dict[str, np.ndarray], select: np.ndarray, alpha: float,
                   n_fine: int = 61, regions: list | None = None) -> Fit:
@@ -292,13 +305,8 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
     regions: (n,) the statistics' regions (for the regions the candidate makes worse; none
     looked for without them).
     """
-    fine = _fine_axes(cand.params, n_fine)
-    grid = np.stack(np.meshgrid(*fine, indexing="ij"), axis=-1).reshape(-1, len(fine)) \
-        if fine else np.zeros((1, 0))
+    fine, grid, f_cal, resid = _calibration_residuals(cand, z_cal, sd["cal"], n_fine)
     ok_cal = np.isfinite(z_cal)
-    f_cal = _interpolator(cand.params, np.nan_to_num(cand.delta["cal"]))
-    d_fine = f_cal(grid) / sd["cal"]  # (m, n) change of t
-    resid = np.where(ok_cal, z_cal, 0.0)[None, :] - np.where(ok_cal, d_fine, 0.0)
     chi2 = np.sum(resid ** 2, axis=1)
     best = int(np.argmin(chi2))
     p_best = grid[best]
@@ -368,13 +376,10 @@ def bootstrap_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.nd
     resamples come from ``seed``). z_cal: (n,) standardised differences from the current model;
     sd_cal: (n,) prediction standard deviations; regions: (n,) the statistics' regions.
     """
-    fine = _fine_axes(cand.params, n_fine)
-    if not fine:
+    if not cand.params:
         return {}
-    grid = np.stack(np.meshgrid(*fine, indexing="ij"), axis=-1).reshape(-1, len(fine))
-    ok = np.isfinite(z_cal)
-    d_fine = _interpolator(cand.params, np.nan_to_num(cand.delta["cal"]))(grid) / sd_cal
-    r2 = (np.where(ok, z_cal, 0.0)[None, :] - np.where(ok, d_fine, 0.0)) ** 2  # (m, n)
+    _, grid, _, resid = _calibration_residuals(cand, z_cal, sd_cal, n_fine)
+    r2 = resid ** 2  # (m, n)
     keys: dict = {}
     block = np.array([keys.setdefault(r.key, len(keys)) for r in regions])
     order = np.argsort(block, kind="stable")

@@ -764,15 +764,14 @@ def calibrate(nominal: Scenario, inv: subset.Inventory, cache: Path) -> tuple[su
             data["campaign"]["phase1"] = False
             data["phase2"]["runs_per_session"] = r
             timed.append(_timed_campaign(from_dict(data), tmp / f"phase2-{r}"))
-        total = [a + b for a, b in timed]
-        sigs = [b for _, b in timed]
-        for series, slot in ((total, "all"), (sigs, "signature")):
+
+        def session_and_run(series: list[float]) -> tuple[float, float]:
+            """(fixed cost per session, cost per run) from the campaigns' seconds."""
             per_run = max((series[1] - series[0]) / (m * (runs[1] - runs[0])), 0.0) if len(runs) > 1 else 0.0
-            fixed = max(series[0] / m - runs[0] * per_run, 0.0)
-            if slot == "all":
-                sess, run = fixed, per_run
-            else:
-                sess_sig, run_sig = fixed, per_run
+            return max(series[0] / m - runs[0] * per_run, 0.0), per_run
+
+        sess, run = session_and_run([a + b for a, b in timed])
+        sess_sig, run_sig = session_and_run([b for _, b in timed])
     shutil.rmtree(tmp, ignore_errors=True)
     # The signature is part of the whole cost (a scatter of the timings can say otherwise).
     costs = subset.UnitCosts(cap, max(sess, sess_sig), max(run, run_sig), cap_sig, sess_sig, run_sig)
@@ -869,10 +868,11 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
               **result}
     if sub is not None:
         result["subset"] = sub
+    write_json(out / "diagnosis.json", result, nan_as_null=True)  # kept if the report fails
     if plots:
         write_diagnosis_report(out / "report", result, real["heldout"].regions, t_heldout)
     if sub is not None:
         sub["actual_minutes"] = (time.perf_counter() - t0) / 60.0  # the report included
-    write_json(out / "diagnosis.json", result, nan_as_null=True)
+        write_json(out / "diagnosis.json", result, nan_as_null=True)
     return result
 
