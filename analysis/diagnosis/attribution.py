@@ -71,6 +71,7 @@ with all the added effects to the twin as it is.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy import stats
@@ -145,6 +146,13 @@ TIE_SIGMAS = 3.0
 TIE_FRACTION = 0.01
 
 
+@lru_cache(maxsize=4096)
+def chi2_quantile(q: float, dof: int) -> float:
+    """The χ²_dof quantile q (scipy.stats.chi2.ppf), remembered: a diagnosis asks for the same
+    few (q, dof) pairs for every candidate and region."""
+    return float(stats.chi2.ppf(q, dof))
+
+
 def worse_regions(z_before: np.ndarray, z_after: np.ndarray, regions: list,
                   alpha: float) -> list[dict]:
     """The regions whose held-out Σ t² over their m usable statistics rises by more than the
@@ -152,16 +160,18 @@ def worse_regions(z_before: np.ndarray, z_after: np.ndarray, regions: list,
     to ``z_after`` ((n,) each; ``regions`` (n,)), worst first: domain, channel, family, bin,
     n_statistics, heldout_gap_before/after (mean t²),
     increase (of Σ t²) and threshold (the quantile)."""
-    acc: dict[tuple, list[float]] = {}
-    for j, r in enumerate(regions):
-        if np.isfinite(z_before[j]) and np.isfinite(z_after[j]):
-            a = acc.setdefault(r.key, [0, 0.0, 0.0])
-            a[0] += 1
-            a[1] += float(z_before[j]) ** 2
-            a[2] += float(z_after[j]) ** 2
+    group: dict[tuple, int] = {}
+    index = np.array([group.setdefault(r.key, len(group)) for r in regions], dtype=np.intp)
+    ok = np.isfinite(z_before) & np.isfinite(z_after)
+    m_of = np.bincount(index[ok], minlength=len(group))
+    sb_of = np.bincount(index[ok], weights=np.asarray(z_before, float)[ok] ** 2, minlength=len(group))
+    sa_of = np.bincount(index[ok], weights=np.asarray(z_after, float)[ok] ** 2, minlength=len(group))
     out = []
-    for key, (m, sb, sa) in acc.items():
-        thr = float(stats.chi2.ppf(1.0 - alpha, m))
+    for key, k in group.items():
+        m, sb, sa = int(m_of[k]), float(sb_of[k]), float(sa_of[k])
+        if m == 0:
+            continue
+        thr = chi2_quantile(1.0 - alpha, m)
         if sa - sb > thr and sa - sb >= WORSE_FRACTION * sb:
             out.append({"domain": key[0], "channel": key[1], "family": key[2], "bin": key[3],
                         "n_statistics": m, "heldout_gap_before": sb / m, "heldout_gap_after": sa / m,
@@ -340,7 +350,7 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
     dt = d_ho[sel] / sd["heldout"][sel]
     after = float(np.sum((z_ho[sel] - dt) ** 2))
     noise = 2.0 * float(np.sqrt(np.sum(dt ** 2)))
-    threshold = float(stats.chi2.ppf(1.0 - alpha, max(len(cand.params), 1))) + 3.0 * noise
+    threshold = chi2_quantile(1.0 - alpha, max(len(cand.params), 1)) + 3.0 * noise
     params = {a.name: float(v) for a, v in zip(cand.params, p_best, strict=True)}
     worse, penalty = [], 0.0
     if regions is not None:
@@ -478,7 +488,7 @@ def _gap_setup(real: dict[str, Signature], twin: dict[str, list[Signature]], alp
     select = g.holm(g.pvalues(z0["cal"], sp["cal"]), alpha)
     sel_ho = select & np.isfinite(z0["heldout"])
     g_before = float(np.sum(z0["heldout"][sel_ho] ** 2))
-    crit = float(stats.chi2.ppf(1.0 - alpha, max(int(sel_ho.sum()), 1)))
+    crit = chi2_quantile(1.0 - alpha, max(int(sel_ho.sum()), 1))
     return sp, z0, select, sel_ho, g_before, crit
 
 
