@@ -155,15 +155,17 @@ def _regions_from(text: str) -> list[Region]:
             for d, c, f, b, h in json.loads(text)]
 
 
-def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool = False) -> list[str]:
+def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] = False) -> list[str]:
     """Simulate the scenarios not yet cached (one campaign each, batched rollouts:
     :func:`twin.campaign.simulate_campaigns_batched`) and store the signatures of both parts
     and the campaign's layout (``layout.json``, :func:`analysis.diagnosis.layout.describe`);
     returns the paths of their ``signature.npz`` (``cal``, ``heldout``: (n,) values;
-    ``regions``: JSON)."""
+    ``regions``: JSON). ``keep`` (one flag, or one per scenario): leave the simulated
+    campaign's files in the cache (``<key>/campaign``) for a later post-processing."""
     from threadpoolctl import threadpool_limits
 
     ss = [from_dict(json.loads(j)) for j in scenario_jsons]
+    keeps = [keep] * len(ss) if isinstance(keep, bool) else list(keep)
     dirs = [Path(cache_dir) / _key(s) for s in ss]
     todo = [i for i, d in enumerate(dirs) if not (d / "signature.npz").exists()]
     with threadpool_limits(1):
@@ -177,7 +179,7 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool = False) -> l
                       "regions": np.array(_regions_json(sigs["cal"].regions))}
             atomic_write(d / "signature.npz", lambda tmp, arrays=arrays: _save_npz(tmp, arrays))
             write_text(d / "scenario.json", scenario_jsons[i])
-            if not keep:
+            if not keeps[i]:
                 shutil.rmtree(d / "campaign", ignore_errors=True)
     return [str(d / "signature.npz") for d in dirs]
 
@@ -190,10 +192,12 @@ def load_signatures(path: str) -> dict[str, Signature]:
 
 def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
                  on_progress: Callable[[int, int], None] | None = None,
-                 keep: bool = False, scheduler: str | None = None) -> list[dict[str, Signature]]:
+                 keep: bool | list[bool] = False, scheduler: str | None = None) -> list[dict[str, Signature]]:
     """Signatures of every scenario (cached), in order, on ``workers`` processes or the Dask
-    cluster at ``scheduler`` (:func:`run_tasks`)."""
+    cluster at ``scheduler`` (:func:`run_tasks`); ``keep`` (one flag, or one per scenario):
+    the simulated campaigns whose files stay in the cache (:func:`evaluate`)."""
     payloads = [s.to_json() for s in scenarios]
+    keeps = [keep] * len(payloads) if isinstance(keep, bool) else list(keep)
     paths: list[str | None] = [None] * len(payloads)
     todo = []
     for i in range(len(payloads)):
@@ -221,8 +225,9 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
         if on_progress:
             on_progress(counted[0], len(payloads))
 
-    results = run_tasks(evaluate, [(batch, str(cache_dir), keep) for batch in batches], workers, scheduler,
-                        finished)
+    kept = {p: any(keeps[i] for i in unique[p]) for p in keys}
+    results = run_tasks(evaluate, [(batch, str(cache_dir), [kept[p] for p in batch]) for batch in batches],
+                        workers, scheduler, finished)
     for batch, result in zip(batches, results, strict=True):
         for payload, path in zip(batch, result, strict=True):
             for i in unique[payload]:
@@ -538,7 +543,11 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
     cand_scen, points = candidate_scenarios(seeded, effects)
-    sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress, scheduler=scheduler)
+    # The seeds' campaigns the artefacts are post-processed on stay in the cache (not simulated
+    # twice): the first seed's, every seed's when an artefact's response is a mean over seeds.
+    n_bases = len(artefact_plans(artefacts, len(seeded))) if artefacts else 0
+    keep = [i < n_bases for i in range(len(seeded) + len(cand_scen))]
+    sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress, keep=keep, scheduler=scheduler)
     twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
     cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
     if artefacts:
