@@ -5,6 +5,10 @@ from pathlib import Path
 
 import pytest
 
+# Each test process has a core of its own (pytest-xdist, one per core): a command under test
+# runs its work in its own process (twin.executors.default_processes) unless the test asks for
+# --workers; the parallel paths are tested with explicit --workers / --scheduler.
+os.environ.setdefault("TWIN_WORKERS", "1")
 REPO = Path(__file__).resolve().parents[1]
 TWIN = [sys.executable, "-m", "twin.cli"]
 # A small but complete campaign: every kind of unit, a few seconds of simulation.
@@ -13,8 +17,8 @@ SMALL = ["--set", "phase1.capture_s=2.0", "--set", "phase1.sample_interval_hours
          "--set", "phase2.speeds_mm_s=[100.0, 500.0]", "--set", "phase2.session_hours=[50.0, 550.0]"]
 
 
-def run_twin(*args, check=True, **kw):
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+def run_twin(*args, check=True, env=None, **kw):
+    env = dict(os.environ, PYTHONPATH=str(REPO)) if env is None else env
     return subprocess.run([*TWIN, *map(str, args)], cwd=REPO, env=env, capture_output=True,
                           text=True, check=check, **kw)
 

@@ -79,7 +79,7 @@ def benchmark(tmp_path_factory):
     out = tmp_path_factory.mktemp("diagnose-benchmark")
     # Without the re-simulated shrink (--resim-seeds 0: it would cost 38 cases × the seeds more
     # campaigns); test_benchmark_resimulated_shrink (slow) re-runs it on this cache with it.
-    proc = run_twin("diagnose-benchmark", "-o", str(out), "--workers", "2", "--resim-seeds", "0")
+    proc = run_twin("diagnose-benchmark", "-o", str(out), "--resim-seeds", "0")
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out, json.loads((out / "benchmark.json").read_text()), proc
 
@@ -177,7 +177,7 @@ def test_diagnose_cli_names_cogging_and_writes_report(benchmark, tmp_path):
     real = _record(tmp_path, "real", "effects.cogging_Nm=0.1", "effects.cogging_per_rev=18")
     out = tmp_path / "diag"
     proc = run_twin("diagnose", str(real), "--scenario", str(BENCH_SCENARIO), "-o", str(out),
-                    "--cache", str(out_b / "cache"), "--workers", "2", "--resim-seeds", "2")
+                    "--cache", str(out_b / "cache"), "--resim-seeds", "2")
     assert proc.returncode == 0, proc.stderr[-3000:]
     res = json.loads((out / "diagnosis.json").read_text())
     assert res["verdict"] in ("explained", "unexplained gap remains")

@@ -126,7 +126,7 @@ def small_ensemble(tmp_path_factory):
 
     cache = tmp_path_factory.mktemp("param-cache")
     s = load(BENCH_SCENARIO)
-    return s, cache, build_ensemble(s, cache, seeds=4, workers=2, library=SMALL)
+    return s, cache, build_ensemble(s, cache, seeds=4, workers=1, library=SMALL)
 
 
 def _diagnose(tmp_path, small_ensemble, *sets, signatures=False):
@@ -188,7 +188,7 @@ def test_heavier_carriage_resimulated_shrink(heavier, small_ensemble):
 
     res, real = heavier
     s, cache, ens = small_ensemble
-    rs = resimulate(ens, [res["added"], []], cache, workers=2)
+    rs = resimulate(ens, [res["added"], []], cache, workers=1)
     assert rs[1] is None  # nothing added: nothing simulated
     out = add_resimulation(res, real, ens, rs[0])
     r = out["resimulation"]
@@ -198,7 +198,7 @@ def test_heavier_carriage_resimulated_shrink(heavier, small_ensemble):
     assert out["heldout_shrink_resimulated"] == r["heldout_shrink"] >= 0.8
     assert abs(r["heldout_shrink"] - out["heldout_shrink"]) <= RESIM_TOLERANCE
     assert out["verdict"] == r["verdict"] and out["verdict_interpolated"] == res["verdict"]
-    again = resimulate(ens, [res["added"]], cache, workers=2)[0]
+    again = resimulate(ens, [res["added"]], cache, workers=1)[0]
     assert all(np.array_equal(a.values, b.values, equal_nan=True)
                for p in again for a, b in zip(again[p], rs[0][p], strict=True))
 
@@ -230,7 +230,7 @@ def test_a_physical_effect_is_not_taken_for_a_parameter(tmp_path, small_ensemble
     assert not any(a["kind"] == "parameter" for a in res["added"])
     # Re-simulated (4 seeds) beside the interpolated shrink.
     s, cache, ens = small_ensemble
-    out = add_resimulation(res, real, ens, resimulate(ens, [res["added"]], cache, workers=2)[0])
+    out = add_resimulation(res, real, ens, resimulate(ens, [res["added"]], cache, workers=1)[0])
     print("Stribeck friction: interpolated", round(out["heldout_shrink"], 4), "re-simulated",
           round(out["heldout_shrink_resimulated"], 4), [a["effect"] for a in out["added"]], out["verdict"])
     assert out["resimulation"]["done"] and out["resimulation"]["seeds"] == 4

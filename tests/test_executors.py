@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 
 import h5py
 import numpy as np
@@ -184,3 +185,26 @@ def test_keep_freed_memory_stops_refaulting_pages():
     if not applied:
         pytest.skip("mallopt is not available here (not Linux with glibc): nothing to check")
     assert before > 500 and after < 50
+
+
+def test_twin_workers_sets_the_default_processes_and_a_bad_value_is_refused(monkeypatch, tmp_path):
+    """TWIN_WORKERS sets how many local processes a command starts when not told; a value that is
+    not a whole number >= 1 ends any command with exit 2 naming the variable and the value."""
+    from twin.executors import _LocalPool, _Serial, default_processes, make_executor
+
+    monkeypatch.setenv("TWIN_WORKERS", "3")
+    assert default_processes() == 3
+    monkeypatch.setenv("TWIN_WORKERS", "1")
+    with make_executor() as ex:
+        assert isinstance(ex, _Serial)
+    monkeypatch.delenv("TWIN_WORKERS")
+    assert default_processes() == (os.cpu_count() or 1)
+    with make_executor(2) as ex:
+        assert isinstance(ex, _LocalPool)
+    for bad in ("0", "two", "-1"):
+        r = run_twin("simulate", REPO / "scenarios/quick.toml", "-o", tmp_path / "x", check=False,
+                     env=dict(os.environ, PYTHONPATH=str(REPO), TWIN_WORKERS=bad))
+        assert r.returncode == 2 and "Traceback" not in r.stderr
+        assert (f"environment variable TWIN_WORKERS='{bad}': expected a whole number of local processes >= 1"
+                in " ".join((r.stdout + r.stderr).split()))
+    assert not (tmp_path / "x").exists()

@@ -294,7 +294,7 @@ def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path):
     for spec in ("carriage_mass", f"{MODULE}:HEAVY"):
         out = tmp_path / f"diag-{len(results)}"
         r = twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, "--candidate", spec,
-                 "--candidate", "cogging", "--seeds", "3", "--workers", "2", "-o", out,
+                 "--candidate", "cogging", "--seeds", "3", "-o", out,
                  "--cache", tmp_path / "cache", pythonpath=path)
         assert "carriage_mass" in flat(r.stdout)
         results[spec] = json.loads((out / "diagnosis.json").read_text())

@@ -494,7 +494,8 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
 
     Args:
         s: the scenario. out_dir: campaign directory (created).
-        workers: local processes (default: all local cores; 1 runs in this process).
+        workers: local processes (default: ``TWIN_WORKERS`` or all local cores,
+            :func:`twin.executors.default_processes`; 1 runs in this process).
         on_progress: called as (done, total, unit name) after each unit.
         scheduler: address of a running Dask scheduler to send the units to instead
             (:mod:`twin.executors`); its workers must see ``out_dir`` at the same path.

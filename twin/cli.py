@@ -67,7 +67,8 @@ def _writable_dir(out: Path, what: str = "output directory") -> None:
 # Options several verbs take, defined once (typer reads the option from the ``Annotated`` type).
 ScenarioOverrides = Annotated[list[str], typer.Option(
     "--set", help="scenario override KEY=VALUE (TOML value), repeatable")]
-Workers = Annotated[int | None, typer.Option("--workers", min=1, help="local processes (default: all cores)")]
+Workers = Annotated[int | None, typer.Option("--workers", min=1, help=(
+    "local processes (default: the environment variable TWIN_WORKERS, else all cores)"))]
 Scheduler = Annotated[str | None, typer.Option(
     "--scheduler", help="address of a running dask.distributed scheduler to run on instead of local "
                         "processes; its workers must see the files at the same paths")]
@@ -993,9 +994,14 @@ def report(
 
 
 def main() -> None:
-    from twin.executors import keep_freed_memory
+    from twin.executors import ExecutorError, default_processes, keep_freed_memory
 
     keep_freed_memory()
+    try:
+        default_processes()  # a bad TWIN_WORKERS is refused before any work
+    except ExecutorError as exc:
+        console.print(f"[bold red]error:[/] {exc}")
+        sys.exit(2)
     try:
         app()
     except ScenarioError as exc:  # pragma: no cover - defensive

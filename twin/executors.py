@@ -20,11 +20,37 @@ import os
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 
-__all__ = ["ExecutorError", "Executor", "make_executor", "map_ordered", "mapper"]
+__all__ = ["ExecutorError", "Executor", "default_processes", "make_executor", "map_ordered", "mapper"]
 
 
 class ExecutorError(ValueError):
     """The executor cannot be set up (e.g. no Dask scheduler at the given address)."""
+
+
+#: The environment variable that sets how many local processes a command starts when it is not
+#: told (``--workers``): e.g. 1 on a machine whose cores are busy with other work, or under a
+#: test runner that already runs one test per core.
+WORKERS_ENV = "TWIN_WORKERS"
+
+
+def default_processes() -> int:
+    """The local processes a command starts by default: ``TWIN_WORKERS`` when set, else every
+    core (``os.cpu_count()``).
+
+    Raises:
+        ExecutorError: ``TWIN_WORKERS`` is not a whole number >= 1.
+    """
+    text = os.environ.get(WORKERS_ENV)
+    if text is None or not text.strip():
+        return os.cpu_count() or 1
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ExecutorError(f"environment variable {WORKERS_ENV}={text!r}: expected a whole number of "
+                            "local processes >= 1 (or unset: every core)")
+    return n
 
 
 class Executor:
@@ -206,7 +232,7 @@ def make_executor(processes: int | None = None, *, dask_workers: int | None = No
     """The executor for one command.
 
     Args:
-        processes: local processes (default ``os.cpu_count()``); 1 runs in this process.
+        processes: local processes (default :func:`default_processes`); 1 runs in this process.
         dask_workers: start a Dask LocalCluster of this many worker processes instead.
         scheduler: connect to the Dask scheduler at this address instead (``tcp://host:8786``).
         prefix: first part of the Dask task keys (seen on the cluster's dashboard).
@@ -218,15 +244,16 @@ def make_executor(processes: int | None = None, *, dask_workers: int | None = No
         return _Dask(scheduler=scheduler, prefix=prefix)
     if dask_workers is not None:
         return _Dask(workers=dask_workers, prefix=prefix)
-    n = processes or os.cpu_count() or 1
+    n = processes or default_processes()
     return _Serial() if n == 1 else _LocalPool(n)
 
 
 def parallel_slots(processes: int | None = None, scheduler: str | None = None) -> int:
-    """How many tasks run at once: ``processes`` local processes (default ``os.cpu_count()``),
-    or the threads of the workers the Dask cluster at ``scheduler`` has now."""
+    """How many tasks run at once: ``processes`` local processes (default
+    :func:`default_processes`), or the threads of the workers the Dask cluster at ``scheduler``
+    has now."""
     if scheduler is None:
-        return processes or os.cpu_count() or 1
+        return processes or default_processes()
     with make_executor(scheduler=scheduler) as ex:
         return max(1, sum(ex.client.nthreads().values()))  # type: ignore[attr-defined]
 
@@ -264,7 +291,7 @@ def mapper(processes: int | None = None, *, scheduler: str | None = None,
     """
     def run(fn: Callable, args: Sequence[tuple]) -> Iterator:
         n = len(args)
-        local = min(processes or os.cpu_count() or 1, max(n, 1))
+        local = min(processes or default_processes(), max(n, 1))
         with make_executor(local, scheduler=scheduler, prefix=prefix) as ex:
             futures = [ex.submit(fn, *a, key=str(i)) for i, a in enumerate(args)]
             for fut in futures:

@@ -55,7 +55,6 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 from __future__ import annotations
 
 import csv
-import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -69,6 +68,7 @@ from analysis.diagnosis.signature import PARTS
 from analysis.files import write_json
 from twin.effects import candidates
 from twin.effects.parameters import PARAMETERS
+from twin.executors import default_processes
 from twin.harness.gap_runner import (
     DEFAULT_KINDS,
     DEFAULT_SEEDS,
@@ -276,7 +276,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
-    workers = workers or os.cpu_count() or 1
+    workers = workers or default_processes()
     t0 = time.perf_counter()
     prog = (lambda what: (lambda d, n: on_progress(what, d, n))) if on_progress else (lambda what: None)
     if kinds is None:

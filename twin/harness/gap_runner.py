@@ -35,7 +35,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 import shutil
 import time
 from collections.abc import Callable
@@ -70,7 +69,7 @@ from twin.campaign import simulate_campaigns_batched
 from twin.effects import Effect, candidate, candidates
 from twin.effects import parameters as twin_parameters
 from twin.effects.parameters import PARAMETERS
-from twin.executors import make_executor, map_ordered, parallel_slots
+from twin.executors import default_processes, make_executor, map_ordered, parallel_slots
 from twin.scenario import Scenario, from_dict
 
 DEFAULT_SEEDS = 8
@@ -539,7 +538,7 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     seed's campaign. ``library`` (candidate names) wins over ``kinds``; ``scheduler``: run the
     simulations on that Dask cluster instead of ``workers`` local processes."""
     effects, artefacts = resolve_library(library, kinds)
-    workers = workers or os.cpu_count() or 1
+    workers = workers or default_processes()
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
     cand_scen, points = candidate_scenarios(seeded, effects)
@@ -624,7 +623,7 @@ def resimulate(ens: TwinEnsemble, addeds: list[list[dict]], cache: Path, workers
     grid); the post-processed signatures are cached under the campaign's entry, the campaigns
     kept only for the nominal twin's seeds (every artefact-only diagnosis of the scenario
     post-processes those)."""
-    workers = workers or os.cpu_count() or 1
+    workers = workers or default_processes()
     plans = [resim_plan(ens, a, n_seeds) if a else None for a in addeds]
     cache = Path(cache)
     plain = [s for p in plans if p and not p[1] for s in p[0]]

@@ -58,8 +58,8 @@ Output directory::
                                 per Phase I method, aggregated over all points and seeds
     OUT/plots/*.png             scores against the swept values; the ROC curves
 
-Executors: by default a ``concurrent.futures.ProcessPoolExecutor`` of ``os.cpu_count()``
-processes (started with ``spawn``; no cluster to start); ``workers=N`` a
+Executors: by default a ``concurrent.futures.ProcessPoolExecutor`` of ``TWIN_WORKERS`` (else
+``os.cpu_count()``) processes (started with ``spawn``; no cluster to start); ``workers=N`` a
 ``dask.distributed.LocalCluster(n_workers=N, threads_per_worker=1, processes=True)``;
 ``scheduler=ADDRESS`` an existing cluster, whose workers must see OUT at the same path (a shared
 file system), since each task writes its campaign directory there. Each task runs with one BLAS

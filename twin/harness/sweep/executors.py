@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import time
 
-from twin.executors import Executor, ExecutorError
+from twin.executors import Executor, ExecutorError, default_processes
 from twin.executors import make_executor as shared_executor
 from twin.harness.sweep.schema import SweepError
 from twin.scenario import from_dict
@@ -48,7 +48,7 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> E
         SweepError: no scheduler answers at ``scheduler``.
     """
     try:
-        return shared_executor(os.cpu_count() or 2, dask_workers=workers, scheduler=scheduler,
+        return shared_executor(default_processes(), dask_workers=workers, scheduler=scheduler,
                                prefix="sweep")
     except ExecutorError as exc:
         raise SweepError(str(exc)) from None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 import uuid
 from collections.abc import Callable
@@ -10,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from analysis.files import write_json
+from twin.executors import default_processes
 from twin.harness.sweep.executors import make_executor, run_task
 from twin.harness.sweep.plan import Plan, Task
 from twin.harness.sweep.plots import write_plots
@@ -47,7 +47,7 @@ def run_sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
     done_tasks = [t for t in plan.tasks if read_result(out, t) is not None]
     todo = [t for t in plan.tasks if read_result(out, t) is None]
     executor_name = ("dask:" + scheduler if scheduler else f"dask-local:{workers}" if workers
-                     else f"processes:{os.cpu_count() or 1}")
+                     else f"processes:{default_processes()}")
     _append_log(out, {"event": "start", "invocation": invocation, "time": time.time(),
                       "executor": executor_name, "tasks": len(plan.tasks), "todo": len(todo),
                       "reused": len(done_tasks)})
@@ -59,7 +59,7 @@ def run_sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
 
         try:
             summary = simulate_campaign(from_dict(plan.reference), ref_dir,
-                                        workers=workers or os.cpu_count() or 1,
+                                        workers=workers or default_processes(),
                                         on_progress=cb.reference)
         except CampaignDirectoryError as exc:
             raise SweepError(str(exc)) from None
