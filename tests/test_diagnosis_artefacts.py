@@ -147,3 +147,41 @@ def test_apply_refuses_unknown_candidates_and_missing_channels(tmp_path):
     with pytest.raises(a.ArtefactError,
                        match="/phase2/s0000/r0000/imu_acc is missing; artefact noise:imu_acc acts on it"):
         a.apply(src, tmp_path / "x.h5", {"noise:imu_acc": {"rms": 0.01}}, 0)
+
+
+def test_edits_are_not_candidates_and_apply_like_artefacts(tmp_path):
+    """The benchmark's out-of-everything recordings: edits no candidate models, applied by the
+    artefacts' machinery from the case's seed."""
+    from twin.harness.gap_runner import candidate_names
+
+    assert {e.artefact for e in a.EDITS.values()} == {"spikes", "dropouts", "lowpass"}
+    assert not set(a.EDITS) & set(a.ARTEFACTS)
+    assert not set(a.EDITS) & set(candidate_names(("physical", "artefact", "parameter")))
+    src = _recording(tmp_path / "m.h5")
+    spec = {"spikes:acc": {"rate_hz": 20.0, "amplitude": 8.0}}
+    d1, d2 = (a.apply(src, tmp_path / f"{k}.h5", spec, 3) for k in ("e1", "e2"))
+    with h5py.File(src) as f0, h5py.File(d1) as f1, h5py.File(d2) as f2:
+        diff = f1["phase1/c000000/acc1"][...].astype(float) - f0["phase1/c000000/acc1"][...]
+        np.testing.assert_array_equal(f1["phase1/c000000/acc1"][...], f2["phase1/c000000/acc1"][...])
+        np.testing.assert_array_equal(f1["phase1/c000000/torque"][...], f0["phase1/c000000/torque"][...])
+    hit = np.abs(diff) > 1.0
+    assert 1 <= hit.any(axis=1).sum() <= 30  # 20 per s over 2000 samples at 10 kHz: 4 expected
+    np.testing.assert_allclose(np.abs(diff[hit]), 8.0, rtol=1e-5)
+
+
+def test_spikes_dropouts_and_lowpass_transforms():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(200_000, 2))
+    y = a.spikes(x, 10_000.0, 50.0, 5.0, np.random.default_rng(1))
+    n_hit = int((np.abs(y - x) > 0).any(axis=1).sum())
+    assert n_hit == pytest.approx(50.0 * 20.0, rel=0.1)  # 20 s at 50 per s
+    ramp = np.arange(100_000, dtype=float)
+    z = a.dropouts(ramp, 10_000.0, 2.0, 10.0, np.random.default_rng(2))
+    held = np.flatnonzero(np.diff(z) == 0) + 1
+    assert len(held) >= 100 and np.all(z <= ramp) and z[0] == 0.0  # 10 gaps of 100 samples, expected
+    t = np.arange(20_000) / 10_000.0
+    # 4th-order Butterworth, bilinear transform: |H| = 1/√(1 + (tan(πf/fs)/tan(πfc/fs))⁸)
+    warped = np.tan(np.pi * 600.0 / 1e4) / np.tan(np.pi * 300.0 / 1e4)
+    for f_hz, gain in ((30.0, 1.0), (600.0, 1.0 / np.sqrt(1.0 + warped ** 8))):
+        out = a.lowpass(np.sin(2 * np.pi * f_hz * t), 10_000.0, 300.0)
+        assert np.std(out[5000:]) * np.sqrt(2) == pytest.approx(gain, rel=0.02), f_hz

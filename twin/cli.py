@@ -857,6 +857,9 @@ def diagnose_benchmark(
     parameters: int = typer.Option(0, "--parameters", min=0, help=(
         "cases per twin parameter and magnitude (0: none); the diagnosis then tries the twin "
         "parameters too")),
+    edits: int = typer.Option(2, "--edits", min=0, help=(
+        "cases per recording edit no candidate models (impulses, lost samples, a low-pass; 0: "
+        "none)")),
     rng_seed: int = typer.Option(2026, "--rng-seed", help="seed of the case plan"),
     seeds: TwinSeeds = 8,
     workers: Workers = None,
@@ -874,7 +877,7 @@ def diagnose_benchmark(
     except ScenarioError as exc:
         _fail(str(exc))
     cases = plan_cases(rng_seed, per_cell, nulls, open_set, pairs, artefacts_per_cell=artefacts,
-                       parameters_per_cell=parameters)
+                       parameters_per_cell=parameters, edits_per_cell=edits)
     console.print(f"benchmark of the gap diagnosis: {len(cases)} cases on scenario "
                   f"[bold]{s.name}[/] -> {out}")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -899,7 +902,10 @@ def diagnose_benchmark(
                   f"{fmt(res['median_heldout_shrink'])} ({resim}), null cases correct "
                   f"{fmt(res['null_correct_fraction'])}, open-set unexplained "
                   f"{fmt(res['open_set_correct_fraction'])} (and no wrong effect removing half "
-                  f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), pairs both in top 3 "
+                  f"the gap: {fmt(res['open_set_no_wrong_effect_fraction'])}), out of everything "
+                  f"(physics withheld, recording edits) unexplained "
+                  f"{fmt(res['out_of_everything_unexplained_fraction'])}, false attributions "
+                  f"{fmt(res['false_attribution_rate'])}, pairs both in top 3 "
                   f"{fmt(res['pair_both_top3_fraction'])}; top-1 per kind: "
                   + ", ".join(f"{k} {fmt(v)}" for k, v in res["per_kind_top1"].items() if v is not None)
                   + f"; wrote {out / 'benchmark.json'}")

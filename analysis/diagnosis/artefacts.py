@@ -132,6 +132,38 @@ def clip(x: np.ndarray, limit: float) -> np.ndarray:
     return np.clip(x, -limit, limit) if limit > 0 else x.copy()
 
 
+def spikes(x: np.ndarray, fs_hz: float, rate_hz: float, amplitude: float,
+           rng: np.random.Generator) -> np.ndarray:
+    """x plus one-sample impulses of ± ``amplitude`` at random instants, ``rate_hz`` per second
+    on average (Poisson), each column its own sign: an intermittent contact, an electrostatic
+    discharge."""
+    x = np.asarray(x, float).copy()
+    k = int(rng.poisson(rate_hz * x.shape[0] / fs_hz))
+    at = rng.integers(0, x.shape[0], k)
+    np.add.at(x, at, amplitude * rng.choice([-1.0, 1.0], size=(k, *x.shape[1:])))
+    return x
+
+
+def dropouts(x: np.ndarray, fs_hz: float, rate_hz: float, length_ms: float,
+             rng: np.random.Generator) -> np.ndarray:
+    """x with gaps where the acquisition lost samples and held the last good value: ``rate_hz``
+    gaps per second on average (Poisson), each ``length_ms`` long."""
+    x = np.asarray(x, float).copy()
+    n, m = x.shape[0], max(1, int(round(length_ms * 1e-3 * fs_hz)))
+    for start in np.sort(rng.integers(1, max(n - 1, 2), int(rng.poisson(rate_hz * n / fs_hz)))):
+        x[start:start + m] = x[start - 1]
+    return x
+
+
+def lowpass(x: np.ndarray, fs_hz: float, cutoff_hz: float) -> np.ndarray:
+    """x through a causal 4th-order Butterworth low-pass at ``cutoff_hz`` (scipy.signal.butter,
+    sosfilt along the samples): an anti-alias filter set too low, a long cable's capacitance."""
+    from scipy import signal
+
+    sos = signal.butter(4, min(cutoff_hz, 0.45 * fs_hz), fs=fs_hz, output="sos")
+    return signal.sosfilt(sos, np.asarray(x, float), axis=0)
+
+
 # ---------------------------------------------------------------------------------------------
 # Candidates
 
@@ -316,17 +348,59 @@ def _candidates() -> list[Artefact]:
 ARTEFACTS: dict[str, Artefact] = {a.name: a for a in _candidates()}
 
 
+def _edits() -> list[Artefact]:
+    out: list[Artefact] = []
+    spike_amp = {"acc": ("m/s²", 2.0, 10.0), "torque": ("N·m", 0.2, 1.0)}
+    for t, (unit, lo, hi) in spike_amp.items():
+        out.append(Artefact(
+            "spikes", TARGETS[t], f"impulses on {TARGETS[t].words}",
+            (CandidateParam("rate_hz", low=2.0, high=20.0, grid=(2.0, 20.0), log=True, label="impulse rate",
+                            unit="per s", digits=2),
+             _amp("amplitude", unit, (lo, hi), lo, hi, "impulse amplitude")),
+            lambda x, c: spikes(x, c["fs_hz"], c["rate_hz"], c["amplitude"], c["rng"]),
+            f"impulses of {{amplitude}} on {TARGETS[t].words}", "intermittent contact"))
+    for t in ("acc", "torque", "imu_acc"):
+        out.append(Artefact(
+            "dropouts", TARGETS[t], f"lost samples held on {TARGETS[t].words}",
+            (CandidateParam("rate_hz", low=0.5, high=4.0, grid=(0.5, 4.0), log=True, label="gap rate",
+                            unit="per s", digits=2),
+             CandidateParam("length_ms", low=5.0, high=50.0, grid=(5.0, 50.0), log=True, label="gap length",
+                            unit="ms", digits=2)),
+            lambda x, c: dropouts(x, c["fs_hz"], c["rate_hz"], c["length_ms"], c["rng"]),
+            f"gaps of {{length_ms}} on {TARGETS[t].words}", "acquisition buffer overrun"))
+    for t, (lo, hi) in {"acc": (200.0, 800.0), "imu_acc": (20.0, 80.0)}.items():
+        out.append(Artefact(
+            "lowpass", TARGETS[t], f"low-pass filter on {TARGETS[t].words}",
+            (CandidateParam("cutoff_hz", low=lo, high=hi, grid=(lo, hi), log=True, label="cut-off",
+                            unit="Hz", digits=3),),
+            lambda x, c: lowpass(x, c["fs_hz"], c["cutoff_hz"]),
+            f"{TARGETS[t].words} low-passed at {{cutoff_hz}}", "anti-alias filter set too low"))
+    return out
+
+
+#: Edits of a recording that no candidate models (impulses, lost samples, a low-pass filter),
+#: by name (``edit:target``): the blind benchmark's out-of-everything recordings. Never a
+#: candidate of the diagnosis; :func:`apply` applies them as it applies the artefacts.
+EDITS: dict[str, Artefact] = {a.name: a for a in _edits()}
+
+
 def rng_for(seed: int, name: str) -> np.random.Generator:
     """The generator of an artefact's random draws: the scenario's seed and the candidate's
     name (the same draws for the same seed and candidate, whatever else is applied)."""
     return np.random.default_rng([int(seed) % 2**32, zlib.crc32(name.encode())])
 
 
+def lookup(name: str) -> Artefact:
+    """The artefact candidate or the recording edit (:data:`EDITS`) called ``name``."""
+    if name in ARTEFACTS:
+        return ARTEFACTS[name]
+    if name in EDITS:
+        return EDITS[name]
+    raise ArtefactError(f"unknown signal artefact {name!r}; the candidates are {', '.join(ARTEFACTS)}")
+
+
 def _check(name: str, values: dict[str, float]) -> Artefact:
-    if name not in ARTEFACTS:
-        raise ArtefactError(f"unknown signal artefact {name!r}; the candidates are "
-                            f"{', '.join(ARTEFACTS)}")
-    a = ARTEFACTS[name]
+    a = lookup(name)
     want = {p.name for p in a.params}
     if set(values) != want:
         raise ArtefactError(f"artefact {name}: parameters {sorted(values)}; expected {sorted(want)}")

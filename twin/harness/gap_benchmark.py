@@ -21,7 +21,12 @@ Cases (:func:`plan_cases`, every draw from ``rng_seed``):
   key's factor drawn away from 1 by at least 15 % (side and log distance within the prior
   range, "low" nearer 1, "high" farther), ``parameters_per_cell`` cases per candidate and
   magnitude (none by default: ``--parameters``); the diagnosis then tries the twin
-  parameters too.
+  parameters too;
+- ``edit``: an edit of the recording no candidate models (:data:`analysis.diagnosis.artefacts.EDITS`:
+  impulses, lost samples held, a low-pass filter) on the nominal twin's campaign with the
+  case's seed, post-processed as the artefact cases, its target drawn; ``edits_per_cell`` cases
+  per edit, drawn in the upper half of each parameter's range (as the open set: the gap is
+  there, the question is whether the diagnosis invents an explanation).
 
 Every case has its own seed (10 000 + case number), different from the twin's seeds. The
 diagnosis sees only the signatures computed from each recording's ``measurements.h5``; the
@@ -37,6 +42,12 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
   gap); ``open_set_no_wrong_effect_fraction``, stricter: and no wrong effect added that removes
   ``HIGH_SCORE`` (50 %) or more of the held-out gap;
 - ``pair_both_top3_fraction``: pair cases with both effects among the first three of the ranking;
+- ``out_of_everything_unexplained_fraction``: open-set and edit cases (nothing in the library
+  explains them) whose verdict is "unexplained gap remains"; per kind in
+  ``per_out_of_everything_unexplained``;
+- ``false_attribution_rate``: cases where a candidate that was not injected is added and its
+  held-out gain is ``HIGH_SCORE`` (50 %) or more of the recording's held-out gap, over all cases; per case kind in
+  ``per_case_kind_false_attribution``;
 - ``median_heldout_shrink_resimulated``, ``per_kind_median_heldout_shrink_resimulated``: the
   same on the twin re-simulated with each case's added candidates (the first ``resim_seeds``
   twin seeds; the verdicts follow it), ``per_kind_median_shrink_difference`` the median
@@ -62,7 +73,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.diagnosis.artefacts import ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT, KIND_PARAMETER
+from analysis.diagnosis.artefacts import ARTEFACTS, EDITS, KIND_ARTEFACT, KIND_EFFECT, KIND_PARAMETER
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
 from analysis.files import write_json
@@ -87,7 +98,10 @@ from twin.scenario import Scenario
 #: Twin seeds the benchmark re-simulates each case with (fewer than the spread's K: the
 #: re-simulation costs that many campaigns per case with candidates added; docs/gap-diagnosis.md).
 DEFAULT_RESIM_SEEDS = 2
-HIGH_SCORE = 0.5  # the stricter open-set score: no wrong effect removing this much of the gap
+HIGH_SCORE = 0.5  # a false attribution: a wrong candidate added that removes this much of the gap
+#: The cases nothing in the library explains: physics withheld from the library (open set) and
+#: edits of the recording no candidate models (:data:`analysis.diagnosis.artefacts.EDITS`).
+OUT_OF_EVERYTHING = {"open_set": "physics withheld", "edit": "recording edit"}
 CASE_SEED0 = 10_000
 
 
@@ -109,10 +123,11 @@ class Case:
 
 def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_set: int = 5,
                pairs: int = 5, library: list[str] | None = None,
-               artefacts_per_cell: int = 1, parameters_per_cell: int = 0) -> list[Case]:
+               artefacts_per_cell: int = 1, parameters_per_cell: int = 0,
+               edits_per_cell: int = 2) -> list[Case]:
     """The benchmark's cases (deterministic in ``rng_seed``; the artefact cases, then the
-    parameter cases come last and draw after the others, so adding them changes no other
-    case)."""
+    parameter cases, then the recording edits come last and draw after the others, so adding
+    them changes no other case)."""
     effects = candidates()
     lib = list(effects) if library is None else list(library)
     rng = np.random.default_rng(rng_seed)
@@ -149,6 +164,15 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
         for mag in ("low", "high"):
             for _ in range(parameters_per_cell):
                 add("parameter", {name: par.draw(rng, mag)}, mag)
+    edit_kinds: dict[str, list[str]] = {}
+    for name, ed in EDITS.items():
+        edit_kinds.setdefault(ed.artefact, []).append(name)
+    for names in edit_kinds.values():
+        # As for the open set, the upper half of each range: the gap is clearly there, the
+        # question is only whether the diagnosis invents an explanation.
+        for _ in range(edits_per_cell):
+            name = str(rng.choice(names))
+            add("edit", {}, "high", artefacts={name: EDITS[name].draw(rng, "high")})
     return cases
 
 
@@ -182,12 +206,16 @@ def _score_case(case: Case, res: dict) -> dict:
         row["correct_or_not_told_apart"] = bool(row["correct"] or injected in row["alternatives"])
     if case.kind == "null":
         row["correct"] = res["verdict"] == NO_GAP
-    elif case.kind == "open_set":
+    elif case.kind in OUT_OF_EVERYTHING:
         row["correct"] = res["verdict"] == UNEXPLAINED
         row["no_wrong_effect"] = row["correct"] and not any(
             a["heldout_reduction"] >= HIGH_SCORE for a in added)
     elif case.kind == "pair":
         row["correct"] = bool(res["verdict"] != NO_GAP and set(case.effects) <= set(ranking[:3]))
+    injected = set(case.effects) | set(case.artefacts)
+    gap = res["heldout_gap_before"]
+    row["false_attribution"] = bool(gap > 0 and any(
+        a["effect"] not in injected and a["gain"] >= HIGH_SCORE * gap for a in added))
     return row
 
 
@@ -340,6 +368,15 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                                                              if r["kind"] == "open_set"]))
                                               if any(r["kind"] == "open_set" for r in rows) else None),
         "pair_both_top3_fraction": _fraction(rows, "pair"),
+        "out_of_everything_unexplained_fraction": (
+            float(np.mean([r["correct"] for r in rows if r["kind"] in OUT_OF_EVERYTHING]))
+            if any(r["kind"] in OUT_OF_EVERYTHING for r in rows) else None),
+        "per_out_of_everything_unexplained": {words: _fraction(rows, kind)
+                                              for kind, words in OUT_OF_EVERYTHING.items()},
+        "false_attribution_rate": float(np.mean([r["false_attribution"] for r in rows])) if rows else None,
+        "per_case_kind_false_attribution": {
+            kind: float(np.mean([r["false_attribution"] for r in rows if r["kind"] == kind]))
+            for kind in dict.fromkeys(r["kind"] for r in rows)},
         "kinds": sorted({c.kind for c in ens.candidates}),
         "per_kind_top1": {KIND_EFFECT: _fraction(rows, "single"), KIND_ARTEFACT: _fraction(rows, "artefact"),
                           KIND_PARAMETER: _fraction(rows, "parameter")},

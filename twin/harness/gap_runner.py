@@ -314,7 +314,7 @@ def _artefact_batch(h5: str, specs: list[str], paths: list[str], base_path: str,
     with threadpool_limits(1):
         for spec_json, path in zip(specs, paths, strict=True):
             spec = json.loads(spec_json)
-            domains = tuple(sorted({d for n in spec for d in ARTEFACTS[n].target.domains}))
+            domains = tuple(sorted({d for n in spec for d in art.lookup(n).target.domains}))
             tmp = Path(path).with_suffix(".tmp.h5")
             art.apply(Path(h5), tmp, spec, seed)
             try:
