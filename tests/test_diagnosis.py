@@ -160,10 +160,9 @@ def test_benchmark_signal_artefacts_named_first(benchmark):
 def test_benchmark_out_of_everything_and_false_attributions(benchmark):
     """Issue 15, item 4: the cases nothing in the library explains (5 physical effects withheld,
     6 recording edits no candidate models: impulses, lost samples, a low-pass, each twice) are
-    "unexplained" in at least 90 % (10 of 11 measured: a torque held for 45 ms at 3.6 gaps per s
-    leaves no significant gap, docs/gap-diagnosis.md); the false-attribution rate (a candidate
-    not injected added with half the gap or more) is the mean of the cases' flags, none among
-    the nulls, single effects and edits."""
+    "unexplained" in at least 90 % (11 of 11 measured, docs/gap-diagnosis.md); the
+    false-attribution rate (a candidate not injected added with half the gap or more) is the
+    mean of the cases' flags, none among the nulls, single effects and edits."""
     _, res, _ = benchmark
     edits = [c for c in res["cases"] if c["kind"] == "edit"]
     assert len(edits) == 6 and sorted({c["injected"][0].split(":")[0] for c in edits}) == [

@@ -268,18 +268,24 @@ def test_mis_set_parameter_against_every_candidate(tmp_path, full_cache, sets, n
 
 
 def test_benchmark_plan_adds_parameter_cases_last():
-    """`--parameters 1`: one case per twin parameter and magnitude after every other case,
-    which stay as they were (the plan is drawn from its seed)."""
+    """`--parameters 1`: one case per twin parameter and magnitude after the physical and
+    artefact cases, which stay as they were (the plan is drawn from its seed), before the
+    recording edits, which keep their draws (a stream of their own)."""
     from twin.effects.parameters import PARAMETERS
     from twin.harness.gap_benchmark import plan_cases
 
     base = plan_cases(2026)
     more = plan_cases(2026, parameters_per_cell=1)
-    assert more[:len(base)] == base
-    extra = more[len(base):]
-    assert len(extra) == 2 * len(PARAMETERS) and {c.kind for c in extra} == {"parameter"}
+    n = sum(c.kind != "edit" for c in base)
+    assert more[:n] == base[:n]
+    extra = more[n:n + 2 * len(PARAMETERS)]
+    assert {c.kind for c in extra} == {"parameter"}
     assert {(next(iter(c.effects)), c.magnitude) for c in extra} == {
         (n, m) for n in PARAMETERS for m in ("low", "high")}
+    edits = [c for c in more if c.kind == "edit"]
+    assert [c.artefacts for c in edits] == [c.artefacts for c in base[n:]] and len(edits) == 6
+    no_edits = plan_cases(2026, parameters_per_cell=1, edits_per_cell=0)
+    assert more[:len(no_edits)] == no_edits  # the parameter cases as before the edits existed
 
 
 @pytest.mark.slow

@@ -126,8 +126,8 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
                artefacts_per_cell: int = 1, parameters_per_cell: int = 0,
                edits_per_cell: int = 2) -> list[Case]:
     """The benchmark's cases (deterministic in ``rng_seed``; the artefact cases, then the
-    parameter cases, then the recording edits come last and draw after the others, so adding
-    them changes no other case)."""
+    parameter cases come after the others and draw after them, so adding them changes no case
+    before; the recording edits come last, drawn from a stream of their own)."""
     effects = candidates()
     lib = list(effects) if library is None else list(library)
     rng = np.random.default_rng(rng_seed)
@@ -167,12 +167,15 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
     edit_kinds: dict[str, list[str]] = {}
     for name, ed in EDITS.items():
         edit_kinds.setdefault(ed.artefact, []).append(name)
+    # The edits draw from a stream of their own: adding parameter cases before them changes
+    # their ids and seeds, not what they are.
+    edit_rng = np.random.default_rng([rng_seed, 1])
     for names in edit_kinds.values():
         # As for the open set, the upper half of each range: the gap is clearly there, the
         # question is only whether the diagnosis invents an explanation.
         for _ in range(edits_per_cell):
-            name = str(rng.choice(names))
-            add("edit", {}, "high", artefacts={name: EDITS[name].draw(rng, "high")})
+            name = str(edit_rng.choice(names))
+            add("edit", {}, "high", artefacts={name: EDITS[name].draw(edit_rng, "high")})
     return cases
 
 
