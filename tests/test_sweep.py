@@ -1,8 +1,9 @@
 """``twin sweep`` (issue 5, checks 2, 3, 4 and 7).
 
 One tiny sweep (Phase II only: 2 sessions of 1 run at 100 mm/s over 200 mm, 1 s dwell; 2 backlash steps x
-2 IMU noise levels x 2 seeds = 8 campaigns) is run once with the default executor (all local
-cores); that table is the reference of the other runs:
+2 IMU noise levels x 2 seeds = 8 campaigns) is run once with the default executor (local
+processes, ``TWIN_WORKERS`` of them: 1 under the suite, tests/conftest.py); that table is the
+reference of the other runs:
 - (2) the same sweep on ``--workers 2`` (a dask LocalCluster) gives an identical table;
 - (3) on a LocalCluster started here (``--scheduler``), one worker SIGKILLed while it runs a
   point: the sweep completes with every point and an identical table;
