@@ -145,14 +145,15 @@ def test_benchmark_files_and_table(benchmark):
 
 def test_benchmark_signal_artefacts_named_first(benchmark):
     """Each of the 7 signal artefacts at two magnitudes on a twin recording (post-processed): the
-    injected artefact, on its target, is the first added candidate in at least 11 of 14 cases
-    (86 % measured, docs/gap-diagnosis.md); the physical single cases keep their top-1."""
+    injected artefact, on its target, is the first added candidate in at least 13 of 14 cases
+    (issue 15's 90 %; 13 measured, docs/gap-diagnosis.md); the physical single cases keep their
+    top-1."""
     _, res, _ = benchmark
     arts = [c for c in res["cases"] if c["kind"] == "artefact"]
     assert len(arts) == 14
     assert {c["injected"][0].split(":")[0] for c in arts} == {
         "gain", "noise", "mains_line", "order_line", "bias_drift", "time_offset", "clipping"}
-    assert sum(c["correct"] for c in arts) >= 11, [(c["id"], c["injected"], c["added"]) for c in arts]
+    assert sum(c["correct"] for c in arts) >= 13, [(c["id"], c["injected"], c["added"]) for c in arts]
     assert res["per_kind_top1"]["signal artefact"] == pytest.approx(np.mean([c["correct"] for c in arts]))
     assert res["per_kind_top1"]["physical effect"] == res["top1_accuracy"] >= 0.8
 
@@ -481,3 +482,30 @@ def test_region_bootstrap_interval_covers_what_the_regions_disagree_on():
     assert at.bootstrap_interval(cand, prefer, sd, regions)["p"] == boot
     agree = at.bootstrap_interval(cand, np.full_like(prefer, 2.0), sd, regions)["p"]
     assert agree[1] - agree[0] < 0.02
+
+
+def test_a_response_averaged_over_seeds_is_not_penalised_within_its_own_spread():
+    """A candidate that removes the gap of the significant statistics S and overshoots a region
+    outside S: with a one-seed response that region counts as made worse (the penalty exceeds
+    the gain, the candidate is not significant); with a response averaged over seeds whose
+    seed-to-seed spread covers the overshoot (an order line added coherently to each seed's own
+    vibration), it does not, and the same fit is added."""
+    from analysis.diagnosis import attribution as at
+
+    regions = [Region("phase1", "s", "band", "x", float(h)) for h in range(2)] + \
+              [Region("phase1", "o", "band", "y", float(h)) for h in range(10)]
+    sd = np.ones(12)
+    z = np.r_[np.full(2, 6.0), np.full(10, 3.0)]  # S: region "s"; "o" shows it too
+    delta = np.r_[np.full(2, 6.0), np.full(10, 9.0)][None, :]  # one grid point: overshoots "o" by 6 sd
+    select = np.arange(12) < 2
+    one_seed = at.CandidateResponse("c", [at.ParamAxis("p", (1.0,))], {"cal": delta, "heldout": delta})
+    f1 = at.fit_candidate(one_seed, z, z, {"cal": sd, "heldout": sd}, select, 0.01, regions=regions)
+    assert f1.gain == pytest.approx(72.0) and f1.heldout_after == pytest.approx(0.0)
+    assert [w["channel"] for w in f1.worse] == ["o"] and f1.penalty == pytest.approx(270.0)
+    assert not f1.significant(0.1)
+    spread = np.r_[np.zeros(2), np.full(10, 8.0)][None, :]
+    averaged = at.CandidateResponse("c", [at.ParamAxis("p", (1.0,))], {"cal": delta, "heldout": delta},
+                                    spread={"cal": spread, "heldout": spread})
+    f2 = at.fit_candidate(averaged, z, z, {"cal": sd, "heldout": sd}, select, 0.01, regions=regions)
+    assert f2.params == f1.params and f2.gain == f1.gain
+    assert f2.worse == [] and f2.penalty == 0.0 and f2.significant(0.1)

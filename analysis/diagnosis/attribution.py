@@ -103,13 +103,17 @@ class CandidateResponse:
 
     name: candidate name; params: its axes; delta: {"cal": array, "heldout": array}, each of
     shape (*[len(a.values) for a in params], n) with the change of every statistic on the grid;
-    kind: "physical effect" (simulated) or "signal artefact" (applied to a simulated recording).
+    kind: "physical effect" (simulated) or "signal artefact" (applied to a simulated recording);
+    spread: for a response that is the mean of its change over the twin's seeds, the standard
+    deviation of that change from seed to seed, same shapes as ``delta`` (None: one seed's
+    response): how far one recording's change may stand from the mean.
     """
 
     name: str
     params: list[ParamAxis]
     delta: dict[str, np.ndarray]
     kind: str = "physical effect"
+    spread: dict[str, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         shape = tuple(len(a.values) for a in self.params)
@@ -355,6 +359,11 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
     worse, penalty = [], 0.0
     if regions is not None:
         z_after = z_ho - d_ho / sd["heldout"]
+        if cand.spread is not None:
+            # A response averaged over the seeds: the recording's change is one seed's draw around
+            # it, so a statistic is only made worse beyond that spread as well as the twin's.
+            s_ho = _interpolator(cand.params, np.nan_to_num(cand.spread["heldout"]))(p_best[None, :])[0]
+            z_after = z_after * sd["heldout"] / np.sqrt(sd["heldout"] ** 2 + s_ho ** 2)
         worse = worse_regions(z_ho, z_after, regions, alpha)
         penalty = _penalty(z_ho, z_after, regions, select, worse)
     return Fit(name=cand.name, params=params,

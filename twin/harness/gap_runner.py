@@ -438,6 +438,7 @@ def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, wo
     ensure_campaigns([seeded[k] for k in range(1, n_bases) if not artefact_cached(seeded[k], plans[k][0], cache)],
                      cache, workers, scheduler)
     sums: dict[str, dict[str, np.ndarray]] = {}
+    squares: dict[str, dict[str, np.ndarray]] = {}
     for k, (specs, where) in enumerate(plans):
         # The first seed's campaign stays in the cache (the artefact grid of a later version is
         # post-processed from it); the others only serve the seed-dependent artefacts.
@@ -446,17 +447,24 @@ def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, wo
         n = base_sig["cal"].values.size
         for name in names:
             if k == 0 or ARTEFACTS[name].seed_dependent:
-                sums.setdefault(name, {p: np.zeros(tuple(len(q.grid) for q in ARTEFACTS[name].params) + (n,))
-                                       for p in PARTS})
+                shape = tuple(len(q.grid) for q in ARTEFACTS[name].params) + (n,)
+                sums.setdefault(name, {p: np.zeros(shape) for p in PARTS})
+                squares.setdefault(name, {p: np.zeros(shape) for p in PARTS})
         for (name, index), sig in zip(where, sigs, strict=True):
             for p in PARTS:
-                sums[name][p][index] += sig[p].values - base_sig[p].values
+                change = sig[p].values - base_sig[p].values
+                sums[name][p][index] += change
+                squares[name][p][index] += change ** 2
     out = []
     for name in names:
         k = n_bases if ARTEFACTS[name].seed_dependent else 1
+        mean = {p: sums[name][p] / k for p in PARTS}
+        # the seed-to-seed standard deviation of the change (ddof 1) of a response averaged over seeds
+        spread = ({p: np.sqrt(np.maximum(squares[name][p] - k * mean[p] ** 2, 0.0) / (k - 1)) for p in PARTS}
+                  if k > 1 else None)
         out.append(CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed)
                                             for q in ARTEFACTS[name].params],
-                                     {p: sums[name][p] / k for p in PARTS}, kind=KIND_ARTEFACT))
+                                     mean, kind=KIND_ARTEFACT, spread=spread))
     return out
 
 
