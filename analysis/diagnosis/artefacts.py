@@ -16,7 +16,8 @@ The candidates (:data:`ARTEFACTS`, one per artefact and target; name ``artefact:
 - ``gain``: every column of the target times (1 + error): a sensitivity error, %;
 - ``noise``: white Gaussian noise of a given RMS added to every column (a noisier channel), drawn
   from the scenario's seed;
-- ``mains_line``: a sine of fixed frequency (50/60 Hz and harmonics) on every column, the same Hz
+- ``mains_line``: a sine of fixed frequency (50/60 Hz and harmonics) on every column, its phase
+  drawn for each capture or run (an acquisition does not start in step with the mains), the same Hz
   at every speed and at standstill: electrical pickup;
 - ``order_line``: a sine locked to the motor angle (the integral of the Phase I ``speed``
   channel, rad): its frequency is the order times the rotational frequency and follows the
@@ -53,8 +54,8 @@ KIND_EFFECT = "physical effect"
 KIND_ARTEFACT = "signal artefact"
 KIND_PARAMETER = "parameter"  # a twin parameter set wrong (twin/effects/parameters.py)
 #: Bump when a transform or a candidate's grid changes: the harness caches artefact signatures
-#: on it.
-ARTEFACT_VERSION = 1
+#: on it (2: the mains line's phase drawn per capture or run).
+ARTEFACT_VERSION = 2
 
 
 class ArtefactError(ValueError):
@@ -304,7 +305,8 @@ def _candidates() -> list[Artefact]:
         out.append(Artefact(
             "mains_line", TARGETS[t], f"fixed-frequency line on {TARGETS[t].words}",
             (amp, _line_position("frequency_hz", _MAINS_HZ, "line frequency", "Hz", digits=3)),
-            lambda x, c: fixed_line(x, c["fs_hz"], c["amplitude"], c["frequency_hz"]),
+            lambda x, c: fixed_line(x, c["fs_hz"], c["amplitude"], c["frequency_hz"],
+                                    float(c["rng"].uniform(0.0, 2.0 * np.pi))),
             f"a {{frequency_hz}} line of {{amplitude}} on {TARGETS[t].words} at every speed: "
             "electrical pickup", "mains pickup on signal lines (IEC 61000-4-16)", amplitude="amplitude"))
         out.append(Artefact(
