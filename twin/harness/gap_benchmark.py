@@ -39,8 +39,7 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 - ``null_correct_fraction``: null cases with verdict "no significant gap";
 - ``open_set_correct_fraction``: open-set cases whose verdict is "unexplained gap remains" (a
   wrong effect may be added, but not presented as the explanation: that would take 90 % of the
-  gap); ``open_set_no_wrong_effect_fraction``, stricter: and no wrong effect added that removes
-  ``HIGH_SCORE`` (50 %) or more of the held-out gap;
+  gap); ``open_set_no_wrong_effect_fraction``, stricter: and no false attribution (below);
 - ``pair_both_top3_fraction``: pair cases with both effects among the first three of the ranking;
 - ``out_of_everything_unexplained_fraction``: open-set and edit cases (nothing in the library
   explains them) whose verdict is "unexplained gap remains"; per kind in
@@ -207,18 +206,17 @@ def _score_case(case: Case, res: dict) -> dict:
         injected = next(iter(case.artefacts or case.effects))
         row["alternatives"] = [a["effect"] for a in (added[0].get("alternatives", []) if added else [])]
         row["correct_or_not_told_apart"] = bool(row["correct"] or injected in row["alternatives"])
+    truth = set(case.effects) | set(case.artefacts)
+    gap = res["heldout_gap_before"]
+    row["false_attribution"] = bool(gap > 0 and any(
+        a["effect"] not in truth and a["gain"] >= HIGH_SCORE * gap for a in added))
     if case.kind == "null":
         row["correct"] = res["verdict"] == NO_GAP
     elif case.kind in OUT_OF_EVERYTHING:
         row["correct"] = res["verdict"] == UNEXPLAINED
-        row["no_wrong_effect"] = row["correct"] and not any(
-            a["heldout_reduction"] >= HIGH_SCORE for a in added)
+        row["no_wrong_effect"] = row["correct"] and not row["false_attribution"]
     elif case.kind == "pair":
         row["correct"] = bool(res["verdict"] != NO_GAP and set(case.effects) <= set(ranking[:3]))
-    injected = set(case.effects) | set(case.artefacts)
-    gap = res["heldout_gap_before"]
-    row["false_attribution"] = bool(gap > 0 and any(
-        a["effect"] not in injected and a["gain"] >= HIGH_SCORE * gap for a in added))
     return row
 
 
