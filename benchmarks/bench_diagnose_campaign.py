@@ -92,6 +92,8 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--budget-minutes", type=float, default=60.0)
     ap.add_argument("--measure", action="store_true")
+    ap.add_argument("--response-seeds", type=int, default=3,
+                    help="twin seeds of each candidate's response (twin diagnose --response-seeds)")
     a = ap.parse_args()
     cache = a.out / "cache"
     paper = load(PAPER)
@@ -102,8 +104,9 @@ def main() -> None:
     print(f"calibration: {spent:.1f} s (0: from the cache); unit costs (s, one worker): {costs}")
     report: dict = {"unit_costs_s": costs.__dict__, "calibration_s": spent, "budgets": []}
     for w in sorted({a.workers, 2}):
-        work = workload(paper, 8, None, None, None, w)
-        print(f"workload (default kinds, 8 seeds, 8 re-simulation seeds) on {w} worker(s): {work}")
+        work = workload(paper, 8, None, None, None, w, a.response_seeds)
+        print(f"workload (default kinds, 8 seeds, {a.response_seeds} response seeds, 8 re-simulation seeds) "
+              f"on {w} worker(s): {work}")
         for b in BUDGETS_MIN:
             sub = subset.choose(inv, costs, work, b * 60.0)
             print(f"  budget {b:5d} min: {describe(sub)}, estimated {sub.estimated_s / 60:.1f} min"
@@ -112,13 +115,13 @@ def main() -> None:
                                       "estimated_minutes": sub.estimated_s / 60, "fits": sub.fits})
         whole = subset.ladder(inv)[-1]
         print(f"  the whole recording: estimated {subset.cost_s(whole, costs, work) / 3600:.1f} h")
-    work = workload(paper, 8, None, None, None, a.workers)
+    work = workload(paper, 8, None, None, None, a.workers, a.response_seeds)
     chosen = subset.choose(inv, costs, work, a.budget_minutes * 60.0)
     size = subset.Size(len(chosen.samples), chosen.captures, len(chosen.sessions), chosen.runs)
     print(f"chosen for {a.budget_minutes:g} min on {a.workers} worker(s): {describe(chosen)}; on N workers "
           "it takes, and within the same budget N workers diagnose:")
     for n in WORKERS:
-        wn = workload(paper, 8, None, None, None, n)
+        wn = workload(paper, 8, None, None, None, n, a.response_seeds)
         est = subset.cost_s(size, costs, wn)
         more = subset.choose(inv, costs, wn, a.budget_minutes * 60.0)
         whole = subset.cost_s(subset.ladder(inv)[-1], costs, wn)
@@ -149,6 +152,7 @@ def main() -> None:
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "twin.cli", "diagnose", str(real), "--scenario", str(PAPER),
                            "--budget-minutes", f"{a.budget_minutes:g}", "--workers", str(a.workers),
+                           "--response-seeds", str(a.response_seeds),
                            "--cache", str(cache), "-o", str(a.out / "diagnosis")],
                           cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), capture_output=True, text=True)
     wall = time.perf_counter() - t0

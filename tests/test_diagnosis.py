@@ -446,17 +446,24 @@ def test_interval_coverage_counts_the_injected_value_inside_the_stated_interval(
     assert cov["n"] == {"physical effect": 2, "signal artefact": 1, "parameter": 0}
     assert cov["per_parameter"] == {"cogging.torque_Nm": 1.0, "gain:acc1.error_pct": 1.0, "thermal_growth.rise_K": 0.0}
     assert cov["missed"] == [["b", "thermal_growth.rise_K", 5.4, [5.31, 5.35]]]
+    # half-widths: cogging 0.01 / 0.07, thermal 0.02 / 5.4 (median of the two), gain 0.25 / 10
+    assert cov["median_relative_half_width"] == pytest.approx(
+        {"physical effect": (0.01 / 0.07 + 0.02 / 5.4) / 2, "signal artefact": 0.025, "parameter": None})
 
 
 def test_benchmark_reports_interval_coverage(benchmark):
-    """Issue 15, item 5 (measured, not yet met): benchmark.json states the coverage of the
-    intervals per kind (profile ∪ region bootstrap: 45 % and 55 % measured, against 85 % asked;
-    docs/gap-diagnosis.md, "Intervals")."""
+    """Issue 15, item 5: on the default benchmark the stated 90 % interval of each fitted
+    continuous parameter holds the injected value in at least 85 % of the cases, per kind
+    (measured 95 % of 20 physical-effect and 91 % of 11 artefact parameters; docs/gap-diagnosis.md,
+    "Intervals"), and it is not so wide as to say nothing: the median half-width is under 20 % of
+    the value."""
     _, res, _ = benchmark
     cov = res["interval_coverage"]
-    print("interval coverage", cov["per_kind"], cov["n"])
+    print("interval coverage", cov["per_kind"], cov["n"], cov["median_relative_half_width"], cov["missed"])
     assert cov["n"]["physical effect"] >= 16 and cov["n"]["signal artefact"] >= 8
     assert set(cov["per_kind"]) == {"physical effect", "signal artefact", "parameter"}
+    assert cov["per_kind"]["physical effect"] >= 0.85 and cov["per_kind"]["signal artefact"] >= 0.85
+    assert all(w < 0.2 for w in cov["median_relative_half_width"].values() if w is not None)
 
 
 def test_region_bootstrap_interval_covers_what_the_regions_disagree_on():

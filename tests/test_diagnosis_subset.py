@@ -159,8 +159,9 @@ def test_diagnose_with_a_budget_uses_a_subset_and_finds_no_gap(recording, tmp_pa
     assert sub["estimated_minutes"] > 0 and sub["actual_minutes"] > 0 and sub["calibration_s"] > 0
     assert all(v >= 0 for v in sub["unit_costs_s"].values()) and sub["unit_costs_s"]["capture"] > 0
     # 3 seeds, no simulated candidate, 3 re-simulation seeds; gain:torque's 4 grid points
-    # post-processed on Phase I, and the base campaign's signature
-    assert sub["workload"] == {"campaigns": 6, "phase1_signatures": 5, "phase2_signatures": 1, "workers": 1,
+    # post-processed on Phase I on the campaigns of the 3 response seeds (the spread's, kept),
+    # and those base campaigns' signatures
+    assert sub["workload"] == {"campaigns": 6, "phase1_signatures": 15, "phase2_signatures": 3, "workers": 1,
                                "stages": 2}
     inv = subset.inventory(out / "subset" / "measurements.h5")
     assert [(k, h, names) for k, h, names in inv.samples] == [

@@ -792,6 +792,10 @@ def diagnose(
         "twin seeds the twin is re-simulated with, the added candidates at their fitted values, "
         "for the re-simulated shrink the verdict follows (default: all --seeds; 0: none, the "
         "verdict then follows the interpolated shrink)")),
+    response_seeds: int = typer.Option(3, "--response-seeds", min=1, help=(
+        "twin seeds each candidate's response is simulated with: the first seed's is fitted, "
+        "all of them give the stated 90 % interval (1: the cheapest, the interval then from the "
+        "fit alone)")),
     budget_minutes: float | None = typer.Option(None, "--budget-minutes", help=(
         "diagnose a subset of the recording that fits this time (samples and sessions spread "
         "over its hours, the first captures and runs of each; the costs measured on this "
@@ -807,11 +811,15 @@ def diagnose(
         _fail(f"--budget-minutes {budget_minutes:g}: expected a positive number of minutes (the time "
               "the diagnosis may take)")
     from analysis.dataset import DatasetError
-    from twin.harness.gap_runner import check_kinds, run_diagnosis
+    from twin.harness.gap_runner import check_kinds, check_response_seeds, run_diagnosis
 
     try:
         s = load(scenario, overrides)
     except ScenarioError as exc:
+        _fail(str(exc))
+    try:
+        check_response_seeds(response_seeds, seeds)
+    except ValueError as exc:
         _fail(str(exc))
     try:
         kind_list = check_kinds(None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()])
@@ -834,7 +842,7 @@ def diagnose(
                                 on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
                                 scheduler=scheduler, resim_seeds=resim_seeds,
                                 on_resim_progress=lambda d, n: cb("re-simulation with the added candidates", d, n),
-                                budget_minutes=budget_minutes)
+                                budget_minutes=budget_minutes, response_seeds=response_seeds)
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))
@@ -866,11 +874,21 @@ def diagnose_benchmark(
     resim_seeds: int = typer.Option(2, "--resim-seeds", min=0, help=(
         "twin seeds each case with candidates added is re-simulated with, for the re-simulated "
         "shrink and the verdict (0: none; fewer than --seeds: that many campaigns per case)")),
+    response_seeds: int = typer.Option(3, "--response-seeds", min=1, help=(
+        "twin seeds each candidate's response is simulated with: the first seed's is fitted, "
+        "all of them give the stated 90 % interval (1: the cheapest, the interval then from the "
+        "fit alone)")),
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
     _require("diagnose-benchmark", "sim")
     from twin.harness.gap_benchmark import plan_cases, run_benchmark
+    from twin.harness.gap_runner import check_response_seeds
+
+    try:
+        check_response_seeds(response_seeds, seeds)
+    except ValueError as exc:
+        _fail(str(exc))
 
     try:
         s = load(scenario)
@@ -883,7 +901,8 @@ def diagnose_benchmark(
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=console, transient=False) as progress:
         res = run_benchmark(out, s, cases, seeds=seeds, workers=workers,
-                            on_progress=_progress_callback(progress, {}), resim_seeds=resim_seeds)
+                            on_progress=_progress_callback(progress, {}), resim_seeds=resim_seeds,
+                            response_seeds=response_seeds)
     fmt = lambda v: "-" if v is None else f"{100 * v:.0f} %"  # noqa: E731
     table = Table(title=f"blind benchmark ({res['n_cases']} cases, {res['wall_time_s']['total']:.0f} s)")
     for col in ("case", "injected", "magnitude", "verdict", "first ranked", "added", "held-out shrink",

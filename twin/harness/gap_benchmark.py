@@ -81,6 +81,7 @@ from twin.effects.parameters import PARAMETERS
 from twin.executors import default_processes
 from twin.harness.gap_runner import (
     DEFAULT_KINDS,
+    DEFAULT_RESPONSE_SEEDS,
     DEFAULT_SEEDS,
     add_resimulation,
     artefact_cached,
@@ -241,11 +242,13 @@ def interval_coverage(rows: list[dict]) -> dict:
     """How often the stated interval of a fitted parameter holds the injected value: over the
     continuous parameters of the injected candidate in the single, artefact and parameter cases
     where it was added first. Returns {"per_kind": {kind: fraction or None}, "per_parameter":
-    {candidate.param: fraction}, "n": {kind: count}, "missed": [[case, candidate.param, injected,
+    {candidate.param: fraction}, "n": {kind: count}, "median_relative_half_width": {kind: the
+    median of (hi − lo) / 2 / |injected| or None}, "missed": [[case, candidate.param, injected,
     [lo, hi]], ...]}."""
     effects = candidates()
     kind_of_case = {"single": KIND_EFFECT, "artefact": KIND_ARTEFACT, "parameter": KIND_PARAMETER}
     hits: dict[str, list[bool]] = {k: [] for k in kind_of_case.values()}
+    widths: dict[str, list[float]] = {k: [] for k in kind_of_case.values()}
     per_param: dict[str, list[bool]] = {}
     missed = []
     for r in rows:
@@ -259,11 +262,13 @@ def interval_coverage(rows: list[dict]) -> dict:
             lo, hi = r["intervals"][name][p.name]
             inside = bool(lo - 1e-9 * abs(true) <= true <= hi + 1e-9 * abs(true))
             hits[kind_of_case[r["kind"]]].append(inside)
+            widths[kind_of_case[r["kind"]]].append((hi - lo) / 2.0 / abs(true))
             per_param.setdefault(f"{name}.{p.name}", []).append(inside)
             if not inside:
                 missed.append([r["id"], f"{name}.{p.name}", true, [lo, hi]])
     return {"per_kind": {k: (float(np.mean(v)) if v else None) for k, v in hits.items()},
             "n": {k: len(v) for k, v in hits.items()},
+            "median_relative_half_width": {k: (float(np.median(v)) if v else None) for k, v in widths.items()},
             "per_parameter": {k: float(np.mean(v)) for k, v in sorted(per_param.items())},
             "missed": missed}
 
@@ -295,7 +300,8 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   on_progress: Callable[[str, int, int], None] | None = None,
                   kinds: tuple[str, ...] | list[str] | None = None,
-                  resim_seeds: int = DEFAULT_RESIM_SEEDS) -> dict:
+                  resim_seeds: int = DEFAULT_RESIM_SEEDS,
+                  response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> dict:
     """Simulate, diagnose and score every case; writes OUT/benchmark.json and
     OUT/benchmark_cases.csv and returns the summary. ``kinds``: the kinds of candidate the
     diagnosis tries (default :data:`DEFAULT_KINDS`, and "parameter" when there are parameter
@@ -311,7 +317,8 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     if kinds is None:
         kinds = tuple(DEFAULT_KINDS) + (("parameter",) if any(c.kind == "parameter" for c in cases)
                                          and "parameter" not in DEFAULT_KINDS else ())
-    ens = build_ensemble(nominal, cache, seeds, workers, None, prog("twin and candidates"), kinds)
+    ens = build_ensemble(nominal, cache, seeds, workers, None, prog("twin and candidates"), kinds,
+                         response_seeds=response_seeds)
     t_ens = time.perf_counter() - t0
     reals = [with_seed(with_effects(nominal, c.effects), c.seed) for c in cases]
     plain = [i for i, c in enumerate(cases) if not c.artefacts]

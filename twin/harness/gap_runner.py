@@ -73,6 +73,10 @@ from twin.executors import default_processes, make_executor, map_ordered, parall
 from twin.scenario import Scenario, from_dict
 
 DEFAULT_SEEDS = 8
+#: Twin seeds each deterministic candidate's response is simulated (or post-processed) with: the
+#: first one's response is fitted, all of them give the interval (the bootstrap over the seeds,
+#: :func:`analysis.diagnosis.attribution.seed_interval`).
+DEFAULT_RESPONSE_SEEDS = 3
 BATCH = 6  # campaigns simulated together (batched rollouts) in one task
 SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
 
@@ -255,16 +259,17 @@ def grid_points(effect: Effect) -> list[GridPoint]:
     return out
 
 
-def candidate_scenarios(seeded: list[Scenario], library: dict[str, Effect]
+def candidate_scenarios(seeded: list[Scenario], library: dict[str, Effect],
+                        response_seeds: int = DEFAULT_RESPONSE_SEEDS
                         ) -> tuple[list[Scenario], list[tuple[GridPoint, list[int]]]]:
     """The scenarios to simulate for the candidates' responses: one per grid point where the
-    effect is present, with the first twin seed (all seeds for a random effect). Returns
-    (scenarios, [(grid point, indices into scenarios, one per seed used; empty where the point
-    is the nominal twin)])."""
+    effect is present and seed used: the first ``response_seeds`` twin seeds (every seed for a
+    random effect). Returns (scenarios, [(grid point, indices into scenarios, one per seed used,
+    in the order of ``seeded``; empty where the point is the nominal twin)])."""
     scen: list[Scenario] = []
     points: list[tuple[GridPoint, list[int]]] = []
     for eff in library.values():
-        bases = seeded if eff.random else seeded[:1]
+        bases = seeded if eff.random else seeded[:response_seeds]
         for gp in grid_points(eff):
             idx: list[int] = []
             if not eff.is_off(gp.values):
@@ -278,21 +283,26 @@ def candidate_scenarios(seeded: list[Scenario], library: dict[str, Effect]
 def responses(library: dict[str, Effect], points, grid_sigs: list[dict[str, Signature]],
               nominal: list[dict[str, Signature]]) -> list[CandidateResponse]:
     """The candidates' response arrays (grid shape + (n,)): the change of every statistic
-    against the same seed's nominal twin (common random numbers), averaged over the seeds
-    used."""
+    against the same seed's nominal twin (common random numbers) for each seed used
+    (``per_seed``, (seeds, *grid, n)); the response fitted is the first seed's, or the mean over
+    the seeds for a random effect (whose response is a draw of its own: the origin of each
+    session)."""
     out = []
+    n = nominal[0]["cal"].values.size
     for name, eff in library.items():
         shape = tuple(len(p.grid) for p in eff.params)
-        n = nominal[0]["cal"].values.size
-        delta = {p: np.zeros(shape + (n,)) for p in PARTS}
+        k = max([len(idx) for gp, idx in points if gp.effect == name] + [1])
+        per_seed = {p: np.zeros((k,) + shape + (n,)) for p in PARTS}
         for gp, idx in points:
             if gp.effect != name or not idx:
                 continue
             for p in PARTS:
-                delta[p][gp.index] = np.mean([grid_sigs[i][p].values - nominal[k][p].values
-                                              for k, i in enumerate(idx)], axis=0)
+                for j, i in enumerate(idx):
+                    per_seed[p][(j,) + gp.index] = grid_sigs[i][p].values - nominal[j][p].values
+        delta = {p: per_seed[p].mean(axis=0) if eff.random else per_seed[p][0].copy() for p in PARTS}
         axes = [ParamAxis(p.name, tuple(p.grid), p.discrete) for p in eff.params]
-        out.append(CandidateResponse(name, axes, delta, kind=kind_of(name)))
+        out.append(CandidateResponse(name, axes, delta, kind=kind_of(name),
+                                     per_seed=per_seed if k > 1 else None))
     return out
 
 
@@ -406,17 +416,21 @@ def ensure_campaigns(scenarios: list[Scenario], cache: Path, workers: int,
     run_tasks(_simulate_kept, args, workers, scheduler)
 
 
-def artefact_plans(names: list[str], n_seeds: int) -> list[tuple[list[dict], list[tuple[str, tuple]]]]:
-    """Per base campaign (the first twin seed's, then, when a ``seed_dependent`` artefact is
-    among ``names``, those of the other ``n_seeds`` − 1 seeds) the artefact specs
+def artefact_plans(names: list[str], n_seeds: int, response_seeds: int = DEFAULT_RESPONSE_SEEDS
+                   ) -> list[tuple[list[dict], list[tuple[str, tuple]]]]:
+    """Per base campaign (the twin seeds' in order: the first ``response_seeds``, and all
+    ``n_seeds`` when a ``seed_dependent`` artefact is among ``names``) the artefact specs
     ({name: values}) post-processed on it and where each goes (name, grid index): every grid
     point where the artefact is present."""
-    n_bases = max([n_seeds if ARTEFACTS[n].seed_dependent else 1 for n in names] + [1])
+    def used(name: str) -> int:
+        return n_seeds if ARTEFACTS[name].seed_dependent else min(response_seeds, n_seeds)
+
+    n_bases = max([used(n) for n in names] + [1])
     plans: list[tuple[list[dict], list[tuple[str, tuple]]]] = []
     for k in range(n_bases):
         specs, where = [], []
         for name in names:
-            if k > 0 and not ARTEFACTS[name].seed_dependent:
+            if k >= used(name):
                 continue
             for index, values in artefact_grid(name):
                 if not ARTEFACTS[name].is_off(values):
@@ -428,43 +442,44 @@ def artefact_plans(names: list[str], n_seeds: int) -> list[tuple[list[dict], lis
 
 def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, workers: int = 1,
                        on_progress: Callable[[int, int], None] | None = None,
-                       scheduler: str | None = None) -> list[CandidateResponse]:
+                       scheduler: str | None = None,
+                       response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> list[CandidateResponse]:
     """The artefact candidates' responses: the change of every statistic when each grid point
-    is applied to the campaign of the twin's first seed, against that campaign; for a
-    ``seed_dependent`` artefact, the mean of that change over every seed of ``seeded``."""
-    plans = artefact_plans(names, len(seeded))
+    is applied to the campaign of each of the first ``response_seeds`` twin seeds (every seed of
+    ``seeded`` for a ``seed_dependent`` artefact), against that campaign (``per_seed``); the
+    response fitted is the first seed's, or for a ``seed_dependent`` artefact the mean over the
+    seeds, with its seed-to-seed standard deviation (``spread``)."""
+    plans = artefact_plans(names, len(seeded), response_seeds)
     n_bases = len(plans)
     # The seeds' campaigns simulated together where their post-processed signatures are missing.
     ensure_campaigns([seeded[k] for k in range(1, n_bases) if not artefact_cached(seeded[k], plans[k][0], cache)],
                      cache, workers, scheduler)
-    sums: dict[str, dict[str, np.ndarray]] = {}
-    squares: dict[str, dict[str, np.ndarray]] = {}
+    changes: dict[str, dict[str, list[np.ndarray]]] = {}
     for k, (specs, where) in enumerate(plans):
         # The first seed's campaign stays in the cache (the artefact grid of a later version is
-        # post-processed from it); the others only serve the seed-dependent artefacts.
+        # post-processed from it); the others only serve the responses on other seeds.
         base_sig, sigs = artefact_signatures(seeded[k], specs, cache, workers, keep_campaign=k == 0,
                                              on_progress=on_progress, scheduler=scheduler)
         n = base_sig["cal"].values.size
-        for name in names:
-            if k == 0 or ARTEFACTS[name].seed_dependent:
-                shape = tuple(len(q.grid) for q in ARTEFACTS[name].params) + (n,)
-                sums.setdefault(name, {p: np.zeros(shape) for p in PARTS})
-                squares.setdefault(name, {p: np.zeros(shape) for p in PARTS})
+        for name in {nm for nm, _ in where}:
+            shape = tuple(len(q.grid) for q in ARTEFACTS[name].params) + (n,)
+            for p in PARTS:
+                changes.setdefault(name, {q: [] for q in PARTS})[p].append(np.zeros(shape))
         for (name, index), sig in zip(where, sigs, strict=True):
             for p in PARTS:
-                change = sig[p].values - base_sig[p].values
-                sums[name][p][index] += change
-                squares[name][p][index] += change ** 2
+                changes[name][p][-1][index] = sig[p].values - base_sig[p].values
     out = []
     for name in names:
-        k = n_bases if ARTEFACTS[name].seed_dependent else 1
-        mean = {p: sums[name][p] / k for p in PARTS}
+        per_seed = {p: np.stack(changes[name][p]) for p in PARTS}
+        k = len(per_seed["cal"])
+        dep = ARTEFACTS[name].seed_dependent
+        delta = {p: per_seed[p].mean(axis=0) if dep else per_seed[p][0].copy() for p in PARTS}
         # the seed-to-seed standard deviation of the change (ddof 1) of a response averaged over seeds
-        spread = ({p: np.sqrt(np.maximum(squares[name][p] - k * mean[p] ** 2, 0.0) / (k - 1)) for p in PARTS}
-                  if k > 1 else None)
+        spread = {p: per_seed[p].std(axis=0, ddof=1) for p in PARTS} if dep and k > 1 else None
         out.append(CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed)
                                             for q in ARTEFACTS[name].params],
-                                     mean, kind=KIND_ARTEFACT, spread=spread))
+                                     delta, kind=KIND_ARTEFACT, spread=spread,
+                                     per_seed=per_seed if k > 1 else None))
     return out
 
 
@@ -536,29 +551,40 @@ def resolve_library(library: list[str] | None, kinds: tuple[str, ...] | list[str
     return effects, artefacts
 
 
+def check_response_seeds(response_seeds: int, seeds: int) -> None:
+    """Refuse a number of response seeds that the twin's spread does not have."""
+    if not 1 <= int(response_seeds) <= int(seeds):
+        raise ValueError(f"--response-seeds {response_seeds}: expected 1 to --seeds ({seeds}); the "
+                         "candidates' responses are simulated with the twin's own seeds")
+
+
 def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
                    workers: int | None = None, library: list[str] | None = None,
                    on_progress: Callable[[int, int], None] | None = None,
                    kinds: tuple[str, ...] | list[str] | None = None,
-                   scheduler: str | None = None) -> TwinEnsemble:
+                   scheduler: str | None = None,
+                   response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> TwinEnsemble:
     """Simulate the twin's spread and the candidates' responses (cached): the physical effects
-    and the twin parameters by simulation, the signal artefacts by post-processing the first
-    seed's campaign. ``library`` (candidate names) wins over ``kinds``; ``scheduler``: run the
-    simulations on that Dask cluster instead of ``workers`` local processes."""
+    and the twin parameters by simulation, the signal artefacts by post-processing the seeds'
+    campaigns, each with the first ``response_seeds`` twin seeds. ``library`` (candidate names)
+    wins over ``kinds``; ``scheduler``: run the simulations on that Dask cluster instead of
+    ``workers`` local processes."""
+    check_response_seeds(response_seeds, seeds)
     effects, artefacts = resolve_library(library, kinds)
     workers = workers or default_processes()
     seed_list = twin_seeds(nominal, seeds)
     seeded = [with_seed(nominal, sd) for sd in seed_list]
-    cand_scen, points = candidate_scenarios(seeded, effects)
+    cand_scen, points = candidate_scenarios(seeded, effects, response_seeds)
     # The seeds' campaigns the artefacts are post-processed on stay in the cache (not simulated
-    # twice): the first seed's, every seed's when an artefact's response is a mean over seeds.
-    n_bases = len(artefact_plans(artefacts, len(seeded))) if artefacts else 0
+    # twice).
+    n_bases = len(artefact_plans(artefacts, len(seeded), response_seeds)) if artefacts else 0
     keep = [i < n_bases for i in range(len(seeded) + len(cand_scen))]
     sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress, keep=keep, scheduler=scheduler)
     twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
     cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
     if artefacts:
-        cands += artefact_responses(artefacts, seeded, cache, workers, scheduler=scheduler)
+        cands += artefact_responses(artefacts, seeded, cache, workers, scheduler=scheduler,
+                                    response_seeds=response_seeds)
     return TwinEnsemble(nominal, seed_list, twin, cands, effects)
 
 
@@ -796,18 +822,18 @@ def calibrate(nominal: Scenario, inv: subset.Inventory, cache: Path) -> tuple[su
 
 
 def workload(nominal: Scenario, seeds: int, library: list[str] | None, kinds, resim_seeds: int | None,
-             workers: int) -> subset.Workload:
+             workers: int, response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> subset.Workload:
     """What a diagnosis of ``nominal`` computes (:class:`analysis.diagnosis.subset.Workload`):
-    the twin's seeds, the simulated candidates' grid points (:func:`candidate_scenarios`), the
-    other seeds' campaigns a seed-dependent artefact post-processes, and a re-simulation with
-    ``resim_seeds`` seeds (default all: the cost when something is added); the artefacts'
-    grid points post-processed (:func:`artefact_plans`), each recomputing the statistics of
-    the domains it touches, and each base campaign's signature; the stages that wait for each
-    other."""
+    the twin's seeds, the simulated candidates' grid points (:func:`candidate_scenarios`, with
+    ``response_seeds`` seeds) and a re-simulation with ``resim_seeds`` seeds (default all: the
+    cost when something is added); the artefacts' grid points post-processed on the seeds'
+    campaigns (:func:`artefact_plans`; the campaigns are the spread's, kept), each recomputing
+    the statistics of the domains it touches, and each base campaign's signature; the stages
+    that wait for each other (the twin and the grids, then the re-simulation)."""
     effects, artefacts = resolve_library(library, kinds)
     seeded = [with_seed(nominal, sd) for sd in twin_seeds(nominal, seeds)]
-    cand, _ = candidate_scenarios(seeded, effects)
-    plans = artefact_plans(artefacts, seeds) if artefacts else []
+    cand, _ = candidate_scenarios(seeded, effects, response_seeds)
+    plans = artefact_plans(artefacts, seeds, response_seeds) if artefacts else []
     p1 = p2 = len(plans)
     for specs, _ in plans:
         for spec in specs:
@@ -815,13 +841,13 @@ def workload(nominal: Scenario, seeds: int, library: list[str] | None, kinds, re
             p1 += "phase1" in domains
             p2 += "phase2" in domains
     resim = seeds if resim_seeds is None else min(int(resim_seeds), seeds)
-    stages = 1 + (len(plans) > 1) + (resim > 0)  # the twin and grids; other seeds' campaigns; re-simulation
-    return subset.Workload(seeds + len(cand) + max(len(plans) - 1, 0) + resim, p1, p2, workers, stages)
+    stages = 1 + (resim > 0)  # the twin and grids; the re-simulation
+    return subset.Workload(seeds + len(cand) + resim, p1, p2, workers, stages)
 
 
 def prepare_subset(real_dir: Path, nominal: Scenario, out: Path, cache: Path, budget_minutes: float, *,
                    seeds: int, library: list[str] | None, kinds, resim_seeds: int | None,
-                   workers: int) -> tuple[Path, Scenario, dict]:
+                   workers: int, response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> tuple[Path, Scenario, dict]:
     """Choose the subset of the recording in ``real_dir`` that fits ``budget_minutes`` on
     ``workers`` workers (:func:`analysis.diagnosis.subset.choose`, the unit costs measured by
     :func:`calibrate`), write it to ``OUT/subset/measurements.h5`` and return (that directory,
@@ -835,7 +861,7 @@ def prepare_subset(real_dir: Path, nominal: Scenario, out: Path, cache: Path, bu
     except DatasetError as exc:
         raise DatasetError(f"{src}: {exc}") from None
     costs, spent = calibrate(nominal, inv, cache)
-    work = workload(nominal, seeds, library, kinds, resim_seeds, workers)
+    work = workload(nominal, seeds, library, kinds, resim_seeds, workers, response_seeds)
     sub = subset.choose(inv, costs, work, max(budget_s - spent, 1e-9))
     t0 = time.perf_counter()
     subset.write_subset(src, Path(out) / "subset" / "measurements.h5", inv, sub)
@@ -853,13 +879,17 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                   kinds: tuple[str, ...] | list[str] | None = None,
                   scheduler: str | None = None, resim_seeds: int | None = None,
                   on_resim_progress: Callable[[int, int], None] | None = None,
-                  budget_minutes: float | None = None) -> dict:
+                  budget_minutes: float | None = None,
+                  response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
     twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
     0: none) and the verdict follows the re-simulated shrink (:func:`resimulate`). With
     ``budget_minutes`` the diagnosis is that of a subset of the recording sized to that time
-    (:func:`prepare_subset`; ``subset`` in the result), else of the whole recording."""
+    (:func:`prepare_subset`; ``subset`` in the result), else of the whole recording.
+    ``response_seeds``: the twin seeds each candidate's response is computed with
+    (:func:`build_ensemble`)."""
+    check_response_seeds(response_seeds, seeds)
     t0 = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -869,10 +899,11 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     if budget_minutes is not None:
         real_dir, nominal, sub = prepare_subset(
             real_dir, nominal, out, cache, budget_minutes, seeds=seeds, library=library, kinds=kinds,
-            resim_seeds=resim_seeds, workers=parallel_slots(workers, scheduler))
+            resim_seeds=resim_seeds, workers=parallel_slots(workers, scheduler), response_seeds=response_seeds)
     check_layout(real_dir, nominal, cache)
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
-    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler)
+    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler,
+                         response_seeds)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     resim = None
     if result["added"] and result["verdict"] != attribution.NO_GAP and resim_seeds != 0:
