@@ -55,12 +55,35 @@ def test_the_interpolation_shift_moves_a_curved_response_toward_its_value():
     z = 1e-2 * 15.0 ** 2 * x
     sd = np.ones(N)
     fit = at.fit_candidate(cand, z, z, {"cal": sd, "heldout": sd}, np.ones(N, bool), 0.01, zoom=True)
-    shift = at.interpolation_shift(cand, z, sd)["p"]
+    down, up = at.interpolation_shift(cand, z, sd)["p"]
     assert fit.params["p"] == pytest.approx(10.0 + 10.0 * 125.0 / 300.0, abs=0.02)
-    assert abs(fit.params["p"] + shift - 15.0) < 0.1
+    assert down == 0.0 and abs(fit.params["p"] + up - 15.0) < 0.1
     regions = [Region("phase1", "a", "band", "x", float(i)) for i in range(N)]
     lo, hi = at.stated_interval(fit, cand, z, sd, regions)["p"]
     assert lo <= 15.0 <= hi and hi - lo < 1.5
+
+
+def test_a_log_scaled_factor_is_also_interpolated_in_log():
+    """A noise floor's factor (log-uniform prior, grid 0.5 … 4) whose response is a log power,
+    linear in log p: a recording at 0.644 is fitted at 0.69 between the grid values 0.5 and 1.0
+    by the straight line in p; linear in log p it is exact, and the interval reaches down to it.
+    A factor without the log prior is not interpolated in log (PCHIP alone goes part of the way)."""
+    grid = (0.5, 1.0, 2.0, 3.0, 4.0)
+    x = np.linspace(0.5, 1.5, N)
+    delta = np.stack([3.0 * np.log(v) * x for v in grid])
+    cand = at.CandidateResponse("c", [at.ParamAxis("factor", grid, log=True)], {"cal": delta, "heldout": delta})
+    z = 3.0 * np.log(0.644) * x
+    sd = np.ones(N)
+    fit = at.fit_candidate(cand, z, z, {"cal": sd, "heldout": sd}, np.ones(N, bool), 0.01, zoom=True)
+    down, up = at.interpolation_shift(cand, z, sd)["factor"]
+    line = 0.5 + 0.5 * (np.log(0.644) - np.log(0.5)) / (0.0 - np.log(0.5))  # where the line in p gives it
+    assert fit.params["factor"] == pytest.approx(line, abs=0.002)
+    assert fit.params["factor"] + down == pytest.approx(0.644, abs=0.002)
+    regions = [Region("phase1", "a", "band", "x", float(i)) for i in range(N)]
+    lo, hi = at.stated_interval(fit, cand, z, sd, regions)["factor"]
+    assert lo <= 0.644 < line <= hi
+    plain = at.CandidateResponse("c", [at.ParamAxis("factor", grid)], {"cal": delta, "heldout": delta})
+    assert down < at.interpolation_shift(plain, z, sd)["factor"][0] < 0.0  # PCHIP alone: part of the way
 
 
 def test_the_seed_interval_is_the_prediction_interval_of_the_seeds_fits():

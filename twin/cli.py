@@ -785,7 +785,7 @@ def diagnose(
                                 "signal artefact) or module:NAME of an Effect"),
     kinds: str | None = typer.Option(None, "--kinds", help=(
         "kinds of candidate, comma-separated: physical (the registered effects), parameter (twin "
-        "parameters set wrong: 60 more simulations, docs/gap-diagnosis.md), artefact (signal "
+        "parameters set wrong: 60 more simulations per response seed, docs/gap-diagnosis.md), artefact (signal "
         "artefacts); default physical,artefact; --candidate wins")),
     scheduler: Scheduler = None,
     resim_seeds: int | None = typer.Option(None, "--resim-seeds", min=0, help=(

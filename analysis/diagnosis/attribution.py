@@ -91,12 +91,20 @@ class ParamAxis:
     which the response was simulated (ascending, including the value that turns it off where
     there is one), whether it is discrete (no interpolation between grid values), and whether
     the grid is closed: it lists every value the parameter can take (the mains frequency and
-    its harmonics), so that a fit on its first or last value is not "at the edge"."""
+    its harmonics), so that a fit on its first or last value is not "at the edge"; log: its
+    prior is log-uniform (:attr:`log_scaled`)."""
 
     name: str
     values: tuple[float, ...]
     discrete: bool = False
     closed: bool = False
+    log: bool = False
+
+    @property
+    def log_scaled(self) -> bool:
+        """A scale whose prior is log-uniform (a factor on a twin parameter) and whose grid is
+        positive: its response is also interpolated in log p for the interval."""
+        return self.log and not self.discrete and min(self.values) > 0
 
 
 @dataclass
@@ -292,12 +300,15 @@ def _fine_axes(params: list[ParamAxis], n_fine: int) -> list[np.ndarray]:
 
 def _interpolator(params: list[ParamAxis], delta: np.ndarray, method: str = "linear"):
     """The response ``delta`` (*grid, n) as a function of the parameters: points (m, k) ->
-    (m, n). ``method``: "linear" (the fit's) or "pchip" (the shape-preserving cubic the interval
-    is checked with, :func:`interpolation_shift`; an axis with fewer than four grid values is
-    first given linearly interpolated midpoints, a single value a flat second one)."""
+    (m, n). ``method``: "linear" (the fit's), or one of the interpolations the interval is
+    checked with (:func:`interpolation_shift`): "pchip" (the shape-preserving cubic; an axis with
+    fewer than four grid values is first given linearly interpolated midpoints), "log" (linear
+    in log p on the :attr:`ParamAxis.log_scaled` axes, linear on the others). A single grid
+    value gets a flat second one."""
     if not params:
         return lambda pts: np.broadcast_to(delta, (len(pts), delta.shape[-1]))
     axes = [np.asarray(a.values, float) for a in params]
+    in_log = np.array([method == "log" and a.log_scaled for a in params])
     axes2, d = [], delta
     for i, ax in enumerate(axes):
         if ax.size == 1:
@@ -310,8 +321,11 @@ def _interpolator(params: list[ParamAxis], delta: np.ndarray, method: str = "lin
             order = np.argsort(np.concatenate([ax, mid]), kind="stable")
             ax = np.concatenate([ax, mid])[order]
             d = np.take(np.concatenate([d, dm], axis=i), order, axis=i)
-        axes2.append(ax)
-    return RegularGridInterpolator(axes2, d, method=method)
+        axes2.append(np.log(ax) if in_log[i] else ax)
+    f = RegularGridInterpolator(axes2, d, method="linear" if method == "log" else method)
+    if not in_log.any():
+        return f
+    return lambda pts: f(np.where(in_log, np.log(np.where(in_log, pts, 1.0)), pts))
 
 
 ZOOM_STEPS = 2.0  # half-width of the zoomed search, in steps of the fine grid
@@ -536,24 +550,32 @@ def search_step(axis: ParamAxis, n_fine: int = 61) -> float:
     return 2.0 * ZOOM_STEPS * (v[-1] - v[0]) / max(n_fine - 1, 1) / (ZOOM_POINTS - 1)
 
 
+INTERPOLATIONS = ("pchip", "log")  # the interpolations of a response the interval is checked with
+
+
 def interpolation_shift(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray,
-                        n_fine: int = 61) -> dict[str, float]:
+                        n_fine: int = 61) -> dict[str, tuple[float, float]]:
     """How far each fitted parameter of ``cand`` moves when its response is interpolated between
-    grid values by a shape-preserving piecewise cubic (PCHIP: Fritsch & Carlson, SIAM J. Numer.
-    Anal. 17(2), 1980) instead of linearly: {name: best value (cubic) − best value (linear)}.
+    grid values otherwise than linearly: by a shape-preserving piecewise cubic (PCHIP: Fritsch &
+    Carlson, SIAM J. Numer. Anal. 17(2), 1980), and linearly in log p for a scale factor whose
+    prior is log-uniform. Returns {name: (the most negative shift, the most positive; 0 when
+    none moves it that way)}.
 
     The grid holds the simulated responses only; between them the response is unknown, and a
-    response that curves (a band power growing with the square of an amplitude, a resonance's
-    mass) is overestimated between two grid values by the straight line. Neither the Δχ² profile
-    nor the bootstrap over the regions sees this error; the stated interval is widened by the
-    shift to hold both fits. z_cal, sd_cal: (n,) as for :func:`fit_candidate`."""
-    out = {}
+    response that curves (a band power growing with the square of an amplitude, a noise floor's
+    log power with the log of its factor) is misjudged between two grid values by the straight
+    line. Neither the Δχ² profile nor the bootstraps see this error; the stated interval is
+    widened by the shifts to hold every fit. z_cal, sd_cal: (n,) as for :func:`fit_candidate`."""
     best = {}
-    for method in ("linear", "pchip"):
+    for method in ("linear", *INTERPOLATIONS):
+        if method == "log" and not any(a.log_scaled for a in cand.params):
+            continue
         grid, _, resid = _calibration_residuals(cand, z_cal, sd_cal, n_fine, method)
         best[method] = grid[int(np.argmin(np.sum(resid ** 2, axis=1)))]
+    out = {}
     for i, a in enumerate(cand.params):
-        out[a.name] = float(best["pchip"][i] - best["linear"][i])
+        shifts = [float(best[m][i] - best["linear"][i]) for m in best if m != "linear"]
+        out[a.name] = (min(shifts + [0.0]), max(shifts + [0.0]))
     return out
 
 
@@ -563,7 +585,7 @@ def stated_interval(fit: Fit, cand: CandidateResponse, z_cal: np.ndarray, sd_cal
     of the Δχ² profile interval of ``fit``, the block bootstrap over the regions
     (:func:`bootstrap_interval`), the bootstrap over the seeds of the candidate's response
     (:func:`seed_interval`) and over the twin's own seed-to-seed variation (:func:`noise_interval`,
-    with ``noise`` (K, n)), widened by the shift of the fit under a cubic interpolation of the
+    with ``noise`` (K, n)), widened by the shifts of the fit under other interpolations of the
     response (:func:`interpolation_shift`) and never narrower than ± one step of the search:
     each covers a source of error the others do not see."""
     parts = [fit.interval, bootstrap_interval(cand, z_cal, sd_cal, regions), seed_interval(cand, z_cal, sd_cal)]
@@ -572,10 +594,10 @@ def stated_interval(fit: Fit, cand: CandidateResponse, z_cal: np.ndarray, sd_cal
     shift = interpolation_shift(cand, z_cal, sd_cal)
     out = {}
     for a in cand.params:
-        s, step = shift[a.name], search_step(a)
+        (down, up), step = shift[a.name], search_step(a)
         ends = [iv[a.name] for iv in parts if a.name in iv]
-        lo = min(min(e[0] for e in ends) + min(s, 0.0), fit.params[a.name] - step)
-        hi = max(max(e[1] for e in ends) + max(s, 0.0), fit.params[a.name] + step)
+        lo = min(min(e[0] for e in ends) + down, fit.params[a.name] - step)
+        hi = max(max(e[1] for e in ends) + up, fit.params[a.name] + step)
         out[a.name] = (lo, hi)
     return out
 

@@ -300,7 +300,7 @@ def responses(library: dict[str, Effect], points, grid_sigs: list[dict[str, Sign
                 for j, i in enumerate(idx):
                     per_seed[p][(j,) + gp.index] = grid_sigs[i][p].values - nominal[j][p].values
         delta = {p: per_seed[p].mean(axis=0) if eff.random else per_seed[p][0].copy() for p in PARTS}
-        axes = [ParamAxis(p.name, tuple(p.grid), p.discrete) for p in eff.params]
+        axes = [ParamAxis(p.name, tuple(p.grid), p.discrete, log=p.log) for p in eff.params]
         out.append(CandidateResponse(name, axes, delta, kind=kind_of(name),
                                      per_seed=per_seed if k > 1 else None))
     return out
@@ -476,7 +476,7 @@ def artefact_responses(names: list[str], seeded: list[Scenario], cache: Path, wo
         delta = {p: per_seed[p].mean(axis=0) if dep else per_seed[p][0].copy() for p in PARTS}
         # the seed-to-seed standard deviation of the change (ddof 1) of a response averaged over seeds
         spread = {p: per_seed[p].std(axis=0, ddof=1) for p in PARTS} if dep and k > 1 else None
-        out.append(CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed)
+        out.append(CandidateResponse(name, [ParamAxis(q.name, tuple(q.grid), q.discrete, q.closed, q.log)
                                             for q in ARTEFACTS[name].params],
                                      delta, kind=KIND_ARTEFACT, spread=spread,
                                      per_seed=per_seed if k > 1 else None))
