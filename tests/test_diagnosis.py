@@ -205,6 +205,7 @@ def test_diagnose_cli_names_cogging_and_writes_report(benchmark, tmp_path):
     # The re-simulated shrink (2 of the 8 twin seeds here), side by side with the interpolated one.
     rs = res["resimulation"]
     assert rs["done"] and rs["seeds"] == 2 and rs["twin_seeds"] == res["twin_seeds"][:2]
+    assert res["response_seeds"] == 3
     assert res["heldout_shrink_resimulated"] == rs["heldout_shrink"] >= 0.8
     assert abs(rs["heldout_shrink"] - res["heldout_shrink"]) <= 0.05
     assert res["verdict"] == rs["verdict"]

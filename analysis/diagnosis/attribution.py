@@ -486,8 +486,7 @@ def seed_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray
 
     A candidate's response is simulated with one of the twin's seeds (its rails, its screw's
     phases); the recording's machine is another draw, and its response differs: the fitted value
-    moves with it by more than the noise of the statistics (a Stribeck friction fitted with
-    the responses of three seeds: 75, 80 and 76 N for 85 N injected). The candidate is fitted
+    moves with it by more than the noise of the statistics. The candidate is fitted
     again with the response of each of its R seeds, p_1 … p_R; the recording's own response is
     one more draw, so the interval is the prediction interval of a new observation,
     p̄ ± t_{R−1}((1 + level)/2) · s · √(1 + 1/R) (Montgomery & Runger, Applied Statistics and
@@ -619,7 +618,8 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     # Each twin seed's deviation from the twin's mean, a recording's worth of the twin's own
     # variation (the parametric bootstrap of the intervals, noise_interval).
     k = sp["cal"].k
-    noise = (np.stack([t.values for t in twin["cal"]]) - sp["cal"].mean) / sp["cal"].sd * np.sqrt(k / (k - 1))
+    with np.errstate(divide="ignore", invalid="ignore"):  # a statistic without spread: not finite, not used
+        noise = (np.stack([t.values for t in twin["cal"]]) - sp["cal"].mean) / sp["cal"].sd * np.sqrt(k / (k - 1))
     out: dict = {
         "alpha": alpha, "min_gain": min_gain, "seeds": sp["cal"].k,
         "n_statistics": int(np.isfinite(z0["cal"]).sum()),

@@ -368,6 +368,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
         "median_heldout_shrink": float(np.median([r["heldout_shrink"] for r in singles])) if singles else None,
         "median_heldout_shrink_resimulated": med_resim(singles),
         "resim_seeds": min(resim_seeds, len(ens.seeds)),
+        "response_seeds": response_seeds,
         "n_resimulated": len(todo),
         "verdict_changed_by_resimulation": [r["id"] for r in rows if r["verdict"] != r["verdict_interpolated"]],
         "null_correct_fraction": _fraction(rows, "null"),

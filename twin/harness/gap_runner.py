@@ -910,6 +910,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
         resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_resim_progress)[0]
     result = add_resimulation(result, real, ens, resim, alpha)
     result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
+              "response_seeds": response_seeds,
               "kinds": sorted({c.kind for c in ens.candidates}),
               "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
               **result}
