@@ -494,18 +494,30 @@ def seed_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray
     refits. z_cal, sd_cal: (n,) as for :func:`fit_candidate`."""
     if cand.per_seed is None or not cand.params:
         return {}
-    fits = []
-    for k in range(len(cand.per_seed["cal"])):
-        one = CandidateResponse(cand.name, cand.params, {p: d[k] for p, d in cand.per_seed.items()}, cand.kind)
-        grid, _, resid = _calibration_residuals(one, z_cal, sd_cal, n_fine)
-        fits.append(grid[int(np.argmin(np.sum(resid ** 2, axis=1)))])
-    p = np.array(fits)  # (R, k)
-    r = len(p)
-    half = stats.t.ppf(0.5 + level / 2.0, r - 1) * p.std(axis=0, ddof=1) * np.sqrt(1.0 + 1.0 / r)
-    mean = p.mean(axis=0)
-    return {a.name: ((float(p[:, i].min()), float(p[:, i].max())) if a.discrete
-                     else (float(mean[i] - half[i]), float(mean[i] + half[i])))
-            for i, a in enumerate(cand.params)}
+    fits = np.array([_best_point(CandidateResponse(cand.name, cand.params, {p: d[k] for p, d in cand.per_seed.items()},
+                                                   cand.kind), z_cal, sd_cal, n_fine)
+                     for k in range(len(cand.per_seed["cal"]))])  # (R, k)
+    return _prediction_interval(cand.params, fits, fits.mean(axis=0), level)
+
+
+def _best_point(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray, n_fine: int,
+                method: str = "linear") -> np.ndarray:
+    """The parameter values (k,) of the zoomed search's least Σ t² (:func:`_calibration_residuals`)."""
+    grid, _, resid = _calibration_residuals(cand, z_cal, sd_cal, n_fine, method)
+    return grid[int(np.argmin(np.sum(resid ** 2, axis=1)))]
+
+
+def _prediction_interval(params: list[ParamAxis], fits: np.ndarray, center: np.ndarray,
+                         level: float) -> dict[str, tuple[float, float]]:
+    """The ``level`` prediction interval of one more draw of the refits ``fits`` (n, k) around
+    ``center`` (k,): center ± t_{n−1}((1 + level)/2) · s · √(1 + 1/n) (Montgomery & Runger,
+    Applied Statistics and Probability for Engineers, 6th ed., section 8.4); a discrete
+    parameter gets the range of the refits and the center."""
+    n = len(fits)
+    half = stats.t.ppf(0.5 + level / 2.0, n - 1) * fits.std(axis=0, ddof=1) * np.sqrt(1.0 + 1.0 / n)
+    return {a.name: ((float(min(fits[:, i].min(), center[i])), float(max(fits[:, i].max(), center[i])))
+                     if a.discrete else (float(center[i] - half[i]), float(center[i] + half[i])))
+            for i, a in enumerate(params)}
 
 
 def noise_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray, noise: np.ndarray,
@@ -525,19 +537,10 @@ def noise_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarra
     if not cand.params or len(noise) < 2:
         return {}
     ok = np.isfinite(z_cal)
-    grid, f_cal, resid = _calibration_residuals(cand, z_cal, sd_cal, n_fine)
-    p_hat = grid[int(np.argmin(np.sum(resid ** 2, axis=1)))]
-    d_hat = f_cal(p_hat[None, :])[0] / sd_cal
-    fits = []
-    for e in noise:
-        grid, _, resid = _calibration_residuals(cand, np.where(ok, e + d_hat, np.nan), sd_cal, n_fine)
-        fits.append(grid[int(np.argmin(np.sum(resid ** 2, axis=1)))])
-    p = np.array(fits)
-    k = len(p)
-    half = stats.t.ppf(0.5 + level / 2.0, k - 1) * p.std(axis=0, ddof=1) * np.sqrt(1.0 + 1.0 / k)
-    return {a.name: ((float(min(p[:, i].min(), p_hat[i])), float(max(p[:, i].max(), p_hat[i]))) if a.discrete
-                     else (float(p_hat[i] - half[i]), float(p_hat[i] + half[i])))
-            for i, a in enumerate(cand.params)}
+    p_hat = _best_point(cand, z_cal, sd_cal, n_fine)
+    d_hat = _interpolator(cand.params, np.nan_to_num(cand.delta["cal"]))(p_hat[None, :])[0] / sd_cal
+    fits = np.array([_best_point(cand, np.where(ok, e + d_hat, np.nan), sd_cal, n_fine) for e in noise])
+    return _prediction_interval(cand.params, fits, p_hat, level)
 
 
 def search_step(axis: ParamAxis, n_fine: int = 61) -> float:
@@ -569,8 +572,7 @@ def interpolation_shift(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.n
     for method in ("linear", *INTERPOLATIONS):
         if method == "log" and not any(a.log_scaled for a in cand.params):
             continue
-        grid, _, resid = _calibration_residuals(cand, z_cal, sd_cal, n_fine, method)
-        best[method] = grid[int(np.argmin(np.sum(resid ** 2, axis=1)))]
+        best[method] = _best_point(cand, z_cal, sd_cal, n_fine, method)
     out = {}
     for i, a in enumerate(cand.params):
         shifts = [float(best[m][i] - best["linear"][i]) for m in best if m != "linear"]
