@@ -165,11 +165,11 @@ def test_responses_keep_every_seed_and_fit_the_first_or_the_mean():
 
     nominal = [sig(rng.normal(size=n)) for _ in range(3)]
     points, grid_sigs = [], []
-    for name, eff in lib.items():
+    for eff in lib.values():
         for gp in gr.grid_points(eff):
             idx = []
             if not eff.is_off(gp.values):
-                for k in range(3 if name == "thermal_growth" else 3):
+                for k in range(3):  # 3 response seeds; the random effect on the 3 seeds of this spread
                     idx.append(len(grid_sigs))
                     grid_sigs.append(sig(nominal[k]["cal"].values + (k + 1) * gp.index[0]))
             points.append((gp, idx))

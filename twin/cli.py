@@ -69,6 +69,10 @@ ScenarioOverrides = Annotated[list[str], typer.Option(
     "--set", help="scenario override KEY=VALUE (TOML value), repeatable")]
 Workers = Annotated[int | None, typer.Option("--workers", min=1, help=(
     "local processes (default: the environment variable TWIN_WORKERS, else all cores)"))]
+ResponseSeeds = Annotated[int, typer.Option("--response-seeds", min=1, help=(
+    "twin seeds each candidate's response is simulated with: the first seed's is fitted, all of "
+    "them give the stated 90 % interval (1: the cheapest; the interval then lacks the bootstrap "
+    "over the responses' seeds); at most --seeds"))]
 Scheduler = Annotated[str | None, typer.Option(
     "--scheduler", help="address of a running dask.distributed scheduler to run on instead of local "
                         "processes; its workers must see the files at the same paths")]
@@ -792,10 +796,7 @@ def diagnose(
         "twin seeds the twin is re-simulated with, the added candidates at their fitted values, "
         "for the re-simulated shrink the verdict follows (default: all --seeds; 0: none, the "
         "verdict then follows the interpolated shrink)")),
-    response_seeds: int = typer.Option(3, "--response-seeds", min=1, help=(
-        "twin seeds each candidate's response is simulated with: the first seed's is fitted, "
-        "all of them give the stated 90 % interval (1: the cheapest, the interval then from the "
-        "fit alone)")),
+    response_seeds: ResponseSeeds = 3,
     budget_minutes: float | None = typer.Option(None, "--budget-minutes", help=(
         "diagnose a subset of the recording that fits this time (samples and sessions spread "
         "over its hours, the first captures and runs of each; the costs measured on this "
@@ -817,7 +818,7 @@ def diagnose(
         s = load(scenario, overrides)
     except ScenarioError as exc:
         _fail(str(exc))
-    try:
+    try:  # an option out of range is refused before the recording is read
         check_response_seeds(response_seeds, seeds)
     except ValueError as exc:
         _fail(str(exc))
@@ -874,10 +875,7 @@ def diagnose_benchmark(
     resim_seeds: int = typer.Option(2, "--resim-seeds", min=0, help=(
         "twin seeds each case with candidates added is re-simulated with, for the re-simulated "
         "shrink and the verdict (0: none; fewer than --seeds: that many campaigns per case)")),
-    response_seeds: int = typer.Option(3, "--response-seeds", min=1, help=(
-        "twin seeds each candidate's response is simulated with: the first seed's is fitted, "
-        "all of them give the stated 90 % interval (1: the cheapest, the interval then from the "
-        "fit alone)")),
+    response_seeds: ResponseSeeds = 3,
 ) -> None:
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""

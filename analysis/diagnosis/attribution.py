@@ -332,6 +332,12 @@ ZOOM_STEPS = 2.0  # half-width of the zoomed search, in steps of the fine grid
 ZOOM_POINTS = 41  # points of each continuous parameter in the zoomed search
 
 
+def _zoom_half_width(values: np.ndarray, n_fine: int) -> float:
+    """Half the width of the zoomed search of a continuous parameter whose grid is ``values``:
+    ZOOM_STEPS steps of the fine grid (its range in ``n_fine`` values)."""
+    return ZOOM_STEPS * (values[-1] - values[0]) / max(n_fine - 1, 1)
+
+
 def _zoom_axes(params: list[ParamAxis], fine: list[np.ndarray], p: np.ndarray, n_fine: int) -> list[np.ndarray]:
     """The zoomed search around the fine grid's best point ``p`` (k,): ZOOM_POINTS values of each
     continuous parameter within ± ZOOM_STEPS fine-grid steps of it (inside its grid), a discrete
@@ -341,8 +347,8 @@ def _zoom_axes(params: list[ParamAxis], fine: list[np.ndarray], p: np.ndarray, n
         if a.discrete or v.size == 1:
             out.append(np.array([x]))
             continue
-        step = ZOOM_STEPS * (v[-1] - v[0]) / max(n_fine - 1, 1)
-        out.append(np.linspace(max(v[0], x - step), min(v[-1], x + step), ZOOM_POINTS))
+        half = _zoom_half_width(v, n_fine)
+        out.append(np.linspace(max(v[0], x - half), min(v[-1], x + half), ZOOM_POINTS))
     return out
 
 
@@ -521,7 +527,8 @@ def _prediction_interval(params: list[ParamAxis], fits: np.ndarray, center: np.n
 
 
 def noise_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray, noise: np.ndarray,
-                   level: float = INTERVAL_LEVEL, n_fine: int = 61) -> dict[str, tuple[float, float]]:
+                   level: float = INTERVAL_LEVEL, n_fine: int = 61,
+                   p_hat: np.ndarray | None = None) -> dict[str, tuple[float, float]]:
     """The ``level`` interval of each parameter of ``cand`` from the twin's own seed-to-seed
     variation (a parametric bootstrap over the twin's seeds).
 
@@ -533,11 +540,12 @@ def noise_interval(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarra
     recording the fit should return; the K refits give the prediction interval
     p̂ ± t_{K−1}((1 + level)/2) · s · √(1 + 1/K) of the fitted value (Efron & Tibshirani, *An
     Introduction to the Bootstrap*, 1993, ch. 6: the parametric bootstrap). A discrete parameter
-    gets the range of its refits. z_cal, sd_cal: (n,) as for :func:`fit_candidate`."""
+    gets the range of its refits. z_cal, sd_cal: (n,) as for :func:`fit_candidate`; p_hat: (k,)
+    the fitted values when known (the zoomed fit's), else searched for."""
     if not cand.params or len(noise) < 2:
         return {}
     ok = np.isfinite(z_cal)
-    p_hat = _best_point(cand, z_cal, sd_cal, n_fine)
+    p_hat = _best_point(cand, z_cal, sd_cal, n_fine) if p_hat is None else p_hat
     d_hat = _interpolator(cand.params, np.nan_to_num(cand.delta["cal"]))(p_hat[None, :])[0] / sd_cal
     fits = np.array([_best_point(cand, np.where(ok, e + d_hat, np.nan), sd_cal, n_fine) for e in noise])
     return _prediction_interval(cand.params, fits, p_hat, level)
@@ -549,14 +557,14 @@ def search_step(axis: ParamAxis, n_fine: int = 61) -> float:
     v = np.asarray(axis.values, float)
     if axis.discrete or v.size == 1:
         return 0.0
-    return 2.0 * ZOOM_STEPS * (v[-1] - v[0]) / max(n_fine - 1, 1) / (ZOOM_POINTS - 1)
+    return 2.0 * _zoom_half_width(v, n_fine) / (ZOOM_POINTS - 1)
 
 
 INTERPOLATIONS = ("pchip", "log")  # the interpolations of a response the interval is checked with
 
 
 def interpolation_shift(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray,
-                        n_fine: int = 61) -> dict[str, tuple[float, float]]:
+                        n_fine: int = 61, p_hat: np.ndarray | None = None) -> dict[str, tuple[float, float]]:
     """How far each fitted parameter of ``cand`` moves when its response is interpolated between
     grid values otherwise than linearly: by a shape-preserving piecewise cubic (PCHIP: Fritsch &
     Carlson, SIAM J. Numer. Anal. 17(2), 1980), and linearly in log p for a scale factor whose
@@ -567,9 +575,12 @@ def interpolation_shift(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.n
     response that curves (a band power growing with the square of an amplitude, a noise floor's
     log power with the log of its factor) is misjudged between two grid values by the straight
     line. Neither the Δχ² profile nor the bootstraps see this error; the stated interval is
-    widened by the shifts to hold every fit. z_cal, sd_cal: (n,) as for :func:`fit_candidate`."""
-    best = {}
+    widened by the shifts to hold every fit. z_cal, sd_cal: (n,) as for :func:`fit_candidate`;
+    p_hat: (k,) the linear fit's values when known (the zoomed fit's), else searched for."""
+    best = {} if p_hat is None else {"linear": p_hat}
     for method in ("linear", *INTERPOLATIONS):
+        if method in best:
+            continue
         if method == "log" and not any(a.log_scaled for a in cand.params):
             continue
         best[method] = _best_point(cand, z_cal, sd_cal, n_fine, method)
@@ -588,11 +599,13 @@ def stated_interval(fit: Fit, cand: CandidateResponse, z_cal: np.ndarray, sd_cal
     (:func:`seed_interval`) and over the twin's own seed-to-seed variation (:func:`noise_interval`,
     with ``noise`` (K, n)), widened by the shifts of the fit under other interpolations of the
     response (:func:`interpolation_shift`) and never narrower than ± one step of the search:
-    each covers a source of error the others do not see."""
+    each covers a source of error the others do not see. ``fit``: the candidate's zoomed fit
+    (``fit_candidate(..., zoom=True)``) on the same z_cal, sd_cal."""
+    p_hat = np.array([fit.params[a.name] for a in cand.params])  # the zoomed fit's, not searched again
     parts = [fit.interval, bootstrap_interval(cand, z_cal, sd_cal, regions), seed_interval(cand, z_cal, sd_cal)]
     if noise is not None:
-        parts.append(noise_interval(cand, z_cal, sd_cal, noise))
-    shift = interpolation_shift(cand, z_cal, sd_cal)
+        parts.append(noise_interval(cand, z_cal, sd_cal, noise, p_hat=p_hat))
+    shift = interpolation_shift(cand, z_cal, sd_cal, p_hat=p_hat)
     out = {}
     for a in cand.params:
         (down, up), step = shift[a.name], search_step(a)
@@ -617,11 +630,6 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     sd = {p: sp[p].sd for p in sp}
     regions = real["cal"].regions
     n_sel = int(sel_ho.sum())
-    # Each twin seed's deviation from the twin's mean, a recording's worth of the twin's own
-    # variation (the parametric bootstrap of the intervals, noise_interval).
-    k = sp["cal"].k
-    with np.errstate(divide="ignore", invalid="ignore"):  # a statistic without spread: not finite, not used
-        noise = (np.stack([t.values for t in twin["cal"]]) - sp["cal"].mean) / sp["cal"].sd * np.sqrt(k / (k - 1))
     out: dict = {
         "alpha": alpha, "min_gain": min_gain, "seeds": sp["cal"].k,
         "n_statistics": int(np.isfinite(z0["cal"]).sum()),
@@ -635,6 +643,11 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
                    heldout_shrink=0.0, worse_regions=[], regions=_regions(regions, z0, z0, select, sig_keys, gaps_cal),
                    hours=_hours(regions, z0, z0, select), residual={"significant": False})
         return out, {"before": z0["heldout"], "after": z0["heldout"]}
+    # Each twin seed's deviation from the twin's mean, a recording's worth of the twin's own
+    # variation (the parametric bootstrap of the intervals, noise_interval).
+    k = sp["cal"].k
+    with np.errstate(divide="ignore", invalid="ignore"):  # a statistic without spread: not finite, not used
+        noise = (np.stack([t.values for t in twin["cal"]]) - sp["cal"].mean) / sp["cal"].sd * np.sqrt(k / (k - 1))
     delta = {p: np.zeros_like(z0[p]) for p in z0}
     z = dict(z0)
     remaining = list(candidates)
