@@ -154,14 +154,21 @@ def _response(name, sd, per_channel: dict[str, float], grid=(0.0, 10.0), n_hours
 
 
 def test_fit_beyond_the_grid_is_flagged_high():
-    """The recording needs p = 20 (t = 10 at 0.5 σ per unit), the grid stops at 10."""
+    """The recording needs p = 20 (t = 10 at 0.5 σ per unit), the grid stops at 10: the fit at
+    p = 10 leaves t = 5 where it acts ((250 − 10) / 1000 = 24 % of the gap beyond the twin's
+    noise), so it is refused, and the refusal says that beyond the tried range it may explain
+    it."""
     real, twin, regions, sd = _signatures({"torque": 10.0})
     cand = _response("c", sd, {"torque": 0.5})
     res, _ = at.diagnose(real, twin, [cand])
-    fit = res["ranking"][0]
+    fit = res["refused"][0]
     assert fit["params"] == {"p": 10.0}
     assert fit["at_grid_edge"] == {"p": "high"}
     assert fit["grid"] == {"p": [0.0, 10.0]}
+    assert fit["footprint_gap_left"] == pytest.approx(0.24)
+    assert w.refused_phrase({**res, "library": {}}, fit).endswith(
+        "it does not explain it within the tried range (p is at the upper edge of the tried range "
+        "0–10: the true value may lie beyond)")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -264,6 +271,74 @@ def test_region_made_worse_counts_against_the_candidate():
     # Added alone, harm is selected and its worse region is reported for the whole diagnosis.
     res2, _ = at.diagnose(real, twin, [harm], max_effects=1)
     assert [(r["channel"], r["family"]) for r in res2["worse_regions"]] == [("speed", "band")]
+
+
+# ---------------------------------------------------------------------------------------------
+# An explanation explains where it acts (issue 15, item 4: false attributions)
+
+
+def test_a_candidate_that_leaves_its_footprint_unexplained_is_refused():
+    """The recording: torque t = 4, 6, …, 22 over its 10 hours (a drift) and speed t = 6. 'wide'
+    (1 σ per unit on torque and speed, constant over the hours) takes 76 % of the gap (p = 9.5:
+    2380 → 575) but leaves 23 % of it on its 20 statistics beyond the twin's noise ((575 − 20) /
+    2380; a one-seed response, no allowance for its error): refused, and the selection runs
+    again; 'speed' explains the speed channel exactly and is added; the drift stays unexplained.
+    With the drift's own shape among the candidates, that is added and nothing is refused."""
+    real, twin, regions, sd = _signatures({"torque": 0.0, "speed": 6.0})
+    ramp = np.r_[np.arange(4.0, 23.0, 2.0), np.zeros(10)]
+    real = {p: Signature(real[p].values + ramp * sd[p], regions) for p in real}
+    wide = _response("wide", sd, {"torque": 1.0, "speed": 1.0}, grid=(0.0, 20.0))
+    speed = _response("speed", sd, {"torque": 0.0, "speed": 1.0}, grid=(0.0, 20.0))
+    res, _ = at.diagnose(real, twin, [wide, speed])
+    assert res["heldout_gap_before"] == pytest.approx(2380.0)
+    assert [r["effect"] for r in res["refused"]] == ["wide"]
+    ref = res["refused"][0]
+    assert ref["pass"] == 1 and ref["params"]["p"] == pytest.approx(9.5, abs=0.01)
+    assert ref["heldout_reduction"] == pytest.approx(1805.0 / 2380.0, abs=1e-3)
+    assert ref["footprint_statistics"] == 20
+    assert ref["footprint_gap_left"] == pytest.approx(555.0 / 2380.0, abs=1e-3)
+    assert [a["effect"] for a in res["added"]] == ["speed"]
+    assert res["added"][0]["footprint_statistics"] == 10
+    assert res["added"][0]["footprint_gap_left"] == pytest.approx(0.0, abs=1e-9)
+    assert res["verdict"] == at.UNEXPLAINED and "wide" not in [r["effect"] for r in res["ranking"]]
+    said = w.answer({**res, "library": {}})
+    assert ("refused: wide: p 9.5 (" in said and "would remove 76 % of the held-out gap but leaves "
+            "23 % of the gap where it acts (20 statistics): it approximates the gap there, it does "
+            "not explain it") in said
+    html = render_page({**res, "library": {}}, [])
+    assert '<section id="refused">' in html and "23 %" in html
+    # The drift's own shape: added first, explains its footprint, nothing refused.
+    k = np.r_[np.arange(2.0, 12.0), np.zeros(10)]
+    drift = at.CandidateResponse("drift", [at.ParamAxis("p", (0.0, 4.0))],
+                                 {p: np.stack([v * k * sd[p] for v in (0.0, 4.0)]) for p in sd})
+    res2, _ = at.diagnose(real, twin, [wide, speed, drift])
+    assert [a["effect"] for a in res2["added"]] == ["drift", "speed"] and res2["refused"] == []
+    assert res2["verdict"] == at.EXPLAINED
+
+
+def test_what_a_right_candidate_leaves_within_its_responses_seed_variation_is_allowed():
+    """The recording is the response of the candidate's second response seed at p = 10 (torque
+    t = 14, 6, 14, 6, …); the candidate is fitted with its first seed's (t = 10 everywhere), which
+    leaves ±4 on each of the 10 statistics: (160 − 10) / 1160 = 12.9 % of the gap beyond the
+    twin's noise. Its three seeds respond 10, 14, 6 (variance 16, so an error variance of
+    2 × 16 = 32 per statistic): what it leaves is within its own seed-to-seed variation, and it is
+    added. The same first-seed response alone (no seeds to judge its error by) is refused."""
+    real, twin, regions, sd = _signatures({"torque": 0.0})
+    sign = np.where(np.arange(10) % 2 == 0, 1.0, -1.0)
+    real = {p: Signature(real[p].values + 10.0 * (1 + 0.4 * sign) * sd[p], regions) for p in real}
+    grid = (0.0, 20.0)
+    shapes = (np.ones(10), 1 + 0.4 * sign, 1 - 0.4 * sign)
+    per = {p: np.stack([np.stack([v * k * sd[p] for v in grid]) for k in shapes]) for p in sd}
+    three = at.CandidateResponse("c", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd}, per_seed=per)
+    v = at.response_error_var(three, np.array([10.0]), sd["heldout"])
+    assert v == pytest.approx(np.full(10, 32.0))
+    res, _ = at.diagnose(real, twin, [three])
+    assert [a["effect"] for a in res["added"]] == ["c"] and res["refused"] == []
+    assert res["added"][0]["footprint_gap_left"] == 0.0
+    one = at.CandidateResponse("c", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd})
+    assert at.response_error_var(one, np.array([10.0]), sd["heldout"]) == pytest.approx(np.zeros(10))
+    res1, _ = at.diagnose(real, twin, [one])
+    assert res1["added"] == [] and res1["refused"][0]["footprint_gap_left"] == pytest.approx(150.0 / 1160.0, abs=1e-3)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -719,7 +719,7 @@ def _progress_callback(progress: Progress, tasks: dict):
 
 
 def _print_diagnosis(res: dict) -> None:
-    from analysis.diagnosis.wording import added_phrase, subset_phrase
+    from analysis.diagnosis.wording import added_phrase, refused_phrase, subset_phrase
 
     out = Console(width=max(110, Console().width))
     if res.get("subset"):
@@ -749,7 +749,9 @@ def _print_diagnosis(res: dict) -> None:
                   f"{a['heldout_gap_before']:.1f} -> {a['heldout_gap_after']:.1f} "
                   f"(-{100 * a['heldout_reduction']:.0f} %, gain {a['gain']:.1f} > {a['gain_threshold']:.1f})")
         out.print(f"  in words: {added_phrase(res, a)}", markup=False, highlight=False)
-    if res["ranking"] and not res["added"]:
+    for r in res.get("refused", []):
+        out.print(f"refused: {refused_phrase(res, r)}", markup=False, highlight=False)
+    if res["ranking"] and not res["added"] and not res.get("refused"):
         best = res["ranking"][0]
         out.print(f"no candidate (physical effect, twin parameter or signal artefact) reduces the held-out gap "
                   f"significantly (best: {best['effect']}, {best.get('kind', 'physical effect')}, "

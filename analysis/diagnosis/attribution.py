@@ -41,6 +41,19 @@ change of t_j (if the residual were noise ε_j, ΔG = Σ 2ε_j d_j − d_j² has
 removes at least ``min_gain`` of the gap net of its penalty. Later candidates are fitted on top of the effects
 already added, their responses added to them (the effects' responses are taken as additive).
 
+**An explanation explains where it acts.** Once selected, each added candidate is checked on its
+*footprint*, the statistics of S its response moves by at least one standard deviation of the
+twin's spread (:func:`footprint_left`): with every added candidate in, the footprint's held-out
+Σ t², less what the twin's noise and the error of the candidate's response allow (1 + v_j per
+statistic, v_j from the response's seed-to-seed variation, :func:`response_error_var`), must be
+no more than 1 − ``explained_fraction`` (10 %) of its Σ t² before: the verdict's 90 % rule
+applied where the candidate acts. A candidate that leaves more approximates a gap whose shape it
+does not have (a resonance standing in for a speed-locked line, a drifting bias for a
+misalignment's constant offset): it is *refused* (``refused``, with the fraction it left) and the
+selection runs again without it, until every added candidate passes; what it would have absorbed
+stays unexplained (docs/gap-diagnosis.md gives the measured fractions of right and refused
+candidates).
+
 The verdict: "no significant gap" when no statistic is significant on the calibration part after
 Holm's correction or the held-out gap over S does not exceed its χ²_|S|(1 − α) quantile;
 otherwise "explained" when the residual held-out gap is within that quantile or the added
@@ -209,6 +222,49 @@ def _penalty(z_before, z_after, regions, select, worse: list[dict]) -> float:
     return max(0.0, float(np.sum(z_after[m] ** 2 - z_before[m] ** 2)))
 
 
+#: A statistic is in a candidate's footprint when the candidate's response moves its t by this much.
+FOOTPRINT_SIGMAS = 1.0
+
+
+def footprint_left(delta_heldout: np.ndarray, sd_heldout: np.ndarray, sel: np.ndarray,
+                   z_before: np.ndarray, z_after: np.ndarray, error_var: np.ndarray) -> tuple[int, float]:
+    """What a candidate leaves of the gap where it acts, beyond what a right candidate leaves.
+
+    Its footprint F: the statistics of ``sel`` (S, usable on the held-out part) whose t its
+    response moves by at least :data:`FOOTPRINT_SIGMAS` (|Δ_j|/σ_j ≥ 1; ``delta_heldout``,
+    ``sd_heldout`` (n,), the statistic's units). With a right candidate, the residual t_j there is
+    the twin's own noise (variance 1) plus the error of its response (variance ``error_var`` v_j
+    (n,), :func:`response_error_var`), so the excess Σ_F (t_after² − 1 − v_j), floored at 0, is
+    what it leaves unexplained; returned as a fraction of Σ_F t_before² (``z_before``: the twin
+    as it is, ``z_after``: with every added candidate; (n,) each). Returns (|F|, the fraction;
+    0.0 for an empty footprint)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        moved = np.abs(delta_heldout / sd_heldout) >= FOOTPRINT_SIGMAS
+    foot = sel & moved & np.isfinite(z_before) & np.isfinite(z_after)
+    before = float(np.sum(z_before[foot] ** 2))
+    excess = float(np.sum(z_after[foot] ** 2 - 1.0 - error_var[foot]))
+    return int(foot.sum()), (max(0.0, excess) / before if before > 0 else 0.0)
+
+
+def response_error_var(cand: CandidateResponse, p: np.ndarray, sd: np.ndarray,
+                       part: str = "heldout") -> np.ndarray:
+    """(n,) variance, in units of the twin's spread squared (``sd`` (n,)), of the error of
+    taking ``cand``'s response at ``p`` (k,) for the recording's on ``part``: the recording's
+    machine is another draw than the seed the response was fitted with, so twice the variance
+    of the response over its seeds (``per_seed``, sample variance), or its ``spread`` squared
+    for a response averaged over the seeds; zeros for a one-seed response."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if cand.per_seed is not None and cand.per_seed[part].shape[0] > 1:
+            per = np.stack([_interpolator(cand.params, np.nan_to_num(d))(p[None, :])[0]
+                            for d in cand.per_seed[part]])
+            v = 2.0 * per.var(axis=0, ddof=1) / sd ** 2
+        elif cand.spread is not None:
+            v = (_interpolator(cand.params, np.nan_to_num(cand.spread[part]))(p[None, :])[0] / sd) ** 2
+        else:
+            v = np.zeros_like(sd)
+    return np.nan_to_num(v)
+
+
 @dataclass
 class Fit:
     """A candidate fitted on the calibration part and measured on the held-out part."""
@@ -229,6 +285,8 @@ class Fit:
     penalty: float = 0.0
     kind: str = "physical effect"
     alternatives: list[dict] = field(default_factory=list)
+    footprint_statistics: int = 0
+    footprint_gap_left: float | None = None
 
     @property
     def reduction(self) -> float:
@@ -261,7 +319,9 @@ class Fit:
                 "worse_regions": self.worse, "worse_penalty": self.penalty,
                 "net_reduction": self.net_reduction,
                 "gain_threshold": self.gain_threshold, "significant": self.significant(min_gain),
-                "alternatives": self.alternatives}
+                "alternatives": self.alternatives,
+                "footprint_statistics": self.footprint_statistics,
+                "footprint_gap_left": self.footprint_gap_left}
 
 
 def alternatives(best: Fit, fits: list[Fit], sel: np.ndarray, sd_ho: np.ndarray,
@@ -648,9 +708,61 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     k = sp["cal"].k
     with np.errstate(divide="ignore", invalid="ignore"):  # a statistic without spread: not finite, not used
         noise = (np.stack([t.values for t in twin["cal"]]) - sp["cal"].mean) / sp["cal"].sd * np.sqrt(k / (k - 1))
+    pool = list(candidates)
+    refused: list[dict] = []
+    passes = 0
+    # Select; then refuse every added candidate that leaves more than 1 − explained_fraction of
+    # the gap where it acts (it approximates the gap, it does not explain it) and select again
+    # without it, until every added candidate explains its footprint.
+    while True:
+        added, ranking, z = _select(pool, real, sp, z0, select, alpha, regions, noise, min_gain, max_effects)
+        bad = []
+        for f in added:
+            cand = next(c for c in pool if c.name == f.name)
+            err = response_error_var(cand, np.array([f.params[a.name] for a in cand.params]), sd["heldout"])
+            f.footprint_statistics, f.footprint_gap_left = footprint_left(
+                f.delta_heldout, sd["heldout"], sel_ho, z0["heldout"], z["heldout"], err)
+            if f.footprint_gap_left > 1.0 - explained_fraction:
+                bad.append(f)
+        if not bad:
+            break
+        passes += 1
+        refused += [{**f.as_dict(min_gain), "pass": passes} for f in bad]
+        pool = [c for c in pool if c.name not in {f.name for f in bad}]
+    g_after = float(np.sum(z["heldout"][sel_ho] ** 2))
+    residual_sig = g_after > crit
+    shrink = 1.0 - g_after / g_before if g_before > 0 else 0.0
+    explained = not residual_sig or (added and shrink >= explained_fraction)
+    ranking = [{**f.as_dict(min_gain), "round": i + 1} for i, f in enumerate(added)] + \
+        [r for r in ranking if r["effect"] not in {f.name for f in added}]
+    out.update(
+        verdict=EXPLAINED if explained else UNEXPLAINED,
+        ranking=ranking,
+        added=[{**f.as_dict(min_gain), "step": i + 1} for i, f in enumerate(added)],
+        refused=refused,
+        heldout_gap_after=g_after,
+        heldout_shrink=shrink, explained_fraction=explained_fraction,
+        worse_regions=worse_regions(z0["heldout"], z["heldout"], regions, alpha),
+        regions=_regions(regions, z0, z, select, sig_keys, gaps_cal),
+        hours=_hours(regions, z0, z, select),
+        residual={"significant": bool(residual_sig), "heldout_gap": g_after, "critical": crit,
+                  "top_regions": [r for r in _regions(regions, z, z, select, sig_keys,
+                                                      g.region_gaps(z["cal"], regions))
+                                  if r["significant"]][:5]},
+    )
+    return out, {"before": z0["heldout"], "after": z["heldout"]}
+
+
+def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict, z0: dict,
+            select: np.ndarray, alpha: float, regions: list, noise: np.ndarray, min_gain: float,
+            max_effects: int) -> tuple[list[Fit], list[dict], dict[str, np.ndarray]]:
+    """Greedy forward selection among ``pool`` (steps 1–3 of the module's docstring): returns
+    the added fits in order (zoomed, with their stated intervals and alternatives), the ranking
+    of the last round and the t of both parts with the added candidates' responses."""
+    sd = {p: sp[p].sd for p in sp}
     delta = {p: np.zeros_like(z0[p]) for p in z0}
     z = dict(z0)
-    remaining = list(candidates)
+    remaining = list(pool)
     added: list[Fit] = []
     ranking: list[dict] = []
     for step in range(max_effects):
@@ -674,27 +786,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
         delta = {"cal": delta["cal"] + best.delta_cal, "heldout": delta["heldout"] + best.delta_heldout}
         z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}
         remaining = [c for c in remaining if c.name != best.name]
-    g_after = float(np.sum(z["heldout"][sel_ho] ** 2))
-    residual_sig = g_after > crit
-    shrink = 1.0 - g_after / g_before if g_before > 0 else 0.0
-    explained = not residual_sig or (added and shrink >= explained_fraction)
-    ranking = [{**f.as_dict(min_gain), "round": i + 1} for i, f in enumerate(added)] + \
-        [r for r in ranking if r["effect"] not in {f.name for f in added}]
-    out.update(
-        verdict=EXPLAINED if explained else UNEXPLAINED,
-        ranking=ranking,
-        added=[{**f.as_dict(min_gain), "step": i + 1} for i, f in enumerate(added)],
-        heldout_gap_after=g_after,
-        heldout_shrink=shrink, explained_fraction=explained_fraction,
-        worse_regions=worse_regions(z0["heldout"], z["heldout"], regions, alpha),
-        regions=_regions(regions, z0, z, select, sig_keys, gaps_cal),
-        hours=_hours(regions, z0, z, select),
-        residual={"significant": bool(residual_sig), "heldout_gap": g_after, "critical": crit,
-                  "top_regions": [r for r in _regions(regions, z, z, select, sig_keys,
-                                                      g.region_gaps(z["cal"], regions))
-                                  if r["significant"]][:5]},
-    )
-    return out, {"before": z0["heldout"], "after": z["heldout"]}
+    return added, ranking, z
 
 
 def _gap_setup(real: dict[str, Signature], twin: dict[str, list[Signature]], alpha: float):

@@ -45,8 +45,10 @@ RULES = (
     "t² of a statistic: its squared distance from the twin's seed mean in units of the twin's "
     "seed-to-seed spread; 1 is typical of the twin itself. The gap is Σ t² over the statistics "
     "significant on the calibration part; every before/after figure is on the held-out part.",
-    "Interval: where the calibration Σ t² stays within max(1, reduced χ²) of its minimum. It does "
-    "not include the error of taking the effect's response from one seed of the twin.",
+    "Interval (90 %): the hull of where the calibration Σ t² stays within max(1, reduced χ²) of "
+    "its minimum and of three bootstraps (over the regions, over the response's twin seeds, over "
+    "the twin's own seed-to-seed variation), widened by how far the fit moves when the response "
+    "is interpolated otherwise between grid values.",
     "At the edge of the tried range: the fitted value or an end of its interval lies on the "
     "first or last value of the grid the effect was simulated on, so the true value may lie "
     "beyond it (a zero amplitude is a physical floor and is not flagged).",
@@ -55,6 +57,10 @@ RULES = (
     "1 − α once the effect is added. Its rise outside the significant statistics is subtracted "
     "from the candidate's gain (net reduction), which ranks the candidates and must pass the "
     "selection test.",
+    "Refused: a candidate that passes the selection test but, with every added candidate in, "
+    "leaves more than 10 % of the gap where it acts (the significant statistics its response "
+    "moves by at least the twin's spread): it approximates the gap there without explaining it; "
+    "the selection runs again without it and what it would have absorbed stays unexplained.",
     "Shrink, re-simulated: the twin run again with every added candidate at its fitted values "
     "(its seeds of the spread; signal artefacts post-processed on those runs), the held-out gap "
     "measured on them with the same statistic; the verdict follows it. Interpolated: from the "
@@ -235,6 +241,11 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
               "worse": _worse_text(a.get("worse_regions", [])),
               "params": w.parameters(result, a)}
              for i, a in enumerate(result.get("added", []))]
+    refused = [{"pass": r["pass"], "title": title_of(r["effect"]), "effect": r["effect"],
+                "kind": w.kind(result, r["effect"]), "words": w.owner_phrase(result, r),
+                "reduction": w.percent(r["heldout_reduction"]), "n": r["footprint_statistics"],
+                "left": w.percent(r["footprint_gap_left"])}
+               for r in result.get("refused", [])]
     ranking = []
     for i, r in enumerate(result.get("ranking", [])):
         pars = w.parameters(result, r)
@@ -279,7 +290,8 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
         resim = ""
     return {"title": f"Gap diagnosis: {verdict}", "verdict": verdict, "verdict_class": cls, "resim": resim,
             "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
-            "facts": facts, "subset": w.subset_phrase(result) or "", "added": added, "ranking": ranking,
+            "facts": facts, "subset": w.subset_phrase(result) or "", "added": added, "refused": refused,
+            "ranking": ranking,
             "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}
 
 

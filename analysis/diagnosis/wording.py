@@ -226,6 +226,18 @@ def added_phrase(result: dict, fit: dict) -> str:
     return text
 
 
+def refused_phrase(result: dict, fit: dict) -> str:
+    """Why a candidate was refused (an entry of ``refused``): "base resonance …
+    [physical effect] would remove 56 % of the held-out gap but leaves 39 % of the gap where it
+    acts (18 statistics): it approximates the gap there, it does not explain it", and, for a fit
+    at the edge of its grid, that it may beyond the tried range."""
+    edges = [f"{r['label']} is {r['note']}" for r in parameters(result, fit) if r["note"]]
+    return (f"{owner_phrase(result, fit)} would remove {percent(fit['heldout_reduction'])} of the "
+            f"held-out gap but leaves {percent(fit['footprint_gap_left'])} of the gap where it acts "
+            f"({fit['footprint_statistics']} statistics): it approximates the gap there, it does not "
+            "explain it" + (f" within the tried range ({'; '.join(edges)})" if edges else ""))
+
+
 def _places(rows: list[dict], k: int = 3) -> str:
     names = [region(r) for r in rows[:k]]
     if len(names) <= 1:
@@ -281,9 +293,11 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
     out = [("Where", f"the recording differs from the twin beyond its seed-to-seed spread in {k} of "
            f"{n} statistics (Holm, α = {number(alpha, 2)}), most in {_places(sig)}{when}.")]
     added = result.get("added", [])
+    refused = result.get("refused", [])
+    no_fit = ("; refused: " + "; ".join(refused_phrase(result, r) for r in refused[:2])) if refused else ""
     if added:
         what = "; then ".join(added_phrase(result, a) for a in added)
-        out.append(("What", f"{what}."))
+        out.append(("What", f"{what}{no_fit}."))
         sure = ", ".join(f"{_title(result, a['effect'])} gains {number(a['gain'] / a['gain_threshold'], 2)}× "
                          "its significance threshold" for a in added if a.get("gain_threshold"))
         edges = [f"{r['label']} is {r['note']}" for a in added for r in parameters(result, a) if r["note"]]
@@ -304,7 +318,10 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
                        "re-simulation)."))
     else:
         best = (result.get("ranking") or [None])[0]
-        if best:
+        if refused:
+            out.append(("What", "no candidate (physical effect, twin parameter or signal artefact) explains it"
+                        f"{no_fit}."))
+        elif best:
             out.append(("What", "no candidate (physical effect, twin parameter or signal artefact) explains it; the "
                        f"best, {owner_phrase(result, best)}, would remove "
                        f"{percent(best.get('net_reduction', best['heldout_reduction']))} of the "

@@ -57,6 +57,9 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
   ``per_kind_median_heldout_shrink``; ``per_kind_top1_or_not_told_apart`` (the injected one
   first or among the ``alternatives`` of the first: candidates the data do not tell apart from
   it); ``per_artefact_top1``, ``per_parameter_top1``;
+- each case's row lists its ``refused`` candidates (they passed the selection test but leave
+  more than 10 % of the gap where they act: :mod:`analysis.diagnosis.attribution`) and each
+  added candidate's ``footprint_gap_left``;
 - ``confusion`` (also ``benchmark_confusion.csv``): the cases whose first added candidate is not
   the injected one, as (kind, injected, named first or none, count, case ids): the pairs the
   diagnosis does not tell apart, measured (:func:`confusion`).
@@ -188,6 +191,8 @@ def _score_case(case: Case, res: dict) -> dict:
            "added_kinds": [a.get("kind", KIND_EFFECT) for a in added],
            "verdict": res["verdict"], "ranking": ranking[:3],
            "added": [a["effect"] for a in added],
+           "footprint_gap_left": {a["effect"]: a.get("footprint_gap_left") for a in added},
+           "refused": [a["effect"] for a in res.get("refused", [])],
            "fitted": {a["effect"]: a["params"] for a in added},
            "intervals": {a["effect"]: a["interval"] for a in added},
            "heldout_gap_before": res["heldout_gap_before"],
