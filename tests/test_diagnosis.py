@@ -140,6 +140,14 @@ def test_benchmark_files_and_table(benchmark):
         assert 0.0 <= res[key] <= 1.0
     lines = (out / "benchmark_cases.csv").read_text().splitlines()
     assert len(lines) == 1 + res["n_cases"] == 57
+    # what is seen, apart from what is named when it is seen
+    for kind, case_kind in (("physical effect", "single"), ("signal artefact", "artefact")):
+        cases = [c for c in res["cases"] if c["kind"] == case_kind]
+        seen = [c for c in cases if c["verdict"] != "no significant gap"]
+        assert res["per_kind_detected"][kind] == pytest.approx(len(seen) / len(cases))
+        when = res["per_kind_top1_when_detected"][kind]
+        assert when["n"] == len(seen) and when["top1"] == pytest.approx(np.mean([c["correct"] for c in seen]))
+    assert res["per_kind_detected"]["parameter"] is None
     assert "top-1 accuracy" in proc.stderr and "blind benchmark" in proc.stdout
 
 

@@ -301,7 +301,10 @@ def test_benchmark_with_parameter_cases(tmp_path):
     pars = [c for c in res["cases"] if c["kind"] == "parameter"]
     assert len(pars) == 30 and "parameter" in res["kinds"]
     assert res["per_kind_top1"]["parameter"] >= 0.65, [(c["id"], c["injected"], c["added"]) for c in pars]
-    assert res["per_kind_top1_or_not_told_apart"]["parameter"] >= 0.75
+    assert res["per_kind_top1_or_not_told_apart"]["parameter"] >= 0.8
+    # when the mis-setting is beyond the twin's spread, it is named or not told apart from the
+    # one named (26 of 26 measured, docs/gap-diagnosis.md)
+    assert res["per_kind_top1_when_detected"]["parameter"]["or_not_told_apart"] >= 0.9
     assert res["per_kind_top1"]["physical effect"] >= 0.9
     assert res["per_kind_top1"]["signal artefact"] >= 11 / 14 - 1e-9
     assert res["null_correct_fraction"] >= 0.9
@@ -335,3 +338,37 @@ def test_candidates_the_data_do_not_tell_apart_are_named_with_the_added_one():
     # alone, nothing to tell apart
     res1, _ = at.diagnose(real, twin, [nut, other], max_effects=1)
     assert res1["added"][0]["effect"] == "nut" and res1["added"][0]["alternatives"] == []
+
+
+def test_candidates_are_not_told_apart_within_the_error_of_their_responses():
+    """The recording: torque t = 10 on 10 statistics. 'a' (1 σ per unit) fits p = 10 and removes
+    the whole gap (1000); 'b' (1 ± 0.3 σ per unit, alternating) fits p = 100/10.9 = 9.17 and
+    leaves 0.83 ∓ 2.75 (Σ r² = 82.6). That difference exceeds three standard deviations of the
+    twin's noise on it (2·√Σ(d_a − d_b)² = 2·√82.6 = 18.2), so from one seed's responses 'b' is
+    told apart. When b's three response seeds answer (1.3, 1, 1.6) and (0.7, 1, 0.4) times p
+    (error variance 2·0.09·p² per statistic), the difference's standard deviation becomes
+    2·√(82.6 + Σ r²·v) = 73: 'b' is not told apart from 'a'."""
+    from test_diagnosis_report import _response, _signatures
+
+    from analysis.diagnosis import attribution as at
+
+    real, twin, regions, sd = _signatures({"torque": 10.0})
+    sign = np.where(np.arange(10) % 2 == 0, 1.0, -1.0)
+    grid = (0.0, 20.0)
+    a = _response("a", sd, {"torque": 1.0}, grid=grid)
+    shapes = (1 + 0.3 * sign, np.ones(10), 1 + 0.6 * sign)
+    per = {p: np.stack([np.stack([v * k * sd[p] for v in grid]) for k in shapes]) for p in sd}
+    b_one = at.CandidateResponse("b", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd})
+    b_three = at.CandidateResponse("b", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd}, per_seed=per)
+    res1, _ = at.diagnose(real, twin, [a, b_one], max_effects=1)
+    assert res1["added"][0]["effect"] == "a" and res1["added"][0]["alternatives"] == []
+    res3, _ = at.diagnose(real, twin, [a, b_three], max_effects=1)
+    alt = res3["added"][0]["alternatives"]
+    assert [x["effect"] for x in alt] == ["b"]
+    p_b = alt[0]["params"]["p"]
+    assert abs(p_b - 100.0 / 10.9) <= 20.0 / 60  # the fine grid's step: an alternative is not zoomed
+    r = 10.0 - p_b * shapes[0]  # b's residual; a leaves none, so d_a − d_b = r
+    assert alt[0]["gain_difference"] == pytest.approx(np.sum(r ** 2), rel=1e-3)
+    v = 2.0 * np.var(np.stack([p_b * k for k in shapes]), axis=0, ddof=1)
+    assert alt[0]["difference_sd"] == pytest.approx(2.0 * np.sqrt(np.sum(r ** 2) + np.sum(r ** 2 * v)), rel=1e-3)
+    assert alt[0]["gain_difference"] > at.TIE_SIGMAS * 2.0 * np.sqrt(np.sum(r ** 2))

@@ -65,10 +65,11 @@ significant but small remainder, not as an unexplained gap.
 
 **Not told apart.** Another candidate of the same round that passes the test too and whose net
 gain falls short of the added one's by no more than ``TIE_SIGMAS`` (3) standard deviations of
-the difference of the two gains if the residual were noise (2·√Σ(d_a − d_b)², as for the gain
-test) or by no more than ``TIE_FRACTION`` (1 %) of the gap before (the error of taking the
-responses from one seed) is listed in the added entry's ``alternatives``: the data do not tell
-them apart (springs in series, a constant against a viscous drag at one speed).
+the difference of the two gains (the twin's noise, 2·√Σ(d_a − d_b)² as for the gain test, and
+the error of each candidate's response from its seed-to-seed variation, :func:`alternatives`)
+or by no more than ``TIE_FRACTION`` (1 %) of the gap before is listed in the added entry's
+``alternatives``: the data do not tell them apart (springs in series, a constant against a
+viscous drag at one speed, a noisier sensor against noise added to its signal).
 
 **Re-simulated shrink.** The shrink above is interpolated: one seed's responses, linear
 between grid values and added. :func:`resimulated` measures it again on the twin re-simulated
@@ -325,19 +326,32 @@ class Fit:
 
 
 def alternatives(best: Fit, fits: list[Fit], sel: np.ndarray, sd_ho: np.ndarray,
-                 min_gain: float) -> list[dict]:
+                 min_gain: float, z_ho: np.ndarray | None = None,
+                 error_var: dict[str, np.ndarray] | None = None) -> list[dict]:
     """The candidates of ``fits`` (one round, ``best`` among them) the data do not tell apart
     from ``best``: they pass the test and their net gain falls short of best's by at most
-    :data:`TIE_SIGMAS` standard deviations of the difference of the gains (2·√Σ(d_a − d_b)²
-    over the statistics ``sel``, d the change of held-out t) or by at most :data:`TIE_FRACTION`
-    of the gap before. Each: effect, kind, params, interval, net_reduction, gain_difference,
-    difference_sd."""
+    :data:`TIE_SIGMAS` standard deviations of the difference of the gains or by at most
+    :data:`TIE_FRACTION` of the gap before.
+
+    The difference of the gains G(a) − G(b), G(x) = Σ_S (z_j − d_x,j)² (z ``z_ho`` the held-out t
+    of the current model, d_x the change of t by candidate x; (n,) each, over the statistics
+    ``sel``), varies with the twin's noise on z (variance 4·Σ(d_a − d_b)²) and with the error of
+    each candidate's response (variance 4·Σ(z − d_x)²·v_x, v_x from ``error_var`` {name: (n,)},
+    :func:`response_error_var`; none without ``z_ho``): first-order propagation of both. Each:
+    effect, kind, params, interval, net_reduction, gain_difference, difference_sd."""
     out = []
+    err = error_var or {}
     for f in fits:
         if f is best or not f.significant(min_gain):
             continue
         dd = (best.delta_heldout - f.delta_heldout)[sel] / sd_ho[sel]
-        sd = 2.0 * float(np.sqrt(np.sum(dd ** 2)))
+        var = float(np.sum(dd ** 2))
+        if z_ho is not None:
+            for x in (best, f):
+                if x.name in err:
+                    r = z_ho[sel] - x.delta_heldout[sel] / sd_ho[sel]
+                    var += float(np.sum(r ** 2 * err[x.name][sel]))
+        sd = 2.0 * float(np.sqrt(var))
         diff = best.net_gain - f.net_gain
         if diff <= max(TIE_SIGMAS * sd, TIE_FRACTION * best.heldout_before):
             out.append({"effect": f.name, "kind": f.kind, "params": f.params,
@@ -775,7 +789,12 @@ def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict,
         ranking = [{**f.as_dict(min_gain), "round": step + 1} for f in fits]
         if not best.significant(min_gain):
             break
-        alt = alternatives(best, fits, select & np.isfinite(z["heldout"]), sd["heldout"], min_gain)
+        by_name = {c.name: c for c in remaining}
+        err = {f.name: response_error_var(by_name[f.name], np.array([f.params[a.name] for a in by_name[f.name].params]),
+                                          sd["heldout"])
+               for f in fits if f is best or f.significant(min_gain)}
+        alt = alternatives(best, fits, select & np.isfinite(z["heldout"]), sd["heldout"], min_gain,
+                           z["heldout"], err)
         cand = next(c for c in remaining if c.name == best.name)
         # The added candidate's value is not rounded to the fine grid: searched again, zoomed.
         best = fit_candidate(cand, z["cal"], z["heldout"], sd, select, alpha, regions=regions, zoom=True)

@@ -56,7 +56,10 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
   artefact on its target, "parameter": the parameter cases, the injected key first), with
   ``per_kind_median_heldout_shrink``; ``per_kind_top1_or_not_told_apart`` (the injected one
   first or among the ``alternatives`` of the first: candidates the data do not tell apart from
-  it); ``per_artefact_top1``, ``per_parameter_top1``;
+  it); ``per_artefact_top1``, ``per_parameter_top1``; ``per_kind_detected``: the cases whose
+  verdict is not "no significant gap" (the injected change is beyond the twin's seed-to-seed
+  spread), and ``per_kind_top1_when_detected`` (top1, or_not_told_apart, n) over those: what the
+  diagnosis names when it sees something, apart from what it can see;
 - each case's row lists its ``refused`` candidates (they passed the selection test but leave
   more than 10 % of the gap where they act: :mod:`analysis.diagnosis.attribution`) and each
   added candidate's ``footprint_gap_left``;
@@ -403,6 +406,15 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
         "per_kind_top1_or_not_told_apart": {
             kind: (float(np.mean([r["correct_or_not_told_apart"] for r in rs])) if rs else None)
             for kind, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars))},
+        "per_kind_detected": {
+            kind: (float(np.mean([r["verdict"] != NO_GAP for r in rs])) if rs else None)
+            for kind, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars))},
+        "per_kind_top1_when_detected": {
+            kind: ({"top1": float(np.mean([r["correct"] for r in d])),
+                    "or_not_told_apart": float(np.mean([r["correct_or_not_told_apart"] for r in d])), "n": len(d)}
+                   if d else None)
+            for kind, d in ((k, [r for r in rs if r["verdict"] != NO_GAP])
+                            for k, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars)))},
         "per_parameter_top1": {name: float(np.mean([r["correct"] for r in pars if r["injected"] == [name]]))
                                for name in sorted({r["injected"][0] for r in pars})},
         "per_artefact_top1": {k: float(np.mean([r["correct"] for r in arts
