@@ -330,13 +330,13 @@ def test_what_a_right_candidate_leaves_within_its_responses_seed_variation_is_al
     shapes = (np.ones(10), 1 + 0.4 * sign, 1 - 0.4 * sign)
     per = {p: np.stack([np.stack([v * k * sd[p] for v in grid]) for k in shapes]) for p in sd}
     three = at.CandidateResponse("c", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd}, per_seed=per)
-    v = at.response_error_var(three, np.array([10.0]), sd["heldout"])
+    v = at.response_error_var(three, {"p": 10.0}, sd["heldout"])
     assert v == pytest.approx(np.full(10, 32.0))
     res, _ = at.diagnose(real, twin, [three])
     assert [a["effect"] for a in res["added"]] == ["c"] and res["refused"] == []
     assert res["added"][0]["footprint_gap_left"] == 0.0
     one = at.CandidateResponse("c", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd})
-    assert at.response_error_var(one, np.array([10.0]), sd["heldout"]) == pytest.approx(np.zeros(10))
+    assert at.response_error_var(one, {"p": 10.0}, sd["heldout"]) == pytest.approx(np.zeros(10))
     res1, _ = at.diagnose(real, twin, [one])
     assert res1["added"] == [] and res1["refused"][0]["footprint_gap_left"] == pytest.approx(150.0 / 1160.0, abs=1e-3)
 

@@ -247,13 +247,14 @@ def footprint_left(delta_heldout: np.ndarray, sd_heldout: np.ndarray, sel: np.nd
     return int(foot.sum()), (max(0.0, excess) / before if before > 0 else 0.0)
 
 
-def response_error_var(cand: CandidateResponse, p: np.ndarray, sd: np.ndarray,
+def response_error_var(cand: CandidateResponse, params: dict[str, float], sd: np.ndarray,
                        part: str = "heldout") -> np.ndarray:
     """(n,) variance, in units of the twin's spread squared (``sd`` (n,)), of the error of
-    taking ``cand``'s response at ``p`` (k,) for the recording's on ``part``: the recording's
+    taking ``cand``'s response at ``params`` (a fit's {name: value}) for the recording's on ``part``: the recording's
     machine is another draw than the seed the response was fitted with, so twice the variance
     of the response over its seeds (``per_seed``, sample variance), or its ``spread`` squared
     for a response averaged over the seeds; zeros for a one-seed response."""
+    p = np.array([params[a.name] for a in cand.params])
     with np.errstate(divide="ignore", invalid="ignore"):
         if cand.per_seed is not None and cand.per_seed[part].shape[0] > 1:
             per = np.stack([_interpolator(cand.params, np.nan_to_num(d))(p[None, :])[0]
@@ -732,8 +733,7 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
         added, ranking, z = _select(pool, real, sp, z0, select, alpha, regions, noise, min_gain, max_effects)
         bad = []
         for f in added:
-            cand = next(c for c in pool if c.name == f.name)
-            err = response_error_var(cand, np.array([f.params[a.name] for a in cand.params]), sd["heldout"])
+            err = response_error_var(next(c for c in pool if c.name == f.name), f.params, sd["heldout"])
             f.footprint_statistics, f.footprint_gap_left = footprint_left(
                 f.delta_heldout, sd["heldout"], sel_ho, z0["heldout"], z["heldout"], err)
             if f.footprint_gap_left > 1.0 - explained_fraction:
@@ -790,8 +790,7 @@ def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict,
         if not best.significant(min_gain):
             break
         by_name = {c.name: c for c in remaining}
-        err = {f.name: response_error_var(by_name[f.name], np.array([f.params[a.name] for a in by_name[f.name].params]),
-                                          sd["heldout"])
+        err = {f.name: response_error_var(by_name[f.name], f.params, sd["heldout"])
                for f in fits if f is best or f.significant(min_gain)}
         alt = alternatives(best, fits, select & np.isfinite(z["heldout"]), sd["heldout"], min_gain,
                            z["heldout"], err)

@@ -59,8 +59,9 @@ RULES = (
     "selection test.",
     "Refused: a candidate that passes the selection test but, with every added candidate in, "
     "leaves more than 10 % of the gap where it acts (the significant statistics its response "
-    "moves by at least the twin's spread): it approximates the gap there without explaining it; "
-    "the selection runs again without it and what it would have absorbed stays unexplained.",
+    "moves by at least the twin's spread), beyond what the twin's noise and the seed-to-seed "
+    "error of its own response allow: it approximates the gap there without explaining it; the "
+    "selection runs again without it and what it would have absorbed stays unexplained.",
     "Shrink, re-simulated: the twin run again with every added candidate at its fitted values "
     "(its seeds of the spread; signal artefacts post-processed on those runs), the held-out gap "
     "measured on them with the same statistic; the verdict follows it. Interpolated: from the "

@@ -228,7 +228,7 @@ def added_phrase(result: dict, fit: dict) -> str:
 
 def refused_phrase(result: dict, fit: dict) -> str:
     """Why a candidate was refused (an entry of ``refused``): "base resonance …
-    [physical effect] would remove 56 % of the held-out gap but leaves 39 % of the gap where it
+    [physical effect] would remove 56 % of the held-out gap but leaves 38 % of the gap where it
     acts (18 statistics): it approximates the gap there, it does not explain it", and, for a fit
     at the edge of its grid, that it may beyond the tried range."""
     edges = [f"{r['label']} is {r['note']}" for r in parameters(result, fit) if r["note"]]
