@@ -731,9 +731,10 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     # without it, until every added candidate explains its footprint.
     while True:
         added, ranking, z = _select(pool, real, sp, z0, select, alpha, regions, noise, min_gain, max_effects)
+        by_name = {c.name: c for c in pool}
         bad = []
         for f in added:
-            err = response_error_var(next(c for c in pool if c.name == f.name), f.params, sd["heldout"])
+            err = response_error_var(by_name[f.name], f.params, sd["heldout"])
             f.footprint_statistics, f.footprint_gap_left = footprint_left(
                 f.delta_heldout, sd["heldout"], sel_ho, z0["heldout"], z["heldout"], err)
             if f.footprint_gap_left > 1.0 - explained_fraction:
@@ -794,7 +795,7 @@ def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict,
                for f in fits if f is best or f.significant(min_gain)}
         alt = alternatives(best, fits, select & np.isfinite(z["heldout"]), sd["heldout"], min_gain,
                            z["heldout"], err)
-        cand = next(c for c in remaining if c.name == best.name)
+        cand = by_name[best.name]
         # The added candidate's value is not rounded to the fine grid: searched again, zoomed.
         best = fit_candidate(cand, z["cal"], z["heldout"], sd, select, alpha, regions=regions, zoom=True)
         best.alternatives = alt

@@ -358,6 +358,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     singles = [r for r in rows if r["kind"] == "single"]
     arts = [r for r in rows if r["kind"] == "artefact"]
     pars = [r for r in rows if r["kind"] == "parameter"]
+    by_kind = ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars))
     med = lambda rs: float(np.median([r["heldout_shrink"] for r in rs])) if rs else None  # noqa: E731
 
     def med_resim(rs: list[dict]) -> float | None:
@@ -405,16 +406,15 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
                                               KIND_PARAMETER: resim_diff(pars)},
         "per_kind_top1_or_not_told_apart": {
             kind: (float(np.mean([r["correct_or_not_told_apart"] for r in rs])) if rs else None)
-            for kind, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars))},
+            for kind, rs in by_kind},
         "per_kind_detected": {
             kind: (float(np.mean([r["verdict"] != NO_GAP for r in rs])) if rs else None)
-            for kind, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars))},
+            for kind, rs in by_kind},
         "per_kind_top1_when_detected": {
             kind: ({"top1": float(np.mean([r["correct"] for r in d])),
                     "or_not_told_apart": float(np.mean([r["correct_or_not_told_apart"] for r in d])), "n": len(d)}
                    if d else None)
-            for kind, d in ((k, [r for r in rs if r["verdict"] != NO_GAP])
-                            for k, rs in ((KIND_EFFECT, singles), (KIND_ARTEFACT, arts), (KIND_PARAMETER, pars)))},
+            for kind, d in ((k, [r for r in rs if r["verdict"] != NO_GAP]) for k, rs in by_kind)},
         "per_parameter_top1": {name: float(np.mean([r["correct"] for r in pars if r["injected"] == [name]]))
                                for name in sorted({r["injected"][0] for r in pars})},
         "per_artefact_top1": {k: float(np.mean([r["correct"] for r in arts
