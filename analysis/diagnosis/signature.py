@@ -13,8 +13,11 @@ Phase I sample or Phase II session it comes from. Families:
 - ``phase``: log10 RMS of the signal high-passed at 20 Hz (Phase I) or 2 Hz (Phase II) within one
   operating phase: steady (cruise), transient (acceleration/deceleration), reversal (±20 ms
   around a stop or start), dwell (standstill);
-- ``level``: mean |torque| in each Phase I operating phase (N·m), and the dwell mean of each IMU
-  channel (m/s², rad/s: gravity projection and bias);
+- ``level``: mean |torque| in each Phase I operating phase (N·m); the constant drag (N·m) and
+  the viscous drag coefficient (N·m·s/rad) of the motor torque over the motion of each Phase I
+  capture (:func:`drag_fit`: with the ramps in, a constant and a viscous drag that give the same
+  cruise torque differ); and the dwell mean of each IMU channel (m/s², rad/s: gravity
+  projection and bias);
 - ``feature``: the 46 Phase I features of the paper (section IV), per sample (line amplitudes
   and band energies as log10);
 - ``position``: log10 RMS of each error motion (mean of forward and reverse, detrended) in four
@@ -47,9 +50,12 @@ PHASE1_BANDS_HZ = (10, 30, 60, 100, 150, 200, 300, 400, 500, 700, 1000, 1500, 20
 PHASE2_CHANNELS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
 PHASE2_BANDS_HZ = (2, 5, 10, 20, 40, 80, 150, 250, 400, 700)
 OPERATING_PHASES = ("steady", "transient", "reversal", "dwell")
+DRAG_TERMS = ("constant drag", "viscous drag")  # the torque's drags over the motion (drag_fit)
+DRAG_SPEED_LOWPASS_HZ = 100.0  # the speed low-passed before it is differentiated, Hz
+DRAG_EDGE_S = 0.05  # left out at each end of a capture: the zero-phase filter's edge transients, s
 POSITION_SEGMENTS = 4
 LAG_SEARCH_M = 7e-3  # largest shift between sessions searched for, m (origins within ±3 mm)
-SIGNATURE_VERSION = 4  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
+SIGNATURE_VERSION = 5  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
 LAG_DOFS = ("E_XX",)  # the only motion whose profile repeats between sessions of a few runs
 LAG_BAND_M = (1.5e-3, 6e-3)  # wavelengths correlated for the shift, m: lead harmonics 2-4
 _TINY = 1e-30
@@ -156,6 +162,35 @@ def _log_rms(x: np.ndarray) -> np.ndarray:
 # Phase I
 
 
+def drag_fit(speed: np.ndarray, torque: np.ndarray, fs: float) -> np.ndarray:
+    """(2,) the constant drag T_c (N·m) and the viscous drag coefficient c_v (N·m·s/rad) of a
+    motor torque over the motion: the least-squares fit of torque = J·dω/dt + T_c·sign(ω) + c_v·ω
+    on the samples where |ω| is above 5 % of its plateau, :data:`DRAG_EDGE_S` from either end of
+    the capture (the classic rigid-body friction model: B. Armstrong-Hélouvry, P. Dupont and
+    C. Canudas de Wit, "A survey of models, analysis tools and compensation methods for the
+    control of machines with friction", Automatica 30(7), 1994). ω: ``speed`` (n,) rad/s,
+    low-passed at :data:`DRAG_SPEED_LOWPASS_HZ` (zero phase) before it is differentiated;
+    ``torque`` (n,) N·m; ``fs`` Hz. At one cruise speed only the sum T_c + c_v·ω is seen; the
+    ramps separate the two (a constant drag adds alike at every speed, a viscous one in
+    proportion). NaN for both when the capture has no ramp (fewer than 1 % of the moving samples
+    below 90 % of the plateau) or too few moving samples."""
+    nan = np.full(2, np.nan)
+    if speed.size < 64 + 2 * DRAG_EDGE_S * fs:
+        return nan
+    sos = signal.butter(2, min(DRAG_SPEED_LOWPASS_HZ, 0.4 * fs), fs=fs, output="sos")
+    w = signal.sosfiltfilt(sos, speed)
+    plateau = float(np.percentile(np.abs(w), 99))
+    moving = np.abs(w) > 0.05 * plateau
+    edge = int(round(DRAG_EDGE_S * fs))
+    moving[:edge] = False
+    moving[moving.size - edge:] = False
+    if plateau <= 0 or moving.sum() < 64 or (np.abs(w[moving]) < 0.9 * plateau).mean() < 0.01:
+        return nan
+    x = np.column_stack([np.gradient(w, 1.0 / fs), np.sign(w), w])[moving]
+    coef, *_ = np.linalg.lstsq(x, torque[moving], rcond=None)
+    return coef[1:]
+
+
 def _phase1_capture_stats(c) -> np.ndarray:
     """(n_stats,) statistics of one capture in the order of :func:`_phase1_regions`."""
     fs = float(c.fs_hz)
@@ -173,7 +208,7 @@ def _phase1_capture_stats(c) -> np.ndarray:
         if m.sum() >= 8:
             phase[:, j] = _log_rms(hp[m])
             level[j] = float(np.mean(np.abs(c.torque[m])))
-    return np.concatenate([bands.ravel(), phase.ravel(), level])
+    return np.concatenate([bands.ravel(), phase.ravel(), level, drag_fit(c.speed, c.torque, fs)])
 
 
 def _phase1_regions(hours: float) -> list[Region]:
@@ -181,6 +216,7 @@ def _phase1_regions(hours: float) -> list[Region]:
            for b in _band_labels(PHASE1_BANDS_HZ)]
     out += [Region("phase1", ch, "phase", ph, hours) for ch in PHASE1_CHANNELS for ph in OPERATING_PHASES]
     out += [Region("phase1", "torque", "level", ph, hours) for ph in OPERATING_PHASES]
+    out += [Region("phase1", "torque", "level", term, hours) for term in DRAG_TERMS]
     return out
 
 

@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from analysis.diagnosis.signature import DRAG_TERMS
+
 #: A thin space that does not break: the thousands separator of large gaps ("527 764").
 THIN = "\u202f"
 #: The typographic minus sign.
@@ -140,7 +142,9 @@ def region(r: dict) -> str:
     if fam == "phase":
         return f"{dom} {ch} RMS in the {b} phase"
     if fam == "level":
-        return f"{dom} {ch} {b}" if b == "dwell mean" else f"{dom} mean |{ch}| in the {b} phase"
+        if b in ("dwell mean", *DRAG_TERMS):
+            return f"{dom} {ch} {b}" + (" (fitted over the motion)" if b in DRAG_TERMS else "")
+        return f"{dom} mean |{ch}| in the {b} phase"
     if fam == "feature":
         return f"{dom} feature {b}"
     if fam == "position":
