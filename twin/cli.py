@@ -865,9 +865,9 @@ def diagnose_benchmark(
     pairs: int = typer.Option(5, "--pairs", min=0),
     artefacts: int = typer.Option(1, "--artefacts", min=0,
                                   help="cases per signal artefact and magnitude (0: none)"),
-    parameters: int = typer.Option(0, "--parameters", min=0, help=(
-        "cases per twin parameter and magnitude (0: none); the diagnosis then tries the twin "
-        "parameters too")),
+    parameters: int = typer.Option(1, "--parameters", min=0, help=(
+        "cases per twin parameter and magnitude (0: none, and the diagnosis leaves the twin "
+        "parameters out of its candidates)")),
     edits: int = typer.Option(2, "--edits", min=0, help=(
         "cases per recording edit no candidate models (impulses, lost samples, a low-pass; 0: "
         "none)")),

@@ -19,9 +19,10 @@ Cases (:func:`plan_cases`, every draw from ``rng_seed``):
   signature;
 - ``parameter``: a twin parameter set wrong (:mod:`twin.effects.parameters`): the twin with one
   key's factor drawn away from 1 by at least 15 % (side and log distance within the prior
-  range, "low" nearer 1, "high" farther), ``parameters_per_cell`` cases per candidate and
-  magnitude (none by default: ``--parameters``); the diagnosis then tries the twin
-  parameters too;
+  range, "low" nearer 1, "high" farther, and beyond the least deviation the diagnosis sees on
+  that side, ``TwinParameter.least_seen``), ``parameters_per_cell`` cases per candidate and
+  magnitude (one with ``twin diagnose-benchmark``, whose ``--parameters 0`` leaves them out);
+  the diagnosis then tries the twin parameters too;
 - ``edit``: an edit of the recording no candidate models (:data:`analysis.diagnosis.artefacts.EDITS`:
   impulses, lost samples held, a low-pass filter) on the nominal twin's campaign with the
   case's seed, post-processed as the artefact cases, its target drawn; ``edits_per_cell`` cases
@@ -34,7 +35,9 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 ``truth.h5`` scenario) and scores:
 
 - ``top1_accuracy``: single cases whose first added effect (the first-ranked candidate, with a
-  significant held-out gain) is the injected one;
+  significant held-out gain) is the injected one (:func:`same_answer`: or, for a twin parameter
+  and a signal artefact that make the same recording, the other one: such cases are listed in
+  ``same_recording``);
 - ``median_heldout_shrink``: median over single cases of 1 − G_after/G_before on held-out data;
 - ``null_correct_fraction``: null cases with verdict "no significant gap";
 - ``open_set_correct_fraction``: open-set cases whose verdict is "unexplained gap remains" (a
@@ -44,7 +47,8 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 - ``out_of_everything_unexplained_fraction``: open-set and edit cases (nothing in the library
   explains them) whose verdict is "unexplained gap remains"; per kind in
   ``per_out_of_everything_unexplained``;
-- ``false_attribution_rate``: cases where a candidate that was not injected is added and its
+- ``false_attribution_rate``: cases where a candidate that was not injected (nor its
+  same-recording twin, :func:`same_answer`) is added and its
   held-out gain is ``HIGH_SCORE`` (50 %) or more of the recording's held-out gap, over all cases; per case kind in
   ``per_case_kind_false_attribution``;
 - ``median_heldout_shrink_resimulated``, ``per_kind_median_heldout_shrink_resimulated``: the
@@ -129,7 +133,7 @@ class Case:
 
 def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_set: int = 5,
                pairs: int = 5, library: list[str] | None = None,
-               artefacts_per_cell: int = 1, parameters_per_cell: int = 0,
+               artefacts_per_cell: int = 1, parameters_per_cell: int = 1,
                edits_per_cell: int = 2) -> list[Case]:
     """The benchmark's cases (deterministic in ``rng_seed``; the artefact cases, then the
     parameter cases come after the others and draw after them, so adding them changes no case
@@ -185,6 +189,22 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
     return cases
 
 
+def same_answer(injected: str, injected_values: dict[str, float], named: str,
+                named_values: dict[str, float]) -> bool:
+    """Whether naming ``named`` (with its fitted values) answers a case that injected ``injected``
+    (with its values): the same candidate, or a twin parameter above 1 and the signal artefact
+    that makes the same recording (:attr:`twin.effects.parameters.TwinParameter.same_above_one`:
+    a torque signal twice as noisy and white noise added on it are one recording, which no
+    diagnosis can tell apart)."""
+    if named == injected:
+        return True
+    for par, par_values, other in ((PARAMETERS.get(injected), injected_values, named),
+                                   (PARAMETERS.get(named), named_values, injected)):
+        if par is not None and par.same_above_one == other and par_values.get("factor", 1.0) > 1.0:
+            return True
+    return False
+
+
 def _score_case(case: Case, res: dict) -> dict:
     ranking = [r["effect"] for r in res["ranking"]]
     added = res["added"]
@@ -206,19 +226,21 @@ def _score_case(case: Case, res: dict) -> dict:
            "verdict_interpolated": res.get("verdict_interpolated", res["verdict"]),
            "n_significant": res["n_significant_calibration"],
            "top_region": ([top["domain"], top["channel"], top["family"], top["bin"]] if top else None)}
-    if case.kind in ("single", "parameter"):
-        row["correct"] = bool(added and added[0]["effect"] == next(iter(case.effects)))
-    elif case.kind == "artefact":
-        row["correct"] = bool(added and added[0]["effect"] == next(iter(case.artefacts)))
+    values = {**case.effects, **case.artefacts}
+
+    def true_answer(a: dict) -> bool:
+        return any(same_answer(name, v, a["effect"], a["params"]) for name, v in values.items())
+
     if case.kind in ("single", "parameter", "artefact"):
-        # the injected candidate first, or among those the data do not tell apart from the first
         injected = next(iter(case.artefacts or case.effects))
+        row["correct"] = bool(added and same_answer(injected, values[injected], added[0]["effect"],
+                                                    added[0]["params"]))
+        # the injected candidate first, or among those the data do not tell apart from the first
         row["alternatives"] = [a["effect"] for a in (added[0].get("alternatives", []) if added else [])]
         row["correct_or_not_told_apart"] = bool(row["correct"] or injected in row["alternatives"])
-    truth = set(case.effects) | set(case.artefacts)
     gap = res["heldout_gap_before"]
     row["false_attribution"] = bool(gap > 0 and any(
-        a["effect"] not in truth and a["gain"] >= HIGH_SCORE * gap for a in added))
+        not true_answer(a) and a["gain"] >= HIGH_SCORE * gap for a in added))
     if case.kind == "null":
         row["correct"] = res["verdict"] == NO_GAP
     elif case.kind in OUT_OF_EVERYTHING:
@@ -425,6 +447,9 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
         "per_effect_top1": {name: float(np.mean([r["correct"] for r in singles if r["injected"] == [name]]))
                             for name in sorted({r["injected"][0] for r in singles})},
         "confusion": confusion(rows),
+        "same_recording": [{"id": r["id"], "injected": r["injected"][0], "named": r["added"][0]} for r in rows
+                           if r.get("correct") and r["kind"] in ("single", "parameter", "artefact")
+                           and r["added"][0] != r["injected"][0]],
         "wall_time_s": {"twin_and_candidates": t_ens, "recordings": t_real,
                         "diagnoses": t_diag, "resimulations": t_all - t_ens - t_real - t_diag, "total": t_all},
         "cases": rows,
