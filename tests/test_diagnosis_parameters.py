@@ -2,22 +2,17 @@
 wrong, fitted as a factor on a grid around 1 and ranked with the physical effects and the signal
 artefacts.
 
-The definitions and the words are checked without simulating. The diagnosis itself runs on
-scenarios/diagnose-bench.toml with a small candidate set (4 twin seeds; five twin parameters, the
-physical effects that absorbed a mis-set parameter before (servo dynamics, Stribeck friction,
-thermal growth) and the torque's gain and noise artefacts: 40 campaigns of 2 s, shared by the
-tests through a module fixture): a recording of the twin with the carriage 35 % heavier
-names the carriage mass first, and a recording with Stribeck friction names the effect, not a
-parameter in its place. The heavier carriage is also re-simulated (issue 15, item 2: 4 more
-campaigns) and the nominal twin is not. The full check (every candidate of the three kinds, 8 seeds) is
-``slow``.
+The definitions, the benchmark's draws and scoring and the words are checked here without
+simulating. The diagnosis of mis-set parameters runs in the default benchmark
+(tests/test_diagnosis.py: a case per parameter and magnitude among the 86, diagnosed against
+every candidate of the three kinds; a heavier carriage and the nominal twin diagnosed with
+`twin diagnose` on the benchmark's cache, re-simulated or not). The full checks on a cache of
+their own are ``slow``.
 """
 
 from __future__ import annotations
 
 import json
-import math
-import re
 
 import numpy as np
 import pytest
@@ -150,132 +145,9 @@ def test_parameter_in_the_owners_words():
 
 
 # ---------------------------------------------------------------------------------------------
-# The diagnosis of twin recordings (small candidate set)
-
-SMALL = ["axis.carriage_mass_kg", "axis.nut_stiffness_N_per_um", "axis.rail_friction_N",
-         "axis.velocity_bandwidth_hz", "axis.no_load_torque_Nm",
-         "servo_dynamics", "stribeck_friction", "thermal_growth",
-         "gain:torque", "noise:torque"]
-
-
-@pytest.fixture(scope="module")
-def small_ensemble(tmp_path_factory):
-    """The twin's spread (4 seeds) and the responses of :data:`SMALL` on diagnose-bench."""
-    from twin.harness.gap_runner import build_ensemble
-    from twin.scenario import load
-
-    cache = tmp_path_factory.mktemp("param-cache")
-    s = load(BENCH_SCENARIO)
-    return s, cache, build_ensemble(s, cache, seeds=4, workers=1, library=SMALL)
-
-
-def _diagnose(tmp_path, small_ensemble, *sets, signatures=False):
-    from analysis.diagnosis.signature import PARTS, signature
-    from twin.harness.gap_runner import diagnose_signatures, library_json
-
-    s, _, ens = small_ensemble
-    rec = tmp_path / "real"
-    proc = run_twin("simulate", str(BENCH_SCENARIO), "-o", str(rec), "--workers", "1",
-                    "--set", "seed=777", *[x for v in sets for x in ("--set", v)])
-    assert proc.returncode == 0, proc.stderr
-    (rec / "truth.h5").unlink()
-    real = {p: signature(rec / "measurements.h5", p) for p in PARTS}
-    res, _ = diagnose_signatures(real, ens, None)
-    res["library"] = library_json([c.name for c in ens.candidates], ens.effects, s)
-    return (res, real) if signatures else res
-
-
-@pytest.fixture(scope="module")
-def heavier(tmp_path_factory, small_ensemble):
-    """The twin with the carriage 35 % heavier (162 kg, nominal 120 kg), diagnosed: (result,
-    the recording's signatures)."""
-    return _diagnose(tmp_path_factory.mktemp("heavier"), small_ensemble, "axis.carriage_mass_kg=162",
-                     signatures=True)
-
-
-def test_a_heavier_carriage_is_named_as_the_parameter(heavier):
-    """The twin with the carriage 35 % heavier (162 kg, nominal 120 kg): the carriage mass is
-    the first added candidate, kind "parameter", above every physical effect and artefact; its
-    fitted mass within 8 % of the truth; the words carry fitted and nominal masses in kg."""
-    res = heavier[0]
-    first = res["added"][0]
-    print(json.dumps({k: first[k] for k in ("effect", "params", "interval", "heldout_reduction")}),
-          [(r["effect"], round(r["net_reduction"], 3)) for r in res["ranking"][:5]], res["verdict"])
-    assert first["effect"] == "axis.carriage_mass_kg" and first["kind"] == "parameter"
-    assert res["ranking"][0]["effect"] == "axis.carriage_mass_kg"
-    mass = 120.0 * first["params"]["factor"]
-    assert mass == pytest.approx(162.0, rel=0.08)
-    assert first["heldout_reduction"] >= 0.6
-    said = w.owner_phrase(res, first)
-    m = re.fullmatch(r"carriage mass ([\d.]+) kg, not 120 kg"
-                     r"(?: \(interval ([\d.]+)–([\d.]+) kg\))? \[parameter\]", said)
-    assert m, said
-    assert math.isclose(float(m.group(1)), mass, rel_tol=0.01)
-    assert "parameter" in w.answer(res)
-
-
-#: |re-simulated − interpolated| shrink allowed for a single correct candidate (measured: see the
-#: tests' printout and docs/gap-diagnosis.md, "The re-simulated shrink").
-RESIM_TOLERANCE = 0.05
-
-
-def test_heavier_carriage_resimulated_shrink(heavier, small_ensemble):
-    """Issue 15, item 2: the twin re-simulated with the fitted carriage mass (every added
-    candidate at its fitted values, the 4 seeds of the spread, through the cache) removes at
-    least 80 % of the held-out gap, within :data:`RESIM_TOLERANCE` of the interpolated shrink;
-    the verdict follows it; a second call reads the cache."""
-    from twin.harness.gap_runner import add_resimulation, resimulate
-
-    res, real = heavier
-    s, cache, ens = small_ensemble
-    rs = resimulate(ens, [res["added"], []], cache, workers=1)
-    assert rs[1] is None  # nothing added: nothing simulated
-    out = add_resimulation(res, real, ens, rs[0])
-    r = out["resimulation"]
-    print("carriage mass: interpolated", round(out["heldout_shrink"], 4), "re-simulated",
-          round(r["heldout_shrink"], 4), [a["effect"] for a in out["added"]], out["verdict"])
-    assert r["done"] and r["seeds"] == 4 and r["twin_seeds"] == ens.seeds
-    assert out["heldout_shrink_resimulated"] == r["heldout_shrink"] >= 0.8
-    assert abs(r["heldout_shrink"] - out["heldout_shrink"]) <= RESIM_TOLERANCE
-    assert out["verdict"] == r["verdict"] and out["verdict_interpolated"] == res["verdict"]
-    again = resimulate(ens, [res["added"]], cache, workers=1)[0]
-    assert all(np.array_equal(a.values, b.values, equal_nan=True)
-               for p in again for a, b in zip(again[p], rs[0][p], strict=True))
-
-
-def test_nominal_twin_is_not_resimulated(tmp_path, small_ensemble):
-    """The twin itself (another seed): no significant gap, nothing added, no re-simulation,
-    said so in diagnosis.json's entry."""
-    from twin.harness.gap_runner import add_resimulation
-
-    res, real = _diagnose(tmp_path, small_ensemble, signatures=True)
-    s, cache, ens = small_ensemble
-    assert res["added"] == []
-    out = add_resimulation(res, real, ens, None)
-    assert out["resimulation"]["done"] is False and out["resimulation"]["reason"]
-    assert out["heldout_shrink_resimulated"] is None and out["verdict"] == res["verdict"]
-
-
-def test_a_physical_effect_is_not_taken_for_a_parameter(tmp_path, small_ensemble):
-    """The twin with Stribeck friction (90 N excess, v_s 3 mm/s): Stribeck friction is added
-    first, and no twin parameter is added in its place (the rail friction, the nut drag and the
-    loop bandwidth compete for the same torque at the reversals)."""
-    from twin.harness.gap_runner import add_resimulation, resimulate
-
-    res, real = _diagnose(tmp_path, small_ensemble, "effects.stribeck_excess_N=90",
-                          "effects.stribeck_velocity_mm_s=3", signatures=True)
-    print([(r["effect"], r["kind"], round(r["net_reduction"], 3), r["significant"]) for r in res["ranking"][:5]],
-          res["verdict"])
-    assert res["added"] and res["added"][0]["effect"] == "stribeck_friction"
-    assert not any(a["kind"] == "parameter" for a in res["added"])
-    # Re-simulated (4 seeds) beside the interpolated shrink.
-    s, cache, ens = small_ensemble
-    out = add_resimulation(res, real, ens, resimulate(ens, [res["added"]], cache, workers=1)[0])
-    print("Stribeck friction: interpolated", round(out["heldout_shrink"], 4), "re-simulated",
-          round(out["heldout_shrink_resimulated"], 4), [a["effect"] for a in out["added"]], out["verdict"])
-    assert out["resimulation"]["done"] and out["resimulation"]["seeds"] == 4
-    assert abs(out["heldout_shrink_resimulated"] - out["heldout_shrink"]) <= 0.1
-
+# The diagnosis of twin recordings against every candidate (slow; the default benchmark in
+# tests/test_diagnosis.py has a case per parameter and magnitude, and a heavier carriage
+# diagnosed on its cache)
 
 @pytest.fixture(scope="module")
 def full_cache(tmp_path_factory):

@@ -253,12 +253,13 @@ def _score_case(case: Case, res: dict) -> dict:
 
 def _fit_errors(singles: list[dict]) -> dict[str, float]:
     """Median |fitted − injected| / |injected| of each continuous parameter over the single
-    cases where the injected effect was added first."""
+    cases where the injected effect was added first (not its same-recording twin, whose
+    parameters differ)."""
     errs: dict[str, list[float]] = {}
     effects = candidates()
     for r in singles:
         name = r["injected"][0]
-        if not r["correct"]:
+        if not r["correct"] or name not in r["fitted"]:
             continue
         for p in (effects.get(name) or PARAMETERS.get(name) or ARTEFACTS[name]).params:
             if p.discrete:
@@ -282,7 +283,7 @@ def interval_coverage(rows: list[dict]) -> dict:
     per_param: dict[str, list[bool]] = {}
     missed = []
     for r in rows:
-        if r["kind"] not in kind_of_case or not r.get("correct"):
+        if r["kind"] not in kind_of_case or not r.get("correct") or r["injected"][0] not in r["intervals"]:
             continue
         name = r["injected"][0]
         for p in (effects.get(name) or PARAMETERS.get(name) or ARTEFACTS[name]).params:
