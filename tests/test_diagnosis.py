@@ -166,14 +166,43 @@ def test_benchmark_signal_artefacts_named_first(benchmark):
     assert res["per_kind_top1"]["physical effect"] == res["top1_accuracy"] >= 0.8
 
 
+def test_benchmark_mis_set_parameters_named_first(benchmark):
+    """Issue 15, item 4, the twin parameters: each of the 15 mis-set twice (30 cases), beyond the
+    least deviation the diagnosis sees on its side: every one seen, and the mis-set parameter
+    named first in at least 90 % (28 of 30 measured, docs/gap-diagnosis.md: the nut taken for
+    the support bearings, springs in series, said "not told apart"; the position loop × 0.67
+    seen in one statistic, nothing added); a noisier torque signal counts when named as noise
+    on the torque (the same recording) and is listed as such; the constant and the viscous drag
+    are told apart (the torque's drags over the ramps); no physical effect is taken for a
+    parameter; a named parameter's factor within 10 % of the truth (median per parameter, the
+    torque ripple aside: 17 %)."""
+    _, res, _ = benchmark
+    pars = [c for c in res["cases"] if c["kind"] == "parameter"]
+    assert len(pars) == 30 and "parameter" in res["kinds"]
+    misses = [(c["id"], c["values"], c["verdict"], c["added"]) for c in pars if not c["correct"]]
+    assert res["per_kind_top1"]["parameter"] == pytest.approx(np.mean([c["correct"] for c in pars]))
+    assert res["per_kind_top1"]["parameter"] >= 0.9, misses
+    assert res["per_kind_detected"]["parameter"] >= 0.9, misses
+    for name in ("axis.no_load_torque_Nm", "axis.drag_viscous_Nm_s_per_rad"):
+        assert res["per_parameter_top1"][name] == 1.0, misses
+    for s in res["same_recording"]:
+        assert (s["injected"], s["named"]) in {("sensors.torque_noise_Nm", "noise:torque"),
+                                               ("noise:torque", "sensors.torque_noise_Nm")}, s
+    singles = [c for c in res["cases"] if c["kind"] == "single"]
+    assert not [c["id"] for c in singles if c["added_kinds"][:1] == ["parameter"]]
+    errs = {k: v for k, v in res["fitted_relative_error"].items() if k.startswith(("axis.", "sensors."))}
+    assert len(errs) >= 12 and all(v <= 0.1 for k, v in errs.items() if not k.startswith("axis.torque_ripple")), errs
+
+
 def test_benchmark_out_of_everything_and_false_attributions(benchmark):
     """Issue 15, item 4: the cases nothing in the library explains (5 physical effects withheld,
     6 recording edits no candidate models: impulses, lost samples, a low-pass, each twice) are
     "unexplained" in at least 90 % (11 of 11 measured, docs/gap-diagnosis.md); the
     false-attribution rate (a candidate not injected added with half the gap or more) is the
-    mean of the cases' flags and at most 5 % (0 of 56 measured: the candidates that approximate
-    a withheld effect are refused for what they leave where they act), none among the nulls,
-    single effects, withheld effects and edits; every added candidate explains its footprint."""
+    mean of the cases' flags and at most 5 % (1 of 86 measured, the nut's stiffness named as the
+    support bearings'; the candidates that approximate a withheld effect are refused for what
+    they leave where they act), none among the nulls, single effects, withheld effects and
+    edits; every added candidate explains its footprint."""
     _, res, _ = benchmark
     edits = [c for c in res["cases"] if c["kind"] == "edit"]
     assert len(edits) == 6 and sorted({c["injected"][0].split(":")[0] for c in edits}) == [
