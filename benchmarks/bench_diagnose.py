@@ -4,7 +4,8 @@
    seed 4242 and a cogging torque of 0.05 N·m at 12 per revolution is simulated, then
    ``twin diagnose REAL --scenario scenarios/quick.toml`` runs with a fresh cache (8 twin seeds
    plus every candidate's grid simulated on all local cores).
-2. ``twin diagnose-benchmark`` (36 cases on ``scenarios/diagnose-bench.toml``), fresh.
+2. ``twin diagnose-benchmark`` (the default plan: 86 cases on ``scenarios/diagnose-bench.toml``, the
+   candidates of the three kinds), fresh.
 
 Prints the wall times, the diagnosis's answer and the benchmark's summary.
 
