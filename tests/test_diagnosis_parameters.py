@@ -13,6 +13,7 @@ their own are ``slow``.
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -261,3 +262,28 @@ def test_candidates_are_not_told_apart_within_the_error_of_their_responses():
     v = 2.0 * np.var(np.stack([p_b * k for k in shapes]), axis=0, ddof=1)
     assert alt[0]["difference_sd"] == pytest.approx(2.0 * np.sqrt(np.sum(r ** 2) + np.sum(r ** 2 * v)), rel=1e-3)
     assert alt[0]["gain_difference"] > at.TIE_SIGMAS * 2.0 * np.sqrt(np.sum(r ** 2))
+
+
+def test_a_same_recording_alternative_is_said_so():
+    """noise:torque added with the torque signal's noise floor × 2.3 as its alternative (the
+    benchmark's case): the words say they make the same recording, not merely that the data do
+    not tell them apart; a floor fitted below 1 is no such twin (then "not told apart"), and
+    another alternative keeps "not told apart"."""
+    from twin.harness.gap_runner import library_json
+    from twin.scenario import load
+
+    res = {"library": library_json(["noise:torque", "sensors.torque_noise_Nm", "mains_line:torque"],
+                                   nominal=load(BENCH_SCENARIO))}
+    assert res["library"]["sensors.torque_noise_Nm"]["same_recording_above_one"] == "noise:torque"
+    noisier = {"effect": "sensors.torque_noise_Nm", "kind": "parameter", "params": {"factor": 2.3}}
+    line = {"effect": "mains_line:torque", "kind": "signal artefact",
+            "params": {"amplitude": 0.01, "frequency_hz": 120.0}}
+    added = {"effect": "noise:torque", "kind": "signal artefact", "params": {"rms": 0.0102},
+             "alternatives": [noisier, line]}
+    said = w.added_phrase(res, added)
+    assert re.search(r"\[signal artefact\], the same recording as torque signal's noise 0\.0115 N·m, not "
+                     r"0\.005 N·m \[parameter\], not told apart from .*120 Hz.* \[signal artefact\]$", said), said
+    assert w.same_recording(res, added, noisier) and w.same_recording(res, noisier, added)
+    quieter = {**noisier, "params": {"factor": 0.8}}
+    assert not w.same_recording(res, added, quieter)
+    assert "not told apart from torque signal's noise" in w.added_phrase(res, {**added, "alternatives": [quieter]})

@@ -222,12 +222,27 @@ def added_phrase(result: dict, fit: dict) -> str:
     """:func:`owner_phrase` of an added candidate, followed by the candidates the data do not
     tell apart from it (its ``alternatives``): "support bearing stiffness 350 N/µm, not 750
     N/µm (…) [parameter], not told apart from nut stiffness 270 N/µm, not 400 N/µm (…)
-    [parameter]"."""
+    [parameter]"; an alternative that makes the same recording (:func:`same_recording`) comes
+    first, as "the same recording as …"."""
     text = owner_phrase(result, fit)
     alts = fit.get("alternatives") or []
-    if alts:
-        text += ", not told apart from " + " or ".join(owner_phrase(result, a) for a in alts)
+    same = [a for a in alts if same_recording(result, fit, a)]
+    if same:
+        text += ", the same recording as " + " or ".join(owner_phrase(result, a) for a in same)
+    others = [a for a in alts if a not in same]
+    if others:
+        text += ", not told apart from " + " or ".join(owner_phrase(result, a) for a in others)
     return text
+
+
+def same_recording(result: dict, x: dict, y: dict) -> bool:
+    """Whether two fits make the same recording: a twin parameter whose ``library`` entry names
+    the other as ``same_recording_above_one`` (a torque signal's noise floor and noise added on
+    the torque: both white per sample), fitted above 1. No data can tell such a pair apart; the
+    words say so rather than "not told apart"."""
+    lib = result.get("library", {})
+    return any(lib.get(a["effect"], {}).get("same_recording_above_one") == b["effect"]
+               and a["params"].get("factor", 1.0) > 1.0 for a, b in ((x, y), (y, x)))
 
 
 def refused_phrase(result: dict, fit: dict) -> str:

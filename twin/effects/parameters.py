@@ -207,11 +207,13 @@ PARAMETERS: dict[str, TwinParameter] = {p.name: p for p in _ALL}
 def library_entry(p: TwinParameter, nominal: Scenario | None) -> dict:
     """The candidate's entry of ``diagnosis.json``'s ``library``: kind, title, source, the keys,
     the quantity and its unit and digits, the nominal value of each key in the scenario the
-    diagnosis ran with, and the factor's prior range and display."""
+    diagnosis ran with, the signal artefact a factor above 1 makes the same recording as
+    (``same_recording_above_one``, or None), and the factor's prior range and display."""
     from analysis.diagnosis.artefacts import KIND_PARAMETER
 
     f = p.factor
     return {"kind": KIND_PARAMETER, "title": p.title, "source": p.source, "keys": list(f.keys),
             "quantity": p.quantity, "unit": p.unit, "digits": p.digits,
             "nominal": p.nominal(nominal) if nominal is not None else None,
+            "same_recording_above_one": p.same_above_one,
             "params": {f.name: {"low": f.low, "high": f.high, **f.display()}}}

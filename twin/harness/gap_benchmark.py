@@ -35,9 +35,7 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
 ``truth.h5`` scenario) and scores:
 
 - ``top1_accuracy``: single cases whose first added effect (the first-ranked candidate, with a
-  significant held-out gain) is the injected one (:func:`same_answer`: or, for a twin parameter
-  and a signal artefact that make the same recording, the other one: such cases are listed in
-  ``same_recording``);
+  significant held-out gain) is the injected one;
 - ``median_heldout_shrink``: median over single cases of 1 − G_after/G_before on held-out data;
 - ``null_correct_fraction``: null cases with verdict "no significant gap";
 - ``open_set_correct_fraction``: open-set cases whose verdict is "unexplained gap remains" (a
@@ -57,7 +55,9 @@ benchmark alone knows what was injected (the case plan, also stored in the recor
   |re-simulated − interpolated|;
 - ``per_kind_top1``: top-1 accuracy per kind of candidate ("physical effect": the single cases,
   "signal artefact": the artefact cases, whose first added candidate must be the injected
-  artefact on its target, "parameter": the parameter cases, the injected key first), with
+  artefact on its target, "parameter": the parameter cases, the injected key first; with
+  :func:`same_answer`, a twin parameter above 1 and the signal artefact that make the same
+  recording answer for each other, and those cases are listed in ``same_recording``), with
   ``per_kind_median_heldout_shrink``; ``per_kind_top1_or_not_told_apart`` (the injected one
   first or among the ``alternatives`` of the first: candidates the data do not tell apart from
   it); ``per_artefact_top1``, ``per_parameter_top1``; ``per_kind_detected``: the cases whose
