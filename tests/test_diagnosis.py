@@ -269,6 +269,19 @@ def test_diagnose_cli_names_cogging_and_writes_report(benchmark, tmp_path):
     assert "Gap diagnosis" in (out / "report" / "index.html").read_text()
 
 
+def _diagnose_against_every_candidate(benchmark, tmp_path, *sets) -> dict:
+    """`twin diagnose` of a twin recording (seed 777, ``sets`` as `--set`) against the candidates
+    of the three kinds on the benchmark's cache, re-simulated with 2 twin seeds: diagnosis.json."""
+    out_b, _, _ = benchmark
+    real = _record(tmp_path, "real", *sets)
+    out = tmp_path / "diag"
+    proc = run_twin("diagnose", str(real), "--scenario", str(BENCH_SCENARIO), "-o", str(out),
+                    "--kinds", "physical,parameter,artefact", "--cache", str(out_b / "cache"),
+                    "--resim-seeds", "2")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads((out / "diagnosis.json").read_text())
+
+
 def test_diagnose_names_a_heavier_carriage_and_resimulates_it(benchmark, tmp_path):
     """Issue 15, items 1(b) and 2: the twin with the carriage 35 % heavier (162 kg, nominal
     120 kg), diagnosed against every candidate of the three kinds on the benchmark's cache: the
@@ -278,14 +291,7 @@ def test_diagnose_names_a_heavier_carriage_and_resimulates_it(benchmark, tmp_pat
     shrink, and the verdict follows it."""
     from analysis.diagnosis import wording as w
 
-    out_b, _, _ = benchmark
-    real = _record(tmp_path, "real", "axis.carriage_mass_kg=162")
-    out = tmp_path / "diag"
-    proc = run_twin("diagnose", str(real), "--scenario", str(BENCH_SCENARIO), "-o", str(out),
-                    "--kinds", "physical,parameter,artefact", "--cache", str(out_b / "cache"),
-                    "--resim-seeds", "2")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    res = json.loads((out / "diagnosis.json").read_text())
+    res = _diagnose_against_every_candidate(benchmark, tmp_path, "axis.carriage_mass_kg=162")
     first = res["added"][0]
     print(json.dumps({k: first[k] for k in ("effect", "params", "interval", "heldout_reduction")}),
           [(r["effect"], round(r["net_reduction"], 3)) for r in res["ranking"][:5]], res["verdict"],
@@ -309,14 +315,7 @@ def test_the_nominal_twin_is_not_resimulated(benchmark, tmp_path):
     """The twin itself with another seed, diagnosed against every candidate with
     `--resim-seeds 2`: no significant gap, nothing added, nothing re-simulated, and
     diagnosis.json says why."""
-    out_b, _, _ = benchmark
-    real = _record(tmp_path, "real")
-    out = tmp_path / "diag"
-    proc = run_twin("diagnose", str(real), "--scenario", str(BENCH_SCENARIO), "-o", str(out),
-                    "--kinds", "physical,parameter,artefact", "--cache", str(out_b / "cache"),
-                    "--resim-seeds", "2")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    res = json.loads((out / "diagnosis.json").read_text())
+    res = _diagnose_against_every_candidate(benchmark, tmp_path)
     assert res["verdict"] == "no significant gap" and res["added"] == []
     assert res["resimulation"] == {"done": False, "reason": "no significant gap: nothing to explain"}
     assert res["heldout_shrink_resimulated"] is None
