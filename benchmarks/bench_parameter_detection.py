@@ -2,7 +2,8 @@
 
 A twin parameter set wrong by a factor close to 1 moves the statistics less than the twin's own
 seed-to-seed spread, and the diagnosis rightly answers "no significant gap": there is nothing to
-name (issue 15, item 4: four of the thirty parameter cases of the blind benchmark). This measures
+name (issue 15, item 4: four of the thirty parameter cases of the blind benchmark were such, until
+it drew its mis-settings beyond these limits, ``TwinParameter.least_seen``). This measures
 where that limit lies, per parameter and side: for each factor of a ladder (1.1, 1.2, 1.4, 2, and
 their inverses, those inside the parameter's prior range), the twin of the scenario with that
 factor is simulated with ``--case-seeds`` recording seeds (other than the twin's), and the gap
