@@ -85,6 +85,7 @@ import numpy as np
 from analysis.diagnosis.artefacts import ARTEFACTS, EDITS, KIND_ARTEFACT, KIND_EFFECT, KIND_PARAMETER
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
+from analysis.diagnosis.wording import same_recording
 from analysis.files import write_json
 from twin.effects import candidates
 from twin.effects.parameters import PARAMETERS
@@ -192,17 +193,16 @@ def plan_cases(rng_seed: int = 2026, per_cell: int = 1, nulls: int = 10, open_se
 def same_answer(injected: str, injected_values: dict[str, float], named: str,
                 named_values: dict[str, float]) -> bool:
     """Whether naming ``named`` (with its fitted values) answers a case that injected ``injected``
-    (with its values): the same candidate, or a twin parameter above 1 and the signal artefact
-    that makes the same recording (:attr:`twin.effects.parameters.TwinParameter.same_above_one`:
-    a torque signal twice as noisy and white noise added on it are one recording, which no
-    diagnosis can tell apart)."""
+    (with its values): the same candidate, or two that make the same recording
+    (:func:`analysis.diagnosis.wording.same_recording`, the rule the verdict's words use, on the
+    twin parameters' ``same_above_one``: a torque signal twice as noisy and white noise added on
+    it are one recording, which no diagnosis can tell apart)."""
     if named == injected:
         return True
-    for par, par_values, other in ((PARAMETERS.get(injected), injected_values, named),
-                                   (PARAMETERS.get(named), named_values, injected)):
-        if par is not None and par.same_above_one == other and par_values.get("factor", 1.0) > 1.0:
-            return True
-    return False
+    library = {n: {"same_recording_above_one": PARAMETERS[n].same_above_one}
+               for n in (injected, named) if n in PARAMETERS}
+    return same_recording({"library": library}, {"effect": injected, "params": injected_values},
+                          {"effect": named, "params": named_values})
 
 
 def _score_case(case: Case, res: dict) -> dict:
