@@ -185,9 +185,13 @@ def test_benchmark_mis_set_parameters_named_first(benchmark):
     assert res["per_kind_detected"]["parameter"] >= 0.9, misses
     for name in ("axis.no_load_torque_Nm", "axis.drag_viscous_Nm_s_per_rad"):
         assert res["per_parameter_top1"][name] == 1.0, misses
+    torque_noise = [c["id"] for c in pars if c["injected"] == ["sensors.torque_noise_Nm"]]
+    assert res["per_parameter_top1"]["sensors.torque_noise_Nm"] == 1.0, misses  # both, by either name
     for s in res["same_recording"]:
         assert (s["injected"], s["named"]) in {("sensors.torque_noise_Nm", "noise:torque"),
                                                ("noise:torque", "sensors.torque_noise_Nm")}, s
+    named_noise = {c["id"] for c in pars if c["id"] in torque_noise and c["added"][0] == "noise:torque"}
+    assert named_noise == {s["id"] for s in res["same_recording"] if s["id"] in torque_noise}
     singles = [c for c in res["cases"] if c["kind"] == "single"]
     assert not [c["id"] for c in singles if c["added_kinds"][:1] == ["parameter"]]
     errs = {k: v for k, v in res["fitted_relative_error"].items() if k.startswith(("axis.", "sensors."))}
