@@ -605,8 +605,63 @@ def scenario_init(
         _fail(f"the scenario measured from {directory} cannot be written: {exc}")
     for n in notes:
         console.print(f"note: {n}", style="yellow", markup=False, highlight=False)
-    console.print(f"wrote {out}; next: twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
+    console.print(f"wrote {out}: the layout and routine only (the drive's parameters and the sensor chain "
+                  f"are the twin's defaults); to fit them: twin calibrate {directory} -o {out}; then: "
+                  f"twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
 # --- end of import, check, scenario init ----------------------------------------------------------
+
+
+@app.command()
+def calibrate(
+    directory: Path = typer.Argument(..., help="campaign directory of the recording (imported or simulated)"),
+    out: Path = typer.Option(..., "-o", "--out", help="scenario file to write (TOML)"),
+    name: str | None = typer.Option(None, "--name", help="scenario name (default: the directory's name)"),
+    budget_minutes: float | None = typer.Option(None, "--budget-minutes", help=(
+        "the longest the calibration may take: it refuses after timing its first simulations, "
+        "with its estimate and the smallest budget that would do")),
+    workers: Workers = None,
+    scheduler: Scheduler = None,
+    cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default: beside OUT)"),
+) -> None:
+    """The twin fitted to a recording, in three layers: the routine and layout (measured), the
+    sensor chain (measured at rest), the drive's mass, drags, torque ripple and the Phase I
+    acceleration (fitted jointly through the twin, each with its 90 % interval). Every value of
+    the written scenario says where it came from; what the recording cannot inform keeps the
+    twin's default and says why. Then: twin diagnose DIRECTORY --scenario OUT."""
+    _require("calibrate", "sim", *(["cluster"] if scheduler is not None else []))
+    _one_executor(scheduler, workers, "simulations")
+    if budget_minutes is not None and not (math.isfinite(budget_minutes) and budget_minutes > 0):
+        _fail(f"--budget-minutes {budget_minutes:g}: expected a positive number of minutes")
+    from analysis.dataset import DatasetError
+    from twin.harness.calibrate import CalibrationError
+    from twin.harness.calibrate import calibrate as run_calibration
+
+    if out.exists() and out.is_dir():
+        _fail(f"-o {out}: is a directory; expected a scenario file path (e.g. {out / 'axis.toml'})")
+    if not (directory / "measurements.h5").is_file():
+        _fail(f"{directory}: no measurements.h5; expected a recording in the dataset format "
+              "(docs/dataset-format.md)")
+    try:
+        rec = run_calibration(directory, out, budget_minutes=budget_minutes, workers=workers,
+                              scheduler=scheduler, cache=cache, name=name)
+    except (CalibrationError, DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    except ScenarioError as exc:
+        _fail(f"the scenario measured from {directory} cannot be written: {exc}")
+    table = Table(title="calibrated values", title_justify="left")
+    for col in ("key", "value", "90 % interval", "source"):
+        table.add_column(col)
+    for v in rec["values"]:
+        iv = f"{v['low']:.4g} to {v['high']:.4g}" if v["low"] is not None else ""
+        table.add_row(v["key"], f"{v['value']:.6g}", iv, v["source"])
+    console.print(table)
+    for d in rec["defaults"]:
+        console.print(f"twin default: {d['key']} ({d['why']})", markup=False, highlight=False)
+    for n in rec["notes"]:
+        console.print(f"note: {n}", style="yellow", markup=False, highlight=False)
+    console.print(f"wrote {out} and {out.with_suffix('.calibration.json')} in {rec['seconds']:.0f} s; "
+                  f"next: twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
+
 
 
 # --- twin sweep -----------------------------------------------------------------------------------

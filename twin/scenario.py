@@ -345,6 +345,9 @@ class Scenario(_Section):
     dial_indicator: DialConfig = Field(default_factory=DialConfig)
     campaign: CampaignConfig = Field(default_factory=CampaignConfig)
     effects: EffectsConfig = Field(default_factory=EffectsConfig)
+    calibration: dict[str, Any] = Field(default_factory=dict, exclude=True, description=(
+        "what `twin calibrate` measured or fitted and from what recording (metadata: not part "
+        "of the simulated scenario, its hash or its JSON)"))
 
     @model_validator(mode="after")
     def _strokes(self) -> Scenario:

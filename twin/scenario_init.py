@@ -31,7 +31,7 @@ from twin.scenario import (
     load,
 )
 
-MEASURED, AXIS, DEFAULT = "measured", "axis description", "twin default"
+MEASURED, AXIS, DEFAULT, FITTED = "measured", "axis description", "twin default", "fitted"
 
 
 def _fmt(v: Any) -> str:
@@ -50,10 +50,17 @@ class _Table:
     """One TOML table; ``section`` (a scenario section's model) gives the meaning of a key whose
     value is a twin default, so the owner knows what to check."""
 
-    def __init__(self, name: str, section: type[BaseModel] | None = None):
+    def __init__(self, name: str, section: type[BaseModel] | None = None,
+                 calibrated: dict[str, tuple[Any, str, str]] | None = None, defaults: dict[str, str] | None = None):
         self.name, self.section, self.rows = name, section, []
+        self.calibrated, self.defaults = calibrated or {}, defaults or {}
 
     def add(self, key: str, value: Any, source: str, note: str = "") -> None:
+        full = f"{self.name}.{key}"
+        if full in self.calibrated:  # twin calibrate: measured or fitted, with its note
+            value, source, note = self.calibrated[full]
+        elif full in self.defaults and source == DEFAULT:
+            note = "the recording cannot inform it: " + self.defaults[full]
         if not note and source == DEFAULT and self.section is not None and key in self.section.model_fields:
             note = self.section.model_fields[key].description or ""
         self.rows.append((key, value, source + (f": {note}" if note else "")))
@@ -68,8 +75,28 @@ class _Table:
         return "\n".join(lines)
 
 
-def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tuple[str, list[str]]:
-    """The scenario TOML for ``recording`` and the notes on what could not be measured."""
+def _calibration_table(record: dict) -> str:
+    """The ``[calibration]`` table: which values ``twin calibrate`` measured or fitted (with
+    their 90 % intervals) and which it left at the twin's default, from what recording."""
+    lines = ["[calibration]", f"version = {int(record['version'])}", f"recording = {json.dumps(record['recording'])}"]
+    for v in record["values"]:
+        iv = f", low = {_fmt(v['low'])}, high = {_fmt(v['high'])}" if v["low"] is not None else ""
+        src = json.dumps(v["source"])
+        lines.append(f"{json.dumps(v['key'])} = {{ value = {_fmt(v['value'])}, source = {src}{iv} }}")
+    lines.append("defaults = [" + ", ".join(json.dumps(d["key"]) for d in record["defaults"]) + "]")
+    return "\n".join(lines)
+
+
+def scenario_text(recording: str | os.PathLike, name: str | None = None, *,
+                  calibrated: dict[str, tuple[Any, str, str]] | None = None,
+                  defaults: dict[str, str] | None = None,
+                  calibration: dict | None = None) -> tuple[str, list[str]]:
+    """The scenario TOML for ``recording`` and the notes on what could not be measured.
+    ``calibrated`` ({"section.key": (value, source, note)}) overrides what is measured or
+    defaulted here (``twin calibrate``'s layers b and c), ``defaults`` ({"section.key": why})
+    says why a default is kept, ``calibration`` (the record of ``twin calibrate``) is written
+    as the ``[calibration]`` table."""
+    cal = {"calibrated": calibrated, "defaults": defaults}
     meas = measure_recording(recording)
     axis = meas["axis"]
     notes: list[str] = []
@@ -80,7 +107,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
     head.add("description", f"the layout and routine of {meas['file']}", MEASURED)
     head.add("seed", 0, DEFAULT, "the seed of the twin's random draws")
 
-    ax = _Table("axis", AxisConfig)
+    ax = _Table("axis", AxisConfig, **cal)
     d_axis = AxisConfig()
     for key in ("travel_mm", "lead_mm", "carriage_mass_kg", "truck_spacing_mm", "rail_spacing_mm"):
         v = getattr(axis, key, None)
@@ -97,7 +124,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
         if key not in {r[0] for r in ax.rows}:
             ax.add(key, value, DEFAULT)
 
-    sens = _Table("sensors", SensorsConfig)
+    sens = _Table("sensors", SensorsConfig, **cal)
     d_sens = SensorsConfig()
     if p2:
         for ch in ("imu_acc", "imu_gyro", "position_cmd"):
@@ -114,7 +141,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
             sens.add(key, value, DEFAULT)
 
     camp = _Table("campaign", CampaignConfig)
-    ph1 = _Table("phase1", Phase1Config)
+    ph1 = _Table("phase1", Phase1Config, **cal)
     d1 = Phase1Config()
     last_hours = 0.0
     if p1:
@@ -164,7 +191,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
         if key not in {r[0] for r in ph1.rows}:
             ph1.add(key, value, DEFAULT, "not measurable from the recording" if key == "dwell_s" else "")
 
-    ph2 = _Table("phase2", Phase2Config)
+    ph2 = _Table("phase2", Phase2Config, **cal)
     d2 = Phase2Config()
     if p2:
         r2 = p2.get("routine", {})
@@ -196,10 +223,18 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None) -> tupl
     deg.add("table_preload_fraction", [1.0] * len(hours), DEFAULT)
     deg.add("table_backlash_um", [0.0] * len(hours), DEFAULT)
 
-    header = ("# Scenario of the recording " + meas["file"] + ", written by `twin scenario init`.\n"
+    verb = "twin calibrate" if calibration else "twin scenario init"
+    header = ("# Scenario of the recording " + meas["file"] + f", written by `{verb}`.\n"
               f"# Each value says where it comes from: '{MEASURED}' (the recording's signals and layout),\n"
+              f"# '{FITTED}' (the twin fitted to the recording, with its 90 % interval: `twin calibrate`),\n"
               f"# '{AXIS}' (its /@axis), or '{DEFAULT}' (not in the recording: check it).\n")
-    body = "\n\n".join(t.text() for t in (head, ax, sens, ph1, ph2, deg, camp))
+    if not calibration:
+        header += ("# The drive's physical parameters and the sensor chain are the twin's defaults here: "
+                   "`twin calibrate` fits them.\n")
+    tables = [t.text() for t in (head, ax, sens, ph1, ph2, deg, camp)]
+    if calibration:
+        tables.append(_calibration_table(calibration))
+    body = "\n\n".join(tables)
     notes_text = "".join(f"# note: {n}\n" for n in notes)
     return header + notes_text + "\n" + body + "\n", notes
 

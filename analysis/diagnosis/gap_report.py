@@ -291,9 +291,26 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
         resim = ""
     return {"title": f"Gap diagnosis: {verdict}", "verdict": verdict, "verdict_class": cls, "resim": resim,
             "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
-            "facts": facts, "subset": w.subset_phrase(result) or "", "added": added, "refused": refused,
+            "facts": facts, "subset": w.subset_phrase(result) or "",
+            "calibration": calibration_phrase(result), "added": added, "refused": refused,
             "ranking": ranking,
             "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}
+
+
+def calibration_phrase(result: dict) -> str:
+    """What ``twin calibrate`` fitted and measured before this diagnosis (its ``calibration``
+    entry), in one paragraph; "" for a scenario that was not calibrated."""
+    cal = result.get("calibration")
+    if not cal:
+        return ("The scenario was not calibrated (`twin calibrate`): a difference of the drive's "
+                "parameters or the sensor chain shows as a gap here.")
+    fitted = ", ".join(f"{v['key']} {w.number(v['value'])}" + (f" ({w.number(v['low'])}–{w.number(v['high'])})"
+                                                               if v.get("low") is not None else "")
+                       for v in cal["values"] if v["source"] == "fitted")
+    measured = ", ".join(v["key"] for v in cal["values"] if v["source"] == "measured")
+    return (f"The twin was calibrated to {cal['recording']}: fitted {fitted or 'nothing'}; measured "
+            f"{measured or 'nothing'}; left at the twin's default: {', '.join(cal['defaults']) or 'nothing'}. "
+            f"{cal['candidates']}")
 
 
 def render_page(result: dict, pngs: list[Path]) -> str:

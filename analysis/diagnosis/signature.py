@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
+from analysis.calibration.drive import rigid_body_fit
 from analysis.dataset import DOFS, DatasetError, Measurements, open_measurements
 from analysis.phase1.features import FEATURE_NAMES, sample_features, summarise_capture, transient_templates
 from analysis.phase2.error_motions import sensor_model, session_error_motions
@@ -51,8 +52,6 @@ PHASE2_CHANNELS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
 PHASE2_BANDS_HZ = (2, 5, 10, 20, 40, 80, 150, 250, 400, 700)
 OPERATING_PHASES = ("steady", "transient", "reversal", "dwell")
 DRAG_TERMS = ("constant drag", "viscous drag")  # the torque's drags over the motion (drag_fit)
-DRAG_SPEED_LOWPASS_HZ = 100.0  # the speed low-passed before it is differentiated, Hz
-DRAG_EDGE_S = 0.05  # left out at each end of a capture: the zero-phase filter's edge transients, s
 POSITION_SEGMENTS = 4
 LAG_SEARCH_M = 7e-3  # largest shift between sessions searched for, m (origins within ±3 mm)
 SIGNATURE_VERSION = 5  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
@@ -164,31 +163,11 @@ def _log_rms(x: np.ndarray) -> np.ndarray:
 
 def drag_fit(speed: np.ndarray, torque: np.ndarray, fs: float) -> np.ndarray:
     """(2,) the constant drag T_c (N·m) and the viscous drag coefficient c_v (N·m·s/rad) of a
-    motor torque over the motion: the least-squares fit of torque = J·dω/dt + T_c·sign(ω) + c_v·ω
-    on the samples where |ω| is above 5 % of its plateau, :data:`DRAG_EDGE_S` from either end of
-    the capture (the classic rigid-body friction model: B. Armstrong-Hélouvry, P. Dupont and
-    C. Canudas de Wit, "A survey of models, analysis tools and compensation methods for the
-    control of machines with friction", Automatica 30(7), 1994). ω: ``speed`` (n,) rad/s,
-    low-passed at :data:`DRAG_SPEED_LOWPASS_HZ` (zero phase) before it is differentiated;
-    ``torque`` (n,) N·m; ``fs`` Hz. At one cruise speed only the sum T_c + c_v·ω is seen; the
-    ramps separate the two (a constant drag adds alike at every speed, a viscous one in
-    proportion). NaN for both when the capture has no ramp (fewer than 1 % of the moving samples
-    below 90 % of the plateau) or too few moving samples."""
-    nan = np.full(2, np.nan)
-    if speed.size < 64 + 2 * DRAG_EDGE_S * fs:
-        return nan
-    sos = signal.butter(2, min(DRAG_SPEED_LOWPASS_HZ, 0.4 * fs), fs=fs, output="sos")
-    w = signal.sosfiltfilt(sos, speed)
-    plateau = float(np.percentile(np.abs(w), 99))
-    moving = np.abs(w) > 0.05 * plateau
-    edge = int(round(DRAG_EDGE_S * fs))
-    moving[:edge] = False
-    moving[moving.size - edge:] = False
-    if plateau <= 0 or moving.sum() < 64 or (np.abs(w[moving]) < 0.9 * plateau).mean() < 0.01:
-        return nan
-    x = np.column_stack([np.gradient(w, 1.0 / fs), np.sign(w), w])[moving]
-    coef, *_ = np.linalg.lstsq(x, torque[moving], rcond=None)
-    return coef[1:]
+    motor torque over the motion: the last two terms of the rigid-body fit
+    torque = J·dω/dt + T_c·sign(ω) + c_v·ω (:func:`analysis.calibration.drive.rigid_body_fit`:
+    the ramps separate the two, since a constant drag adds alike at every speed and a viscous one
+    in proportion). NaN for both when the capture has no ramp."""
+    return rigid_body_fit(speed, torque, fs)[1:]
 
 
 def _phase1_capture_stats(c) -> np.ndarray:

@@ -21,6 +21,16 @@ from analysis.dataset.axis import AxisDescription
 
 #: Moving-average window of the controller's measured motor speed before the moves are found, s.
 SPEED_SMOOTH_S = 0.005
+#: The part of each ramp a measured speed's slope is fitted on, as fractions of the cruise speed:
+#: the servo's transient at the ramp's corners is left out (the loop follows a constant
+#: acceleration with a constant lag once the transient has settled, so the slope there is the
+#: commanded acceleration).
+MEASURED_RAMP = (0.4, 0.8)
+#: The same for a commanded position's increments, which are exact: every increment inside the
+#: ramp (the first and last, which may straddle a corner of the profile, left out).
+COMMAND_RAMP = (0.0, 1.0)
+#: Significant digits of the measured routine values (a fit, not a rounding to 3 digits).
+DIGITS = 7
 
 
 def _segments(moving: np.ndarray) -> list[tuple[int, int]]:
@@ -29,52 +39,125 @@ def _segments(moving: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
-def motion_profile(v: np.ndarray, fs_hz: float, smooth_s: float = 0.0) -> dict:
-    """Speeds, acceleration, dwell and stroke of a velocity signal ``v`` (n,) in mm/s at ``fs_hz``.
+def _round(v: float) -> float:
+    return float(f"{v:.{DIGITS}g}")
 
-    Returns ``speeds_mm_s`` (distinct cruise speeds, ascending), ``accel_mm_s2`` (median of the
-    ramps' slopes), ``dwell_s`` (median standstill between moves), ``stroke_mm`` (median distance of
-    a move); keys whose value cannot be measured are left out. ``smooth_s``: moving-average
-    window applied first (for a noisy measured speed; 0 for a commanded position's derivative)."""
-    out: dict = {}
+
+def _ramp_line(t: np.ndarray, s: np.ndarray, idx: np.ndarray) -> tuple[float, float, int] | None:
+    """(slope, time where the line crosses zero speed, samples) of a least-squares line through
+    ``s[idx]`` against ``t[idx]``; the first and last sample of the run are left out (they may
+    straddle a corner of the profile). None when fewer than 3 samples are left."""
+    idx = idx[1:-1]
+    if idx.size < 3:
+        return None
+    slope, icpt = np.polyfit(t[idx], s[idx], 1)
+    if slope == 0:
+        return None
+    return float(slope), float(-icpt / slope), int(idx.size)
+
+
+def fit_moves(v: np.ndarray, fs_hz: float, ramp: tuple[float, float] = MEASURED_RAMP,
+              smooth_s: float = 0.0) -> list[dict]:
+    """The trapezoidal moves of a velocity signal, each fitted.
+
+    Args:
+        v: (n,) velocity, mm/s (a measured speed, or a commanded position's increments × fs).
+        fs_hz: its rate, Hz.
+        ramp: the fractions of the cruise speed between which each ramp's slope is fitted
+            (:data:`MEASURED_RAMP`, :data:`COMMAND_RAMP`).
+        smooth_s: moving-average window used only to find the moves and their plateaus, s.
+    Returns:
+        one dict per move, in time order (a move cut by the record's start or end has no ramp,
+        start or distance there): ``speed`` (mean of the plateau's middle half, mm/s; None for a triangular move that
+        never cruises), ``accel`` and ``decel`` (the ramps' fitted slopes, mm/s²; None when the
+        ramp has too few samples), ``t_start`` and ``t_stop`` (where the fitted ramps cross zero
+        speed, s: a servo's constant lag shifts both alike, so the dwell between two moves is
+        exact; None where not fitted), ``distance`` (the integral of ``|v|`` over the move, mm), ``direction`` (±1),
+        ``samples`` (the ramps' fitted samples, for weighting)."""
+    v = np.asarray(v, dtype=float)
+    t = np.arange(v.size) / fs_hz
     k = max(1, int(round(smooth_s * fs_hz)))
-    v = np.convolve(v, np.ones(k) / k, mode="same") if k > 1 else v
-    smooth = v
-    peak = float(np.percentile(np.abs(smooth), 99.5))
+    sm = np.convolve(v, np.ones(k) / k, mode="same") if k > 1 else v
+    peak = float(np.percentile(np.abs(sm), 99.5)) if v.size else 0.0
     if not peak > 0:
+        return []
+    moving = np.abs(sm) > 0.02 * peak
+    lo, hi = ramp
+    moves = []
+    for a, b in _segments(moving):
+        if b - a < 8:
+            continue
+        cut_start, cut_end = a == 0, b >= v.size  # a move cut by the record: its ramp there is not fitted
+        sign = 1.0 if np.median(v[a:b]) >= 0 else -1.0
+        s, ss = sign * v[a:b], sign * sm[a:b]
+        n = s.size
+        top = float(np.median(s[n // 3: 2 * n // 3]))
+        on = np.flatnonzero(ss > 0.99 * top)
+        p0, p1 = (int(on[0]), int(on[-1])) if on.size else (n // 2, n // 2)
+        cruise = p1 - p0 > max(8, 0.05 * n)
+        speed = float(np.mean(s[p0 + (p1 - p0) // 4: p1 - (p1 - p0) // 4 + 1])) if cruise else float(ss.max())
+        # the ramps: the accelerating samples before the plateau, the decelerating after it
+        lo_v, hi_v = max(lo * speed, 1e-12), hi * speed
+        up = np.flatnonzero((s[:p0] > lo_v) & (s[:p0] < hi_v) & (ss[:p0] > 0.5 * lo_v))
+        down = p1 + np.flatnonzero((s[p1:] > lo_v) & (s[p1:] < hi_v) & (ss[p1:] > 0.5 * lo_v))
+        tt = t[a:b]
+        acc = None if cut_start else _ramp_line(tt, s, up)
+        dec = None if cut_end else _ramp_line(tt, s, down)
+        moves.append({
+            "speed": speed if cruise else None, "direction": sign,
+            "accel": acc[0] if acc else None, "decel": -dec[0] if dec else None,
+            "t_start": acc[1] if acc else None, "t_stop": dec[1] if dec else None,
+            "distance": None if cut_start or cut_end else float(np.sum(s)) / fs_hz,
+            "samples": (acc[2] if acc else 0) + (dec[2] if dec else 0)})
+    return moves
+
+
+def routine_of_moves(moves: list[list[dict]]) -> dict:
+    """The routine of the moves of several records (lists of :func:`fit_moves` dicts): distinct
+    cruise ``speeds_mm_s`` (ascending; a speed within 1 % of another is the same), ``accel_mm_s2``
+    (the ramps' slopes averaged, weighted by their samples), ``dwell_s`` (median time between the
+    fitted end of a move and the fitted start of the next), ``stroke_mm`` (median distance of a
+    move), ``moves`` (how many were fitted); keys whose value cannot be measured are left out."""
+    out: dict = {}
+    flat = [m for rec in moves for m in rec]
+    if not flat:
         return out
-    moving = np.abs(smooth) > 0.02 * peak
-    # whole moves only: a move cut by the start or the end of the recording is left out
-    segs = [(a, b) for a, b in _segments(moving) if b - a >= 5 and a > 0 and b < len(v)]
-    speeds, accels, strokes = [], [], []
-    for a, b in segs:
-        seg = v[a:b]
-        mid = seg[len(seg) // 4: 3 * len(seg) // 4]
-        cruise = float(np.median(np.abs(mid)))
-        speeds.append(cruise)
-        strokes.append(abs(float(np.sum(seg))) / fs_hz)
-        slope = np.abs(np.diff(v[max(a - 1, 0):b + 1])) * fs_hz
-        accels.append(float(np.median(slope[slope > 0.5 * slope.max()])))  # the ramps' samples
-    levels: list[float] = []
-    for s in sorted(speeds):
-        if not levels or s > 1.03 * levels[-1]:
-            levels.append(s)
-    out["speeds_mm_s"] = [float(f"{s:.3g}") for s in levels]
-    if accels:
-        out["accel_mm_s2"] = float(f"{np.median(accels):.3g}")
-    if strokes:
-        out["stroke_mm"] = float(f"{np.median(strokes):.4g}")
-    still = [(b - a) / fs_hz for a, b in _segments(~moving) if a > 0 and b < len(v)]
-    if still:
-        out["dwell_s"] = float(f"{np.median(still):.3g}")
+    speeds = sorted(m["speed"] for m in flat if m["speed"] is not None)
+    groups: list[list[float]] = []
+    for sp in speeds:
+        if groups and sp <= 1.01 * groups[-1][0]:
+            groups[-1].append(sp)
+        else:
+            groups.append([sp])
+    if groups:
+        out["speeds_mm_s"] = [_round(float(np.mean(g))) for g in groups]
+    slopes = [(m[k], m["samples"]) for m in flat for k in ("accel", "decel") if m[k] is not None]
+    if slopes:
+        w = np.array([n for _, n in slopes], dtype=float)
+        out["accel_mm_s2"] = _round(float(np.average([sl for sl, _ in slopes], weights=w)))
+    dwells = [b["t_start"] - a["t_stop"] for rec in moves for a, b in zip(rec, rec[1:], strict=False)
+              if a["t_stop"] is not None and b["t_start"] is not None]
+    if dwells:
+        out["dwell_s"] = _round(float(np.median(dwells)))
+    dist = [m["distance"] for m in flat if m["distance"] is not None]
+    if dist:
+        out["stroke_mm"] = _round(float(np.median(dist)))
+    out["moves"] = len(flat)
     return out
+
+
+def motion_profile(v: np.ndarray, fs_hz: float, smooth_s: float = 0.0,
+                   ramp: tuple[float, float] = MEASURED_RAMP) -> dict:
+    """Speeds, acceleration, dwell and stroke of one velocity signal ``v`` (n,) in mm/s at
+    ``fs_hz``: :func:`routine_of_moves` of its :func:`fit_moves`."""
+    return routine_of_moves([fit_moves(v, fs_hz, ramp, smooth_s)])
 
 
 def _spacing(hours: list[float]) -> float | None:
     return float(np.median(np.diff(hours))) if len(hours) > 1 else None
 
 
-def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3) -> dict:
+def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3, captures_to_measure: int = 6) -> dict:
     """Layout and routines of ``path`` (campaign directory or ``measurements.h5``); see the module."""
     path = Path(path)
     if path.is_dir() or path.suffix != ".h5":
@@ -99,9 +182,10 @@ def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3) -> d
                   "capture_interval_minutes": float(np.median(within)) * 60 if within else None}
             lead = axis.lead_mm
             if lead is not None:
-                c = caps[0]
-                prof = motion_profile(c.speed * lead / (2 * math.pi), c.fs_hz, SPEED_SMOOTH_S)
-                p1["routine"] = prof
+                # every capture's moves (up to ``captures_to_measure``), the ramps pooled
+                p1["routine"] = routine_of_moves([
+                    fit_moves(c.speed * lead / (2 * math.pi), c.fs_hz, MEASURED_RAMP, SPEED_SMOOTH_S)
+                    for c in caps[:captures_to_measure]])
             out["phase1"] = p1
         sessions = m.phase2_sessions()
         if sessions:
@@ -114,20 +198,18 @@ def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3) -> d
                   "run_s": len(r0.imu_acc) / r0.imu_acc_fs_hz}
             pos = getattr(r0, "position_cmd", None)
             if pos is not None:
-                profs, lo, hi = [], [], []
+                recs, lo, hi = [], [], []
                 for r in runs[sessions[0]][:runs_to_measure]:
                     run = m.phase2(sessions[0], r)
                     x = run.position_cmd * 1e3
-                    profs.append(motion_profile(np.gradient(x) * run.position_cmd_fs_hz, run.position_cmd_fs_hz))
+                    fs = run.position_cmd_fs_hz
+                    # the command's increments between samples: exact mean speeds at mid-interval
+                    recs.append(fit_moves(np.diff(x) * fs, fs, COMMAND_RAMP))
                     lo.append(float(x.min()))
                     hi.append(float(x.max()))
-                prof = profs[0]
-                for key in ("accel_mm_s2", "dwell_s"):
-                    vals = [p[key] for p in profs if key in p]
-                    if vals:
-                        prof[key] = float(f"{np.median(vals):.3g}")
-                prof["start_mm"] = float(f"{np.median(lo):.4g}")
-                prof["end_mm"] = float(f"{np.median(hi):.4g}")
+                prof = routine_of_moves(recs)
+                prof["start_mm"] = _round(float(np.median(lo)))
+                prof["end_mm"] = _round(float(np.median(hi)))
                 p2["routine"] = prof
             out["phase2"] = p2
     return out

@@ -872,6 +872,28 @@ def prepare_subset(real_dir: Path, nominal: Scenario, out: Path, cache: Path, bu
     return Path(out) / "subset", subset_scenario(nominal, sub), entry
 
 
+def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> dict | None:
+    """``diagnosis.json``'s ``calibration``: what ``twin calibrate`` measured and fitted for the
+    scenario (its ``[calibration]`` table) and whether the fitted parameters are candidates
+    here; None for a scenario that was not calibrated. The twin parameters are candidates only
+    with ``--kinds parameter`` (or named with ``--candidate``): then a calibrated one's factor
+    1 is its calibrated value and its grid the same factors around it, so the diagnosis can still
+    say it was fitted wrong (its interval is in the entry); by default what is left after the
+    calibration is looked for among the unmodelled effects and the acquisition's artefacts."""
+    cal = nominal.calibration
+    if not cal:
+        return None
+    values = [{"key": k, **v} for k, v in cal.items() if isinstance(v, dict)]
+    names = set(library or []) | (set(PARAMETERS) if library is None and "parameter" in check_kinds(kinds) else set())
+    fitted = [v["key"] for v in values if v.get("source") == "fitted"]
+    again = sorted(n for n in names if n in PARAMETERS and set(PARAMETERS[n].factor.keys) & set(fitted))
+    words = (f"The calibrated parameters {', '.join(again)} stay candidates (factor 1 = the calibrated value)."
+             if again else "The calibrated parameters are not candidates here (kinds without 'parameter'): "
+             "what remains is looked for among the unmodelled effects and the acquisition's artefacts.")
+    return {"recording": cal.get("recording"), "version": cal.get("version"), "values": values,
+            "defaults": list(cal.get("defaults", [])), "candidates_again": again, "candidates": words}
+
+
 def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,
                   workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
                   library: list[str] | None = None, plots: bool = True,
@@ -891,6 +913,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     (:func:`build_ensemble`)."""
     check_response_seeds(response_seeds, seeds)
     t0 = time.perf_counter()
+    calibration = calibration_entry(nominal, kinds, library)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
@@ -910,7 +933,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
         resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_resim_progress)[0]
     result = add_resimulation(result, real, ens, resim, alpha)
     result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
-              "response_seeds": response_seeds,
+              "response_seeds": response_seeds, "calibration": calibration,
               "kinds": sorted({c.kind for c in ens.candidates}),
               "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
               **result}

@@ -1,0 +1,107 @@
+"""The drive's statistics of a Phase I capture: the motor torque's rigid-body fit and its ripple.
+
+The rigid-body friction model of a feed drive seen at the motor (B. Armstrong-Hélouvry, P. Dupont
+and C. Canudas de Wit, "A survey of models, analysis tools and compensation methods for the
+control of machines with friction", Automatica 30(7), 1994):
+
+    torque = J·dω/dt + T_c·sign(ω) + c_v·ω
+
+J is the inertia the motor drives (rotor, screw and the carriage mass reflected through the lead,
+m·(lead/2π)²), T_c the constant drag (nut drag plus the rails' friction reflected), c_v the viscous
+drag coefficient. The ramps of a capture separate the three: J acts only while accelerating, T_c
+alike at every speed, c_v in proportion to it.
+
+The torque ripple of a permanent-magnet motor is locked to the rotor angle θ = ∫ω dt (T. M. Jahns
+and W. L. Soong, "Pulsating torque minimization techniques for permanent magnet AC motor
+drives", IEEE Trans. Ind. Electron. 43(2), 1996): its amplitude at order k is read by
+demodulating the torque with exp(−i·k·θ) over the cruise (a lock-in amplifier).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+#: The speed is low-passed (zero phase) at this frequency before it is differentiated, Hz.
+SPEED_LOWPASS_HZ = 100.0
+#: Left out at each end of a capture: the zero-phase filter's edge transients, s.
+EDGE_S = 0.05
+#: Statistics of :func:`capture_statistics`, in order, with their units.
+STATISTICS = ("inertia", "constant_drag", "viscous_drag", "ripple")
+UNITS = {"inertia": "kg·m²", "constant_drag": "N·m", "viscous_drag": "N·m·s/rad", "ripple": "N·m"}
+
+
+def _smoothed_speed(speed: np.ndarray, fs: float) -> np.ndarray:
+    sos = signal.butter(2, min(SPEED_LOWPASS_HZ, 0.4 * fs), fs=fs, output="sos")
+    return signal.sosfiltfilt(sos, speed)
+
+
+def rigid_body_fit(speed: np.ndarray, torque: np.ndarray, fs: float) -> np.ndarray:
+    """(3,) J (kg·m²), T_c (N·m) and c_v (N·m·s/rad): the least-squares fit of the model above on
+    the samples where |ω| is above 5 % of its plateau, :data:`EDGE_S` from either end.
+
+    ``speed`` (n,) motor speed, rad/s, low-passed at :data:`SPEED_LOWPASS_HZ` before it is
+    differentiated; ``torque`` (n,) N·m; ``fs`` Hz. NaN for all three when the capture has no
+    ramp (fewer than 1 % of the moving samples below 90 % of the plateau) or too few moving
+    samples."""
+    nan = np.full(3, np.nan)
+    if speed.size < 64 + 2 * EDGE_S * fs:
+        return nan
+    w = _smoothed_speed(speed, fs)
+    plateau = float(np.percentile(np.abs(w), 99))
+    moving = np.abs(w) > 0.05 * plateau
+    edge = int(round(EDGE_S * fs))
+    moving[:edge] = False
+    moving[moving.size - edge:] = False
+    if plateau <= 0 or moving.sum() < 64 or (np.abs(w[moving]) < 0.9 * plateau).mean() < 0.01:
+        return nan
+    x = np.column_stack([np.gradient(w, 1.0 / fs), np.sign(w), w])[moving]
+    coef, *_ = np.linalg.lstsq(x, torque[moving], rcond=None)
+    return coef
+
+
+def ripple_amplitude(speed: np.ndarray, torque: np.ndarray, fs: float, order: int) -> float:
+    """Amplitude (N·m) of the torque component at ``order`` periods per motor revolution over
+    the cruise (|ω| within 2 % of its plateau), by demodulation with exp(−i·order·θ), θ = ∫ω dt;
+    NaN without a cruise of at least 4 ripple periods. ``speed`` (n,) rad/s, ``torque`` (n,) N·m."""
+    w = _smoothed_speed(speed, fs)
+    plateau = float(np.percentile(np.abs(w), 99))
+    if not plateau > 0:
+        return float("nan")
+    cruise = np.abs(w) >= 0.98 * plateau
+    theta = np.cumsum(speed) / fs
+    periods = cruise.sum() / fs * plateau * order / (2 * np.pi)
+    if periods < 4:
+        return float("nan")
+    tq = torque[cruise] - np.mean(torque[cruise])
+    # each cruise direction has its own mean torque: remove it per direction
+    sgn = np.sign(w[cruise])
+    for s in (-1.0, 1.0):
+        sel = sgn == s
+        if sel.any():
+            tq[sel] = torque[cruise][sel] - np.mean(torque[cruise][sel])
+    z = np.mean(tq * np.exp(-1j * order * theta[cruise]))
+    return float(2.0 * np.abs(z))
+
+
+def capture_statistics(speed: np.ndarray, torque: np.ndarray, fs: float, ripple_order: int) -> np.ndarray:
+    """(4,) the :data:`STATISTICS` of one capture: J, T_c, c_v (:func:`rigid_body_fit`) and the
+    ripple amplitude at ``ripple_order`` (:func:`ripple_amplitude`)."""
+    return np.append(rigid_body_fit(speed, torque, fs), ripple_amplitude(speed, torque, fs, ripple_order))
+
+
+def recording_statistics(m, captures: list[str], ripple_order: int) -> tuple[np.ndarray, np.ndarray]:
+    """(mean (4,), standard error of the mean (4,)) of :func:`capture_statistics` over the
+    Phase I ``captures`` of the open recording ``m`` (:class:`analysis.dataset.Measurements`);
+    a statistic NaN in every capture stays NaN."""
+    rows = []
+    for name in captures:
+        c = m.phase1(name)
+        rows.append(capture_statistics(np.asarray(c.speed, float), np.asarray(c.torque, float),
+                                       float(c.fs_hz), ripple_order))
+    x = np.array(rows)
+    with np.errstate(invalid="ignore"):
+        n = np.sum(np.isfinite(x), axis=0)
+        mean = np.nanmean(x, axis=0) if len(rows) else np.full(4, np.nan)
+        sd = np.nanstd(x, axis=0, ddof=1) if len(rows) > 1 else np.full(4, np.nan)
+    return mean, sd / np.sqrt(np.maximum(n, 1))

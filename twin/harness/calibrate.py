@@ -1,0 +1,451 @@
+"""``twin calibrate``: the twin fitted to a recording, in three layers.
+
+a. **Routine and layout**, measured (:func:`analysis.ingest.routine.measure_recording`: the
+   moves' ramps, plateaus and rests fitted over every capture and run), as ``twin scenario
+   init`` writes them;
+b. **the sensor chain**, measured from the rests (:mod:`analysis.calibration.sensor_chain`: noise
+   floors, bandwidths, the torque signal's noise and resolution, the IMU's gravity);
+c. **the drive's physical parameters and the Phase I acceleration, jointly**, fitted by indirect
+   inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl.
+   Econometrics 8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the
+   torque's rigid-body fit J, T_c, c_v, the ripple at its order) and the routine fit's
+   acceleration are computed on the recording's first Phase I sample and on the twin simulated
+   with the same layout and one seed (common random numbers: every evaluation draws the same
+   noise), and ``scipy.optimize.least_squares`` (trust-region reflective, bounds a factor of
+   10 either side of the start) moves the parameters until the two agree within the statistics'
+   standard errors. The Jacobian's columns are simulated together (one batched rollout per
+   capture). The 90 % intervals come from the Jacobian at the solution and the statistics'
+   errors (delta method: Cov = (JᵀJ)⁻¹ for residuals in units of their standard error); an
+   error is the recording's own (the scatter over its captures), the twin's, and the scatter of
+   the statistic over :data:`SPREAD_SEEDS` twin seeds at the start (the machine's random
+   geometry and ripple phase, which one recording cannot average out).
+
+Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters
+(each responds mostly to one: J to the mass, T_c to the constant drag, c_v to the viscous drag, the
+ripple amplitude to the ripple, the ramps' slope to the commanded acceleration), the problem is
+square and small (5 unknowns), and with common random numbers the residual is deterministic,
+so a Gauss–Newton method converges in a few Jacobians where a Bayesian optimiser would need tens
+of evaluations; its Jacobian is also what the intervals need.
+
+What the recording cannot inform keeps the twin's default and says why (:data:`NOT_INFORMED`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import shutil
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize
+
+from analysis.calibration.drive import recording_statistics
+from analysis.calibration.sensor_chain import Measured, measure_instruments
+from analysis.dataset import open_measurements
+from analysis.files import write_json, write_text
+from analysis.ingest.routine import MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
+from twin.config import get_dotted, set_dotted
+from twin.executors import default_processes
+from twin.scenario import Scenario, ScenarioError, from_dict, load
+
+CALIBRATE_VERSION = 1
+#: Phase I captures of the first sample the fit uses (the twin simulates as many).
+FIT_CAPTURES = 4
+#: Jacobian evaluations least_squares may make (each simulates 1 + the parameters' count).
+MAX_JACOBIANS = 6
+#: Twin seeds simulated at the start point: their scatter is the machine-to-machine part of the
+#: statistics' error (the twin's random geometry, ripple phase, ... at the same parameters).
+SPREAD_SEEDS = 6
+#: Twin seeds each evaluation averages (common to every evaluation: the residual stays
+#: deterministic); one seed alone lets a component of random phase at the ripple's order
+#: (the machine's draw) bias the ripple's fit.
+FIT_SEEDS = 3
+#: Step of the finite differences in log(parameter).
+LOG_STEP = 0.03
+#: Student's t 95th percentile with SPREAD_SEEDS − 1 degrees of freedom: a two-sided 90 %
+#: interval whose error is estimated from the seeds' scatter (scipy.stats.t.ppf(0.95, 5)).
+T90 = 2.015048372669157
+Z90 = 1.6448536269514722  # the standard normal's 95th percentile: a two-sided 90 % interval
+
+#: The fitted parameters of layer (c): (scenario key, auxiliary statistic, unit).
+FITTED = (
+    ("axis.carriage_mass_kg", "inertia", "kg"),
+    ("axis.rail_friction_N", "constant_drag", "N"),
+    ("axis.drag_viscous_Nm_s_per_rad", "viscous_drag", "N·m·s/rad"),
+    ("axis.torque_ripple_Nm", "ripple", "N·m"),
+    ("phase1.accel_mm_s2", "accel", "mm/s²"),
+)
+STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel")
+
+#: Parameters the twin has and the recording does not inform in this version, and why.
+NOT_INFORMED = {
+    "axis.motor_inertia_kg_m2": "one inertia is seen at the motor (rotor, screw and the carriage through the "
+                                "lead): the fit puts all of it in the carriage mass",
+    "axis.no_load_torque_Nm": "one constant drag is seen at the motor (the nut's and the rails' reflected "
+                              "through the lead): the fit puts all of it in the rail friction",
+    "axis.nut_stiffness_N_per_um": "no statistic of the axial mode yet: the nut's and the bearings' springs "
+                                   "in series are not fitted",
+    "axis.bearing_stiffness_N_per_um": "no statistic of the axial mode yet (springs in series with the nut)",
+    "axis.truck_stiffness_vertical_N_per_um": "no statistic of the suspension modes yet",
+    "axis.truck_stiffness_lateral_N_per_um": "no statistic of the suspension modes yet",
+    "axis.position_bandwidth_hz": "Phase I records no command: the loops' lag is not told from the routine's "
+                                  "timing",
+    "axis.velocity_bandwidth_hz": "Phase I records no command: the loops' lag is not told from the routine's "
+                                  "timing",
+}
+
+#: Sensor-chain keys of layer (b) that are scenario keys.
+SENSOR_KEYS = ("sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_hz",
+               "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz",
+               "sensors.nut_acc_noise_ug_per_rthz", "sensors.torque_noise_Nm")
+
+
+class CalibrationError(ValueError):
+    """A calibration that cannot run; the message names the recording, what is wrong and what
+    would do."""
+
+
+@dataclass(frozen=True)
+class Value:
+    """A calibrated value: ``key`` (scenario key), ``value`` (its unit), ``source`` ("measured",
+    "fitted"), ``low``/``high`` (the 90 % interval, or None), ``note`` how it was found."""
+
+    key: str
+    value: float
+    source: str
+    low: float | None
+    high: float | None
+    note: str
+
+    def comment(self) -> str:
+        iv = f"; 90 % interval {_g(self.low)} to {_g(self.high)}" if self.low is not None else ""
+        return f"{self.note}{iv}"
+
+    def to_json(self) -> dict:
+        return {"key": self.key, "value": self.value, "source": self.source, "low": self.low,
+                "high": self.high, "note": self.note}
+
+
+def _g(v: float | None) -> str:
+    return "None" if v is None else f"{v:.6g}"
+
+
+def _progress(text: str, stream=None) -> None:
+    """One line per step (a log shows where a long calibration is)."""
+    print(f"calibrate: {text}", file=stream or sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# The twin's statistics for a parameter vector (cached by scenario)
+
+
+def _key(s: Scenario) -> str:
+    return hashlib.sha256(f"{CALIBRATE_VERSION}:{s.to_json()}".encode()).hexdigest()[:20]
+
+
+def _statistics(m, captures: list[str], ripple_order: int, lead_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(values (5,), standard errors (5,)) of :data:`STAT_NAMES` over ``captures`` of the open
+    recording ``m``: the drive statistics and the routine fit's acceleration (mm/s², its error
+    from the scatter of the ramps' slopes)."""
+    mean, se = recording_statistics(m, captures, ripple_order)
+    slopes = []
+    for name in captures:
+        c = m.phase1(name)
+        for mv in fit_moves(np.asarray(c.speed) * lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
+                            SPEED_SMOOTH_S):
+            slopes += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
+    acc = float(np.mean(slopes)) if slopes else float("nan")
+    acc_se = float(np.std(slopes, ddof=1) / math.sqrt(len(slopes))) if len(slopes) > 1 else float("nan")
+    return np.append(mean, acc), np.append(se, acc_se)
+
+
+def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
+    """Simulate the scenarios (JSON) not yet cached, batched (one rollout per capture for all),
+    and return [values, errors] of :data:`STAT_NAMES` for each (kept in ``cache_dir``)."""
+    from threadpoolctl import threadpool_limits
+
+    from twin.campaign import simulate_campaigns_batched
+
+    ss = [from_dict(json.loads(p)) for p in payloads]
+    files = [Path(cache_dir) / f"{_key(s)}.json" for s in ss]
+    todo = [i for i, f in enumerate(files) if not f.exists()]
+    if todo:
+        dirs = [Path(cache_dir) / f"tmp-{_key(ss[i])}" for i in todo]
+        for d in dirs:
+            shutil.rmtree(d, ignore_errors=True)
+        with threadpool_limits(1):
+            simulate_campaigns_batched([ss[i] for i in todo], dirs)
+        for i, d in zip(todo, dirs, strict=True):
+            s = ss[i]
+            with open_measurements(d / "measurements.h5") as m:
+                v, e = _statistics(m, m.phase1_captures(), s.axis.torque_ripple_per_rev, s.axis.lead_mm)
+            write_json(files[i], {"values": v.tolist(), "errors": e.tolist()}, nan_as_null=True)
+            shutil.rmtree(d, ignore_errors=True)
+    out = []
+    for f in files:
+        doc = json.loads(f.read_text())
+        out.append([[np.nan if x is None else x for x in doc["values"]],
+                    [np.nan if x is None else x for x in doc["errors"]]])
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Layer (c): the joint fit
+
+
+@dataclass
+class FitResult:
+    values: list[Value]
+    informed: list[str]
+    skipped: dict[str, str]
+    simulations: int
+    seconds: float
+    residual: list[float]
+
+
+def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int) -> dict:
+    """The scenario data of the fit's twin: Phase I only, one sample of ``n_captures`` at the
+    recording's hours, no degradation change, the scenario's seed (common random numbers)."""
+    data = base.model_dump(mode="json")
+    data["campaign"].update(phase2=False, scale=1.0, pauses=[], warmup_hours=0.0,
+                            total_hours=max(float(sample_hours) + 1.0, 1.0))
+    data["phase1"].update(sample_hours=[float(sample_hours)], captures_per_sample=int(n_captures))
+    return data
+
+
+def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float | None,
+                 workers: int, scheduler: str | None = None,
+                 progress: Callable[[str], None] = _progress) -> FitResult:
+    """Layer (c) of the module docstring on ``recording`` against ``base`` (layers a and b
+    applied). Raises :class:`CalibrationError` when the budget cannot hold (after timing the
+    first simulation: the estimate and the smallest budget that would do)."""
+    from twin.harness.gap_runner import run_tasks
+
+    t0 = time.perf_counter()
+    with open_measurements(recording / "measurements.h5") as m:
+        names = m.phase1_captures()
+        if not names:
+            return FitResult([], [], {k: "no Phase I capture: no torque to fit" for k, _, _ in FITTED}, 0,
+                             0.0, [])
+        first = min(m.phase1_header(n)[1] for n in names)
+        caps = [n for n in names if m.phase1_header(n)[1] == first][:FIT_CAPTURES]
+        hours = float(m.phase1(caps[0]).hours)
+        real, real_se = _statistics(m, caps, base.axis.torque_ripple_per_rev, base.axis.lead_mm)
+    skipped: dict[str, str] = {}
+    use = []
+    for i, (key, stat, _) in enumerate(FITTED):
+        if not np.isfinite(real[i]):
+            skipped[key] = (f"the recording's {stat.replace('_', ' ')} cannot be measured (no ramp, or no cruise "
+                            "of 4 ripple periods, in its first Phase I sample)")
+        else:
+            use.append(i)
+    data0 = _fit_scenario(base, hours, len(caps))
+    keys = [FITTED[i][0] for i in use]
+    start = np.array([float(get_dotted(data0, k)) for k in keys])
+    if np.any(start <= 0):
+        bad = [k for k, v in zip(keys, start, strict=True) if v <= 0]
+        for k in bad:
+            skipped[k] = "its starting value is 0: a factor cannot move it"
+        use = [i for i in use if FITTED[i][0] not in bad]
+        keys = [FITTED[i][0] for i in use]
+        start = np.array([float(get_dotted(data0, k)) for k in keys])
+    stat_idx = np.array(use, dtype=int)
+    cache.mkdir(parents=True, exist_ok=True)
+    sims = [0]
+
+    def scenario_at(logp: np.ndarray, seed: int | None = None) -> str:
+        data = json.loads(json.dumps(data0))
+        for k, lp in zip(keys, logp, strict=True):
+            set_dotted(data, k, float(np.exp(lp)), source="calibrate")
+        if seed is not None:
+            data["seed"] = int(seed)
+        return from_dict(data).to_json()
+
+    def run(points: list[np.ndarray], seeds: list[int]) -> list[list[list[float]]]:
+        """Statistics of each point with each seed (point-major)."""
+        payloads = [scenario_at(p, sd) for p in points for sd in seeds]
+        n = len(payloads)
+        size = max(1, -(-n // max(1, workers)))
+        batches = [payloads[k:k + size] for k in range(0, n, size)]
+        results = run_tasks(evaluate, [(b, str(cache)) for b in batches], workers, scheduler)
+        sims[0] += n
+        return [r for res in results for r in res]
+
+    def averaged(points: list[np.ndarray]) -> list[np.ndarray]:
+        """The statistics of each point averaged over the FIT_SEEDS seeds."""
+        rows = run(points, seeds[:FIT_SEEDS])
+        return [np.nanmean([rows[i * FIT_SEEDS + k][0] for k in range(FIT_SEEDS)], axis=0)[stat_idx]
+                for i in range(len(points))]
+
+    x0 = np.log(start)
+    t_first = time.perf_counter()
+    seeds = [int(data0["seed"])] + [(int(data0["seed"]) + 7919 * (i + 1)) % 2**32 for i in range(SPREAD_SEEDS - 1)]
+    spread = run([x0], seeds)
+    first_eval = spread[0]
+    unit_s = (time.perf_counter() - t_first) / max(1.0, len(seeds) / max(1, workers))
+    n_sims = MAX_JACOBIANS * (len(keys) + 1) * FIT_SEEDS
+    estimate = unit_s * n_sims / max(1, min(workers, len(keys))) * 0.6 + unit_s
+    progress(f"layer c: {len(keys)} parameters jointly; one twin evaluation {unit_s:.1f} s; at most "
+             f"{n_sims} evaluations, about {estimate / 60:.1f} min")
+    if budget_s is not None and estimate > budget_s:
+        raise CalibrationError(
+            f"{recording}: the joint fit needs about {estimate / 60:.1f} min on {workers} worker(s) "
+            f"(one evaluation of the twin takes {unit_s:.1f} s, at most {n_sims} of them); "
+            f"--budget-minutes {budget_s / 60:g} is too small: give at least {math.ceil(estimate / 60 * 1.2):g}")
+    sim_se = np.array(first_eval[1])[stat_idx] / math.sqrt(FIT_SEEDS)
+    seed_sd = np.nanstd(np.array([r[0] for r in spread])[:, stat_idx], axis=0, ddof=1)
+    # the recording is one machine (one draw: its seed scatter counts whole), the twin's
+    # average of FIT_SEEDS draws
+    se = np.sqrt(real_se[stat_idx] ** 2 + np.nan_to_num(sim_se, nan=0.0) ** 2
+                 + np.nan_to_num(seed_sd) ** 2 * (1 + 1 / FIT_SEEDS))
+    # a statistic whose error cannot be estimated (one capture): 1 % of its value
+    se = np.where(np.isfinite(se) & (se > 0), se, 0.01 * np.abs(real[stat_idx]))
+    target = real[stat_idx]
+    memo: dict[bytes, np.ndarray] = {
+        x0.tobytes(): np.nanmean([r[0] for r in spread[:FIT_SEEDS]], axis=0)[stat_idx]}
+
+    def values_at(points: list[np.ndarray]) -> list[np.ndarray]:
+        todo = [p for p in points if p.tobytes() not in memo]
+        if todo:
+            for p, r in zip(todo, averaged(todo), strict=True):
+                memo[p.tobytes()] = r
+        return [memo[p.tobytes()] for p in points]
+
+    def resid(x: np.ndarray) -> np.ndarray:
+        return np.nan_to_num((values_at([x])[0] - target) / se, nan=1e6)
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        pts = [x.copy() for _ in keys]
+        for j, p in enumerate(pts):
+            p[j] += LOG_STEP
+        f0 = resid(x)
+        cols = values_at(pts)
+        at = ", ".join(f"{k.split('.')[-1]}={np.exp(v):.4g}" for k, v in zip(keys, x, strict=True))
+        progress(f"layer c: Jacobian at {at} ({sims[0]} evaluations so far)")
+        return np.column_stack([(np.nan_to_num((c - target) / se, nan=1e6) - f0) / LOG_STEP for c in cols])
+
+    lo, hi = x0 - math.log(10.0), x0 + math.log(10.0)
+    sol = optimize.least_squares(resid, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
+                                 xtol=1e-4, ftol=1e-6, max_nfev=MAX_JACOBIANS * 2)
+    J = jac(sol.x)
+    try:
+        cov = np.linalg.inv(J.T @ J)
+        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        sd = np.full(len(keys), np.inf)
+    values = []
+    for j, (k, x) in enumerate(zip(keys, sol.x, strict=True)):
+        i = use[j]
+        stat = FITTED[i][1].replace("_", " ")
+        w = T90 * sd[j]
+        low, high = (float(np.exp(x - w)), float(np.exp(x + w))) if np.isfinite(w) else (None, None)
+        values.append(Value(k, float(np.exp(x)), "fitted", low, high,
+                            f"fitted jointly to the torque's {stat} of {len(caps)} Phase I captures at "
+                            f"{hours:g} h" if FITTED[i][1] != "accel" else
+                            f"fitted through the twin's servo to the ramps of {len(caps)} Phase I captures"))
+    progress(f"layer c: done in {sims[0]} evaluations, {time.perf_counter() - t0:.1f} s; residual "
+             f"{', '.join(f'{r:+.2f}' for r in sol.fun)} standard errors")
+    return FitResult(values, keys, skipped, sims[0], time.perf_counter() - t0, [float(r) for r in sol.fun])
+
+
+# ---------------------------------------------------------------------------------------------
+# Layer (b): the sensor chain
+
+
+def sensor_values(recording: Path, base: Scenario) -> tuple[list[Value], list[str]]:
+    """Layer (b): the instruments measured from the rests (:func:`measure_instruments`), as
+    scenario values with their 90 % intervals, and notes on what is not a scenario key."""
+    with open_measurements(recording / "measurements.h5") as m:
+        caps = m.phase1_captures()[:2 * FIT_CAPTURES]
+        sess = m.phase2_sessions()
+        runs = [(s, r) for s in sess[:2] for r in m.phase2_runs(s)[:4]]
+        meas = measure_instruments(m, caps, runs, base.sensors.imu_acc_bandwidth_hz,
+                                   base.sensors.imu_gyro_bandwidth_hz)
+    out, notes = [], []
+    for key in SENSOR_KEYS:
+        if key in meas:
+            v: Measured = meas[key]
+            w = Z90 * v.rel_se if np.isfinite(v.rel_se) else None
+            out.append(Value(key, float(f"{v.value:.6g}"), "measured",
+                             None if w is None else float(v.value * math.exp(-w)),
+                             None if w is None else float(v.value * math.exp(w)), v.note))
+    if "torque_resolution_Nm" in meas:
+        notes.append(f"the torque signal's resolution is {meas['torque_resolution_Nm'].value:.4g} N·m (the "
+                     "twin's is 0.001 N·m, not a scenario key)")
+    if "imu_gravity_scale" in meas:
+        g = meas["imu_gravity_scale"].value
+        notes.append(f"the IMU reads gravity as {g:.5f} × 9.80665 m/s² at rest"
+                     + (" (a sensitivity error or local gravity: check the IMU's unit and sensitivity)"
+                        if abs(g - 1) > 0.003 else ""))
+    return out, notes
+
+
+# ---------------------------------------------------------------------------------------------
+# The verb
+
+
+def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: float | None = None,
+              workers: int | None = None, scheduler: str | None = None, cache: str | Path | None = None,
+              name: str | None = None, progress: Callable[[str], None] = _progress) -> dict:
+    """Calibrate the twin to ``recording`` (a campaign directory) and write the scenario to
+    ``out_toml`` with the provenance of every value, and ``<out_toml>.calibration.json`` (what
+    was measured, fitted and left, the fit's residuals and time). Returns that JSON's content."""
+    from twin.scenario_init import scenario_text
+
+    t0 = time.perf_counter()
+    recording = Path(recording)
+    out_toml = Path(out_toml)
+    budget_s = None if budget_minutes is None else float(budget_minutes) * 60.0
+    if budget_s is not None and not budget_s > 0:
+        raise CalibrationError(f"--budget-minutes {budget_minutes}: expected a positive number of minutes")
+    workers = workers or default_processes()
+    cache = Path(cache) if cache else out_toml.parent / ".calibrate-cache"
+    progress("layer a: the routine and the layout from the recording's moves")
+    text_a, notes = scenario_text(recording, name)
+    base = _load_text(text_a)
+    progress("layer b: the sensor chain from the rests")
+    sens, sens_notes = sensor_values(recording, base)
+    data = base.model_dump(mode="json")
+    for v in sens:
+        set_dotted(data, v.key, v.value, source="calibrate")
+    base_b = from_dict(data)
+    fit = fit_physical(base_b, recording, cache / "fit", None if budget_s is None else
+                       budget_s - (time.perf_counter() - t0), workers, scheduler, progress)
+    values = sens + fit.values
+    defaults = {k: why for k, why in NOT_INFORMED.items()}
+    defaults.update(fit.skipped)
+    record = {"version": CALIBRATE_VERSION, "recording": str(recording.resolve()),
+              "values": [v.to_json() for v in values],
+              "defaults": [{"key": k, "why": w} for k, w in defaults.items()],
+              "notes": notes + sens_notes, "simulations": fit.simulations,
+              "fit_seconds": fit.seconds, "residual_se": fit.residual}
+    text, _ = scenario_text(recording, name, calibrated={v.key: (v.value, v.source, v.comment()) for v in values},
+                            defaults=defaults, calibration=record)
+    _load_text(text)
+    write_text(out_toml, text)
+    record["seconds"] = time.perf_counter() - t0
+    write_json(out_toml.with_suffix(".calibration.json"), record, nan_as_null=True)
+    progress(f"wrote {out_toml} ({len(values)} values measured or fitted, {len(defaults)} left at the "
+             f"twin's default) in {record['seconds']:.1f} s")
+    return record
+
+
+def _load_text(text: str) -> Scenario:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / "scenario.toml"
+        p.write_text(text, encoding="utf-8")
+        try:
+            return load(p)
+        except ScenarioError as exc:
+            raise CalibrationError(f"the calibrated scenario does not load: {exc}") from None
+
+
+__all__ = ["CalibrationError", "Value", "calibrate", "fit_physical", "sensor_values"]
