@@ -105,3 +105,43 @@ def recording_statistics(m, captures: list[str], ripple_order: int) -> tuple[np.
         mean = np.nanmean(x, axis=0) if len(rows) else np.full(4, np.nan)
         sd = np.nanstd(x, axis=0, ddof=1) if len(rows) > 1 else np.full(4, np.nan)
     return mean, sd / np.sqrt(np.maximum(n, 1))
+
+
+def imu_ripple(run, lead_m: float, order: int, max_hz: float) -> float:
+    """Log10 of the IMU's axial acceleration (m/s²) at ``order`` periods per motor revolution,
+    averaged over the cruises of a Phase II run: the torque ripple shakes the carriage through the
+    screw, and at the slow speeds of the IMU routine its frequency order·v/lead falls where the
+    servo passes it on. The motor angle is 2π·x/lead from ``position_cmd`` (interpolated to the
+    IMU's clock); each cruise (the commanded speed constant, 50 ms left out at each end) is
+    demodulated with exp(−i·order·θ); cruises whose frequency is above ``max_hz`` (the
+    accelerometer's band) or that span fewer than 4 periods are left out. NaN when none is left
+    or the run has no ``position_cmd``."""
+    pos = getattr(run, "position_cmd", None)
+    if pos is None:
+        return float("nan")
+    fs, fs_x = float(run.imu_acc_fs_hz), float(run.position_cmd_fs_hz)
+    acc = np.asarray(run.imu_acc, float)[:, 0]
+    t = np.arange(acc.size) / fs
+    x = np.interp(t, np.arange(len(pos)) / fs_x, np.asarray(pos, float))
+    v = np.gradient(x, 1.0 / fs)
+    vmax = float(np.max(np.abs(v))) if v.size else 0.0
+    if not vmax > 0:
+        return float("nan")
+    # cruises: runs of (nearly) constant commanded speed away from rest
+    dv = np.abs(np.gradient(v, 1.0 / fs))
+    cruise = (np.abs(v) > 0.05 * vmax) & (dv < 1e-6 + 1e-3 * np.abs(v) * fs)
+    edge = int(round(0.05 * fs))
+    d = np.diff(np.concatenate(([0], cruise.astype(np.int8), [0])))
+    logs = []
+    for a, b in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True):
+        a, b = a + edge, b - edge
+        if b - a < 16:
+            continue
+        speed = float(np.median(np.abs(v[a:b])))
+        f = order * speed / lead_m
+        if f > max_hz or (b - a) / fs * f < 4:
+            continue
+        theta = 2 * np.pi * x[a:b] / lead_m
+        seg = acc[a:b] - acc[a:b].mean()
+        logs.append(np.log10(2.0 * np.abs(np.mean(seg * np.exp(-1j * order * theta))) + 1e-12))
+    return float(np.mean(logs)) if logs else float("nan")

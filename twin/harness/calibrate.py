@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize
 
-from analysis.calibration.drive import recording_statistics
+from analysis.calibration.drive import imu_ripple, recording_statistics
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
 from analysis.files import write_json, write_text
@@ -57,6 +57,8 @@ from twin.scenario import Scenario, ScenarioError, from_dict, load
 CALIBRATE_VERSION = 1
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
+#: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
+FIT_RUNS = 2
 #: Jacobian evaluations least_squares may make (each simulates 1 + the parameters' count).
 MAX_JACOBIANS = 6
 #: Twin seeds simulated at the start point: their scatter is the machine-to-machine part of the
@@ -149,15 +151,26 @@ def _key(s: Scenario) -> str:
     return hashlib.sha256(f"{CALIBRATE_VERSION}:{s.to_json()}".encode()).hexdigest()[:20]
 
 
-def _statistics(m, captures: list[str], ripple_order: int, lead_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """(values (5,), standard errors (5,)) of :data:`STAT_NAMES` over ``captures`` of the open
-    recording ``m``: the drive statistics and the routine fit's acceleration (mm/s², its error
-    from the scatter of the ramps' slopes)."""
-    mean, se = recording_statistics(m, captures, ripple_order)
+def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """(values (5,), standard errors (5,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
+    statistics of the captures, with the ripple read on the IMU of the runs when there are any
+    (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
+    other content at its order; in the Phase I torque a component of random phase at the same
+    order hides it), and the routine fit's acceleration (mm/s², its error from the scatter of
+    the ramps' slopes)."""
+    order = s.axis.torque_ripple_per_rev
+    mean, se = recording_statistics(m, captures, order)
+    if runs:
+        rip = [imu_ripple(m.phase2(a, b), s.axis.lead_mm * 1e-3, order, 0.5 * s.sensors.imu_acc_bandwidth_hz)
+               for a, b in runs]
+        rip = [r for r in rip if np.isfinite(r)]
+        mean[3] = float(np.mean(rip)) if rip else float("nan")
+        se[3] = float(np.std(rip, ddof=1) / math.sqrt(len(rip))) if len(rip) > 1 else float("nan")
     slopes = []
     for name in captures:
         c = m.phase1(name)
-        for mv in fit_moves(np.asarray(c.speed) * lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
+        for mv in fit_moves(np.asarray(c.speed) * s.axis.lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
                             SPEED_SMOOTH_S):
             slopes += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
     acc = float(np.mean(slopes)) if slopes else float("nan")
@@ -184,7 +197,8 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
         for i, d in zip(todo, dirs, strict=True):
             s = ss[i]
             with open_measurements(d / "measurements.h5") as m:
-                v, e = _statistics(m, m.phase1_captures(), s.axis.torque_ripple_per_rev, s.axis.lead_mm)
+                runs = [(a, b) for a in m.phase2_sessions() for b in m.phase2_runs(a)]
+                v, e = _statistics(m, m.phase1_captures(), runs, s)
             write_json(files[i], {"values": v.tolist(), "errors": e.tolist()}, nan_as_null=True)
             shutil.rmtree(d, ignore_errors=True)
     out = []
@@ -209,13 +223,19 @@ class FitResult:
     residual: list[float]
 
 
-def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int) -> dict:
-    """The scenario data of the fit's twin: Phase I only, one sample of ``n_captures`` at the
-    recording's hours, no degradation change, the scenario's seed (common random numbers)."""
+def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
+                  n_runs: int) -> dict:
+    """The scenario data of the fit's twin: one Phase I sample of ``n_captures`` at the
+    recording's hours and, with ``session_hours``, one Phase II session of ``n_runs`` runs (the
+    ripple's statistic), no pause, the scenario's seed (common random numbers)."""
     data = base.model_dump(mode="json")
-    data["campaign"].update(phase2=False, scale=1.0, pauses=[], warmup_hours=0.0,
-                            total_hours=max(float(sample_hours) + 1.0, 1.0))
+    last = max(float(sample_hours), float(session_hours or 0.0))
+    data["campaign"].update(phase2=session_hours is not None, scale=1.0, pauses=[], warmup_hours=0.0,
+                            total_hours=max(last + 1.0, 1.0))
     data["phase1"].update(sample_hours=[float(sample_hours)], captures_per_sample=int(n_captures))
+    if session_hours is not None:
+        data["phase2"].update(session_hours=[float(session_hours)], runs_per_session=int(n_runs))
+        data["dial_indicator"]["every_n_sessions"] = 100  # no dial test in the fit
     return data
 
 
@@ -236,7 +256,12 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         first = min(m.phase1_header(n)[1] for n in names)
         caps = [n for n in names if m.phase1_header(n)[1] == first][:FIT_CAPTURES]
         hours = float(m.phase1(caps[0]).hours)
-        real, real_se = _statistics(m, caps, base.axis.torque_ripple_per_rev, base.axis.lead_mm)
+        sessions = m.phase2_sessions()
+        runs = [(sessions[0], r) for r in m.phase2_runs(sessions[0])[:FIT_RUNS]] if sessions else []
+        if runs and getattr(m.phase2(*runs[0]), "position_cmd", None) is None:
+            runs = []  # the motor angle needs the command: the ripple is read on the torque
+        session_h = m.session_hours(sessions[0]) if runs else None
+        real, real_se = _statistics(m, caps, runs, base)
     skipped: dict[str, str] = {}
     use = []
     for i, (key, stat, _) in enumerate(FITTED):
@@ -245,7 +270,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                             "of 4 ripple periods, in its first Phase I sample)")
         else:
             use.append(i)
-    data0 = _fit_scenario(base, hours, len(caps))
+    data0 = _fit_scenario(base, hours, len(caps), session_h, len(runs))
     keys = [FITTED[i][0] for i in use]
     start = np.array([float(get_dotted(data0, k)) for k in keys])
     if np.any(start <= 0):
@@ -342,13 +367,18 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     values = []
     for j, (k, x) in enumerate(zip(keys, sol.x, strict=True)):
         i = use[j]
-        stat = FITTED[i][1].replace("_", " ")
+        stat = FITTED[i][1]
+        if stat == "accel":
+            note = f"fitted through the twin's servo to the ramps of {len(caps)} Phase I captures"
+        elif stat == "ripple" and runs:
+            note = (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {len(runs)} Phase II "
+                    f"runs at {session_h:g} h")
+        else:
+            note = (f"fitted jointly to the torque's {stat.replace('_', ' ')} of {len(caps)} Phase I captures "
+                    f"at {hours:g} h")
         w = T90 * sd[j]
         low, high = (float(np.exp(x - w)), float(np.exp(x + w))) if np.isfinite(w) else (None, None)
-        values.append(Value(k, float(np.exp(x)), "fitted", low, high,
-                            f"fitted jointly to the torque's {stat} of {len(caps)} Phase I captures at "
-                            f"{hours:g} h" if FITTED[i][1] != "accel" else
-                            f"fitted through the twin's servo to the ramps of {len(caps)} Phase I captures"))
+        values.append(Value(k, float(np.exp(x)), "fitted", low, high, note))
     progress(f"layer c: done in {sims[0]} evaluations, {time.perf_counter() - t0:.1f} s; residual "
              f"{', '.join(f'{r:+.2f}' for r in sol.fun)} standard errors")
     return FitResult(values, keys, skipped, sims[0], time.perf_counter() - t0, [float(r) for r in sol.fun])
