@@ -49,7 +49,7 @@ from analysis.calibration.drive import imu_ripple, recording_statistics
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
 from analysis.files import write_json, write_text
-from analysis.ingest.routine import MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
+from analysis.ingest.routine import COMMAND_RAMP, MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
 from twin.config import get_dotted, set_dotted
 from twin.executors import default_processes
 from twin.scenario import Scenario, ScenarioError, from_dict, load
@@ -63,16 +63,16 @@ FIT_RUNS = 2
 MAX_JACOBIANS = 6
 #: Twin seeds simulated at the start point: their scatter is the machine-to-machine part of the
 #: statistics' error (the twin's random geometry, ripple phase, ... at the same parameters).
-SPREAD_SEEDS = 6
+SPREAD_SEEDS = 5
 #: Twin seeds each evaluation averages (common to every evaluation: the residual stays
 #: deterministic); one seed alone lets a component of random phase at the ripple's order
 #: (the machine's draw) bias the ripple's fit.
-FIT_SEEDS = 3
+FIT_SEEDS = 2
 #: Step of the finite differences in log(parameter).
 LOG_STEP = 0.03
 #: Student's t 95th percentile with SPREAD_SEEDS − 1 degrees of freedom: a two-sided 90 %
-#: interval whose error is estimated from the seeds' scatter (scipy.stats.t.ppf(0.95, 5)).
-T90 = 2.015048372669157
+#: interval whose error is estimated from the seeds' scatter (scipy.stats.t.ppf(0.95, 4)).
+T90 = 2.131846786326649
 Z90 = 1.6448536269514722  # the standard normal's 95th percentile: a two-sided 90 % interval
 
 #: The fitted parameters of layer (c): (scenario key, auxiliary statistic, unit).
@@ -82,8 +82,9 @@ FITTED = (
     ("axis.drag_viscous_Nm_s_per_rad", "viscous_drag", "N·m·s/rad"),
     ("axis.torque_ripple_Nm", "ripple", "N·m"),
     ("phase1.accel_mm_s2", "accel", "mm/s²"),
+    ("phase2.accel_mm_s2", "accel2", "mm/s²"),
 )
-STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel")
+STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel", "accel2")
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
 NOT_INFORMED = {
@@ -152,7 +153,7 @@ def _key(s: Scenario) -> str:
 
 
 def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """(values (5,), standard errors (5,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    """(values (6,), standard errors (6,)) of :data:`STAT_NAMES` over the Phase I ``captures``
     and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
     statistics of the captures, with the ripple read on the IMU of the runs when there are any
     (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
@@ -173,9 +174,25 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
         for mv in fit_moves(np.asarray(c.speed) * s.axis.lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
                             SPEED_SMOOTH_S):
             slopes += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
-    acc = float(np.mean(slopes)) if slopes else float("nan")
-    acc_se = float(np.std(slopes, ddof=1) / math.sqrt(len(slopes))) if len(slopes) > 1 else float("nan")
-    return np.append(mean, acc), np.append(se, acc_se)
+    acc, acc_se = _mean_se(slopes)
+    # the Phase II routine's ramps on the command, sampled as the recording samples it (a
+    # command interpolated onto the IMU's clock bends the short ramps' slopes: the same in the
+    # twin, so the fit through it is exact)
+    slopes2 = []
+    for a, b in runs:
+        run = m.phase2(a, b)
+        x = np.asarray(run.position_cmd, float) * 1e3
+        fs = float(run.position_cmd_fs_hz)
+        for mv in fit_moves(np.diff(x) * fs, fs, COMMAND_RAMP):
+            slopes2 += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
+    acc2, acc2_se = _mean_se(slopes2)
+    return np.append(mean, [acc, acc2]), np.append(se, [acc_se, acc2_se])
+
+
+def _mean_se(x: list[float]) -> tuple[float, float]:
+    """(mean, standard error of the mean) of ``x``; NaN where it has too few values."""
+    mean = float(np.mean(x)) if x else float("nan")
+    return mean, float(np.std(x, ddof=1) / math.sqrt(len(x))) if len(x) > 1 else float("nan")
 
 
 def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
@@ -199,13 +216,16 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
             with open_measurements(d / "measurements.h5") as m:
                 runs = [(a, b) for a in m.phase2_sessions() for b in m.phase2_runs(a)]
                 v, e = _statistics(m, m.phase1_captures(), runs, s)
-            write_json(files[i], {"values": v.tolist(), "errors": e.tolist()}, nan_as_null=True)
+                inst = measure_instruments(m, m.phase1_captures(), runs, s.sensors.imu_acc_bandwidth_hz,
+                                           s.sensors.imu_gyro_bandwidth_hz)
+            write_json(files[i], {"values": v.tolist(), "errors": e.tolist(),
+                                  "instruments": {k: x.value for k, x in inst.items()}}, nan_as_null=True)
             shutil.rmtree(d, ignore_errors=True)
     out = []
     for f in files:
         doc = json.loads(f.read_text())
         out.append([[np.nan if x is None else x for x in doc["values"]],
-                    [np.nan if x is None else x for x in doc["errors"]]])
+                    [np.nan if x is None else x for x in doc["errors"]], doc.get("instruments", {})])
     return out
 
 
@@ -215,12 +235,19 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
 
 @dataclass
 class FitResult:
+    """Layer (c)'s outcome: the fitted ``values``, the keys it ``informed``, the ``skipped``
+    ones and why, the twin ``simulations`` run, the ``seconds`` spent, the ``residual`` (in
+    standard errors) and, for layer (b)'s correction, the instruments the twin's own rests give
+    at each of the spread's seeds (``instruments``: {key: [value per seed]}) for the values it
+    was set to."""
+
     values: list[Value]
     informed: list[str]
     skipped: dict[str, str]
     simulations: int
     seconds: float
     residual: list[float]
+    instruments: dict[str, list[float]]
 
 
 def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
@@ -252,7 +279,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         names = m.phase1_captures()
         if not names:
             return FitResult([], [], {k: "no Phase I capture: no torque to fit" for k, _, _ in FITTED}, 0,
-                             0.0, [])
+                             0.0, [], {})
         first = min(m.phase1_header(n)[1] for n in names)
         caps = [n for n in names if m.phase1_header(n)[1] == first][:FIT_CAPTURES]
         hours = float(m.phase1(caps[0]).hours)
@@ -357,7 +384,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
 
     lo, hi = x0 - math.log(10.0), x0 + math.log(10.0)
     sol = optimize.least_squares(resid, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-                                 xtol=1e-4, ftol=1e-6, max_nfev=MAX_JACOBIANS * 2)
+                                 xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
     J = jac(sol.x)
     try:
         cov = np.linalg.inv(J.T @ J)
@@ -370,6 +397,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         stat = FITTED[i][1]
         if stat == "accel":
             note = f"fitted through the twin's servo to the ramps of {len(caps)} Phase I captures"
+        elif stat == "accel2":
+            note = f"fitted through the twin's sampling of the command to the ramps of {len(runs)} Phase II runs"
         elif stat == "ripple" and runs:
             note = (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {len(runs)} Phase II "
                     f"runs at {session_h:g} h")
@@ -381,30 +410,28 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         values.append(Value(k, float(np.exp(x)), "fitted", low, high, note))
     progress(f"layer c: done in {sims[0]} evaluations, {time.perf_counter() - t0:.1f} s; residual "
              f"{', '.join(f'{r:+.2f}' for r in sol.fun)} standard errors")
-    return FitResult(values, keys, skipped, sims[0], time.perf_counter() - t0, [float(r) for r in sol.fun])
+    inst: dict[str, list[float]] = {}
+    for r in spread:
+        for k, v in r[2].items():
+            inst.setdefault(k, []).append(float(v))
+    return FitResult(values, keys, skipped, sims[0], time.perf_counter() - t0, [float(r) for r in sol.fun], inst)
 
 
 # ---------------------------------------------------------------------------------------------
 # Layer (b): the sensor chain
 
 
-def sensor_values(recording: Path, base: Scenario) -> tuple[list[Value], list[str]]:
-    """Layer (b): the instruments measured from the rests (:func:`measure_instruments`), as
-    scenario values with their 90 % intervals, and notes on what is not a scenario key."""
+def sensor_values(recording: Path, base: Scenario) -> tuple[dict[str, Measured], list[str]]:
+    """Layer (b), as measured: the instruments from the rests (:func:`measure_instruments`) by
+    scenario key, and notes on what is not a scenario key (the torque's resolution, the IMU's
+    gravity)."""
     with open_measurements(recording / "measurements.h5") as m:
         caps = m.phase1_captures()[:2 * FIT_CAPTURES]
         sess = m.phase2_sessions()
         runs = [(s, r) for s in sess[:2] for r in m.phase2_runs(s)[:4]]
         meas = measure_instruments(m, caps, runs, base.sensors.imu_acc_bandwidth_hz,
                                    base.sensors.imu_gyro_bandwidth_hz)
-    out, notes = [], []
-    for key in SENSOR_KEYS:
-        if key in meas:
-            v: Measured = meas[key]
-            w = Z90 * v.rel_se if np.isfinite(v.rel_se) else None
-            out.append(Value(key, float(f"{v.value:.6g}"), "measured",
-                             None if w is None else float(v.value * math.exp(-w)),
-                             None if w is None else float(v.value * math.exp(w)), v.note))
+    notes = []
     if "torque_resolution_Nm" in meas:
         notes.append(f"the torque signal's resolution is {meas['torque_resolution_Nm'].value:.4g} N·m (the "
                      "twin's is 0.001 N·m, not a scenario key)")
@@ -413,7 +440,34 @@ def sensor_values(recording: Path, base: Scenario) -> tuple[list[Value], list[st
         notes.append(f"the IMU reads gravity as {g:.5f} × 9.80665 m/s² at rest"
                      + (" (a sensitivity error or local gravity: check the IMU's unit and sensitivity)"
                         if abs(g - 1) > 0.003 else ""))
-    return out, notes
+    return {k: v for k, v in meas.items() if k in SENSOR_KEYS}, notes
+
+
+def corrected_sensor_values(measured: dict[str, Measured], set_to: dict[str, float],
+                            twin: dict[str, list[float]]) -> list[Value]:
+    """Layer (b)'s values, each measurement corrected by the twin's own: the twin set to
+    ``set_to[key]`` and measured the same way at each seed of the spread (``twin[key]``) gives
+    the measurement's bias ratio r = mean(twin) / set (what its rests hold beside the noise,
+    the estimator's own bias); the value is measured / r (one step of indirect inference; the
+    statistic is proportional to the value near it). The 90 % interval combines the
+    recording's own error and the ratio's scatter over the seeds (Student's t with the seeds'
+    degrees of freedom). Without the twin's measurement the raw value and its own error."""
+    out = []
+    for key, v in measured.items():
+        tw = np.array(twin.get(key, []), dtype=float)
+        tw = tw[np.isfinite(tw)]
+        if tw.size >= 2 and set_to.get(key):
+            ratio = tw / set_to[key]
+            r = float(np.mean(ratio))
+            rel = math.sqrt(v.rel_se ** 2 + (float(np.std(ratio, ddof=1)) / r) ** 2 * (1 + 1 / tw.size))
+            value, note = v.value / r, f"{v.note}; corrected by the twin's own measurement (× {1 / r:.4f})"
+            w = T90 * rel
+        else:
+            value, note, w = v.value, v.note, Z90 * v.rel_se
+        ok = np.isfinite(w)
+        out.append(Value(key, float(f"{value:.6g}"), "measured", float(value * math.exp(-w)) if ok else None,
+                         float(value * math.exp(w)) if ok else None, note))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -440,13 +494,15 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     text_a, notes = scenario_text(recording, name)
     base = _load_text(text_a)
     progress("layer b: the sensor chain from the rests")
-    sens, sens_notes = sensor_values(recording, base)
+    measured, sens_notes = sensor_values(recording, base)
     data = base.model_dump(mode="json")
-    for v in sens:
-        set_dotted(data, v.key, v.value, source="calibrate")
+    for key, v in measured.items():
+        set_dotted(data, key, float(f"{v.value:.6g}"), source="calibrate")
     base_b = from_dict(data)
     fit = fit_physical(base_b, recording, cache / "fit", None if budget_s is None else
                        budget_s - (time.perf_counter() - t0), workers, scheduler, progress)
+    sens = corrected_sensor_values(measured, {k: float(f"{v.value:.6g}") for k, v in measured.items()},
+                                   fit.instruments)
     values = sens + fit.values
     defaults = {k: why for k, why in NOT_INFORMED.items()}
     defaults.update(fit.skipped)

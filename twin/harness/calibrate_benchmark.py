@@ -1,0 +1,203 @@
+"""The round trip of ``twin calibrate``, blind: foreign axes drawn from a seed, simulated, written
+out as a laboratory's files, imported with a spec, calibrated and (optionally) diagnosed, then
+scored against what was drawn.
+
+Each case is an axis that is neither the paper's nor the twin's default: lead, stroke, moving
+mass, routines, sensor rates, noise floors, frictions and ripple drawn within their priors
+(:func:`draw_case`), several off the twin's defaults at once. Its campaign is a nominal machine
+(no preload loss, no backlash growth) of the layout of ``scenarios/foreign-16mm.toml``, written
+out in a rotation of the formats the importer reads (:data:`FORMATS`: each used), imported
+(``twin import``) and calibrated (:func:`twin.harness.calibrate.calibrate`). Scored:
+
+- the routine: every measured routine value within 0.1 % of the drawn one (or the channel's
+  resolution: one sample of the rate for a dwell);
+- the physical parameters and the sensor chain: the drawn value inside the stated 90 % interval,
+  over the (case, parameter) pairs the recording informs;
+- with ``diagnose``: the calibrated twin against the recording, where the right verdict is "no
+  significant gap".
+
+Writes ``OUT/calibrate-benchmark.json`` (per case and the summary) and prints a table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from analysis.files import write_json
+from twin.scenario import Scenario, from_dict, load
+
+#: (Phase I format, Phase II format) of the cases in turn: every reader is used.
+FORMATS = (("tdms", "csv"), ("mat", "mat"), ("mdf", "mdf"), ("csv", "tdms"))
+BENCH_VERSION = 1
+#: Routine keys scored (scenario key: tolerance as a fraction of the drawn value, or in s for
+#: the dwells: the larger of 0.1 % and one sample of the channel they are measured on).
+ROUTINE_KEYS = ("phase1.speed_mm_s", "phase1.accel_mm_s2", "phase1.dwell_s", "phase2.speeds_mm_s",
+                "phase2.accel_mm_s2", "phase2.dwell_s", "phase2.start_mm", "phase2.end_mm")
+
+
+def _base() -> dict:
+    return load("foreign-16mm").model_dump(mode="json")
+
+
+def draw_case(rng: np.random.Generator, i: int) -> Scenario:
+    """A foreign axis within the priors: lead 4–20 mm, stroke 150–800 mm, moving mass 30–400 kg
+    (log-uniform), Phase I speed up to 2400 rpm of the motor and its acceleration, two Phase II
+    speeds, Phase I DAQ rate 5.12–25.6 kHz, IMU rate 1–2 kHz, noise floors ×0.5–2 of the
+    twin's, rail friction 5–40 N, viscous drag 1–5 × 10⁻⁴ N·m·s/rad, torque ripple 0.005–0.03 N·m
+    (log-uniform)."""
+    d = _base()
+    lead = float(rng.choice([4.0, 5.0, 8.0, 10.0, 12.0, 16.0, 20.0]))
+    stroke = float(rng.uniform(150.0, 800.0))
+    travel = round(stroke + 60.0, 1)
+    loguni = lambda lo, hi: float(np.exp(rng.uniform(math.log(lo), math.log(hi))))  # noqa: E731
+    ax = d["axis"]
+    ax.update(travel_mm=travel, lead_mm=lead, carriage_mass_kg=round(loguni(30.0, 400.0), 2),
+              rail_friction_N=round(float(rng.uniform(5.0, 40.0)), 3),
+              drag_viscous_Nm_s_per_rad=float(f"{loguni(1e-4, 5e-4):.4g}"),
+              torque_ripple_Nm=float(f"{loguni(0.005, 0.03):.4g}"))
+    vmax1 = min(500.0, 2400.0 / 60.0 * lead)  # motor at most 2400 rpm
+    speed1 = round(float(rng.uniform(0.4, 1.0)) * vmax1, 2)
+    p1_stroke = min(0.6 * stroke, 300.0)
+    start1 = round(30.0 + 0.5 * (stroke - p1_stroke), 2)
+    d["phase1"].update(fs_hz=float(rng.choice([5120.0, 10000.0, 12800.0, 25600.0])),
+                       speed_mm_s=speed1, accel_mm_s2=round(float(rng.uniform(1500.0, 6000.0)), 2),
+                       start_mm=start1, end_mm=round(start1 + p1_stroke, 2),
+                       dwell_s=round(float(rng.uniform(0.2, 0.4)), 3), capture_s=2.0)
+    vmax2 = min(300.0, 2400.0 / 60.0 * lead)
+    s_lo = round(float(rng.uniform(0.1, 0.3)) * vmax2, 2)
+    s_hi = round(float(rng.uniform(0.6, 1.0)) * vmax2, 2)
+    d["phase2"].update(speeds_mm_s=[s_lo, s_hi], accel_mm_s2=round(float(rng.uniform(5000.0, 20000.0)), 1),
+                       start_mm=30.0, end_mm=round(30.0 + stroke, 2),
+                       dwell_s=round(float(rng.uniform(0.5, 1.0)), 3))
+    fs_imu = float(rng.choice([1000.0, 1600.0, 2000.0]))
+    se = d["sensors"]
+    se.update(imu_acc_fs_hz=fs_imu, imu_gyro_fs_hz=fs_imu, position_cmd_fs_hz=fs_imu,
+              imu_acc_noise_ug_per_rthz=round(7.0 * loguni(0.5, 2.0), 3),
+              imu_gyro_noise_urad_s_per_rthz=round(35.0 * loguni(0.5, 2.0), 3),
+              nut_acc_noise_ug_per_rthz=round(20.0 * loguni(0.5, 2.0), 3),
+              torque_noise_Nm=float(f"{0.005 * loguni(0.5, 2.0):.4g}"))
+    d["name"], d["seed"] = f"foreign-{i:03d}", int(rng.integers(0, 2**31))
+    d["description"] = f"calibrate-benchmark case {i}"
+    return from_dict(d)
+
+
+def _get(data: dict, key: str):
+    a, b = key.split(".")
+    return data[a][b]
+
+
+def score_case(truth: Scenario, calibrated: Scenario, record: dict) -> dict:
+    """The routine's relative errors (and whether each is within tolerance) and, for every value
+    the calibration measured or fitted, whether the drawn value is inside its 90 % interval."""
+    t, c = truth.model_dump(mode="json"), calibrated.model_dump(mode="json")
+    routine = {}
+    for key in ROUTINE_KEYS:
+        tv, cv = _get(t, key), _get(c, key)
+        tv_l, cv_l = (tv, cv) if isinstance(tv, list) else ([tv], [cv])
+        if len(tv_l) != len(cv_l):
+            routine[key] = {"truth": tv, "calibrated": cv, "error": None, "within": False}
+            continue
+        err = max(abs(a - b) / abs(b) for a, b in zip(cv_l, tv_l, strict=True))
+        tol = 1e-3
+        if key.endswith("dwell_s"):  # one sample of the channel the rests are measured on
+            fs = t["phase1"]["fs_hz"] if key.startswith("phase1") else t["sensors"]["position_cmd_fs_hz"]
+            tol = max(tol, 1.0 / fs / tv_l[0])
+        routine[key] = {"truth": tv, "calibrated": cv, "error": err, "within": bool(err <= tol)}
+    params = {}
+    for v in record["values"]:
+        if v["low"] is None:
+            continue
+        tv = float(_get(t, v["key"]))
+        params[v["key"]] = {"truth": tv, "value": v["value"], "low": v["low"], "high": v["high"],
+                            "source": v["source"], "inside": bool(v["low"] <= tv <= v["high"])}
+    return {"routine": routine, "parameters": params}
+
+
+def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds: int,
+             progress: Callable[[str], None]) -> dict:
+    """One case end to end in ``out/case-NNN``; returns its entry of the JSON."""
+    from analysis.ingest import run_import
+    from twin.campaign import simulate_campaign
+    from twin.harness.calibrate import calibrate
+    from twin.harness.lab_export import export
+
+    d = out / f"case-{i:03d}"
+    shutil.rmtree(d, ignore_errors=True)
+    d.mkdir(parents=True)
+    f1, f2 = FORMATS[i % len(FORMATS)]
+    t0 = time.perf_counter()
+    simulate_campaign(s, d / "twin", workers=1)
+    spec = export(d / "twin", d / "lab", phase1_format=f1, phase2_format=f2)
+    run_import(spec, output=d / "campaign")
+    t_sim = time.perf_counter() - t0
+    rec = calibrate(d / "campaign", d / "axis.toml", workers=workers, progress=lambda _t: None)
+    cal = load(d / "axis.toml")
+    entry = {"case": i, "formats": [f1, f2], "scenario": json.loads(s.to_json()),
+             "simulate_export_import_s": t_sim, "calibrate_s": rec["seconds"], **score_case(s, cal, rec)}
+    if diagnose:
+        from twin.harness.gap_runner import run_diagnosis
+
+        t1 = time.perf_counter()
+        res = run_diagnosis(d / "campaign", cal, d / "diagnosis", seeds=seeds, workers=workers,
+                            plots=False, response_seeds=1, resim_seeds=0)
+        entry["diagnosis"] = {"verdict": res["verdict"], "heldout_gap": res["heldout_gap_before"],
+                              "critical": res["heldout_gap_critical"],
+                              "significant": int(sum(r["significant"] for r in res.get("regions", []))),
+                              "seconds": time.perf_counter() - t1}
+    r_ok = sum(v["within"] for v in entry["routine"].values())
+    p_ok = sum(v["inside"] for v in entry["parameters"].values())
+    progress(f"case {i}: lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg, {f1}/{f2}: routine "
+             f"{r_ok}/{len(entry['routine'])} within tolerance, parameters {p_ok}/{len(entry['parameters'])} "
+             f"inside their interval" + (f", diagnosis: {entry['diagnosis']['verdict']}" if diagnose else ""))
+    return entry
+
+
+def summarise(cases: list[dict]) -> dict:
+    """The benchmark's figures over ``cases``."""
+    routine = [v for c in cases for v in c["routine"].values()]
+    params = [v for c in cases for v in c["parameters"].values()]
+    per_key: dict[str, list[bool]] = {}
+    for c in cases:
+        for k, v in c["parameters"].items():
+            per_key.setdefault(k, []).append(v["inside"])
+    worst = {k: max((c["routine"][k]["error"] or 0.0) for c in cases) for k in ROUTINE_KEYS}
+    out = {"cases": len(cases),
+           "routine_within": sum(v["within"] for v in routine) / max(len(routine), 1),
+           "routine_worst_error": worst,
+           "parameters_inside": sum(v["inside"] for v in params) / max(len(params), 1),
+           "parameter_pairs": len(params),
+           "per_parameter_inside": {k: sum(v) / len(v) for k, v in per_key.items()},
+           "formats_used": sorted({f for c in cases for f in c["formats"]}),
+           "calibrate_s_median": float(np.median([c["calibrate_s"] for c in cases])) if cases else None}
+    diag = [c["diagnosis"] for c in cases if "diagnosis" in c]
+    if diag:
+        out["null_no_gap"] = sum(d["verdict"] == "no significant gap" for d in diag) / len(diag)
+        out["diagnosed"] = len(diag)
+    return out
+
+
+def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers: int = 2,
+                  diagnose: bool = False, seeds: int = 4,
+                  progress: Callable[[str], None] = lambda t: print(t, flush=True)) -> dict:
+    """Draw ``cases`` foreign axes from ``seed``, take each through the round trip
+    (:func:`run_case`), write ``OUT/calibrate-benchmark.json`` and return it."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    scenarios = [draw_case(rng, i) for i in range(cases)]
+    t0 = time.perf_counter()
+    done = [run_case(i, s, out, workers, diagnose, seeds, progress) for i, s in enumerate(scenarios)]
+    doc = {"version": BENCH_VERSION, "seed": seed, "workers": workers, "diagnose": diagnose,
+           "seconds": time.perf_counter() - t0, "summary": summarise(done), "cases": done}
+    write_json(out / "calibrate-benchmark.json", doc, nan_as_null=True)
+    return doc
+
+
+__all__ = ["draw_case", "run_benchmark", "score_case", "summarise"]
