@@ -56,13 +56,26 @@ class Profile:
 
     rest_direction: sign (+1 or −1) of the motion that brought the axis to its rest before the
     first sample, which decides the nut flank the carriage rests on; 0 = that of the first
-    motion (the carriage brought into contact by a move in the direction it starts in)."""
+    motion (the carriage brought into contact by a move in the direction it starts in).
+    moves, lead_in: the routine the profile samples (:func:`command_profile`), to sample it again
+    at another clock (:meth:`position_at`)."""
 
     t: np.ndarray
     x: np.ndarray
     v: np.ndarray
     a: np.ndarray
     rest_direction: float = 0.0
+    moves: tuple[Move, ...] = ()
+    lead_in: float = 0.0
+
+    def position_at(self, fs: float, n: int, shift: float = 0.0) -> np.ndarray:
+        """(n,) the commanded position sampled exactly at ``fs`` (k/fs + ``shift``, s), from the
+        moves themselves: a controller's recorded command is the profile at its own clock, not
+        an interpolation of the simulation's samples (which bends the short ramps' parabolas
+        between samples). Without moves: linear interpolation of ``x``."""
+        if not self.moves:
+            return np.interp(np.arange(n) / fs + shift, self.t, self.x)
+        return command_profile(list(self.moves), fs, lead_in=self.lead_in - shift, duration=n / fs).x
 
 
 def _move_samples(move: Move, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -121,7 +134,7 @@ def command_profile(moves: list[Move], fs: float, lead_in: float = 0.0,
             x[sel] = mv.start + dx
             v[sel], a[sel] = dv, da
         t0 += mv.duration
-    return Profile(t=t, x=x, v=v, a=a)
+    return Profile(t=t, x=x, v=v, a=a, moves=tuple(moves), lead_in=float(lead_in))
 
 
 def reciprocating(start: float, end: float, speed: float, accel: float, dwell: float,

@@ -532,8 +532,7 @@ def phase2_measure_runs(sim: Simulator, traj: Trajectory, rngs: list[np.random.G
     force = traj.sens[:, traj.index.imu_acc]
     rate = traj.angular_velocity_imu
     n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
-    t_cmd = np.arange(n_cmd) / w.position_cmd_fs
-    pos = np.interp(t_cmd + position_cmd_lead_s, traj.cmd.t, traj.cmd.x)
+    pos = traj.cmd.position_at(w.position_cmd_fs, n_cmd, position_cmd_lead_s)
     out = []
     # Groups of runs, so that only one group's float64 samples are held at a time.
     for start in range(0, len(rngs), _RUNS_PER_GROUP):

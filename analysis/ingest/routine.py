@@ -84,9 +84,12 @@ def fit_moves(v: np.ndarray, fs_hz: float, ramp: tuple[float, float] = MEASURED_
     moving = np.abs(sm) > 0.02 * peak
     lo, hi = ramp
     moves = []
-    for a, b in _segments(moving):
-        if b - a < 8:
-            continue
+    segs = [(a, b) for a, b in _segments(moving) if b - a >= 8]
+    for j, (a, b) in enumerate(segs):
+        # the distance is integrated out to the middle of the rests on either side (the tails
+        # below the moving threshold belong to the move)
+        ia = (segs[j - 1][1] + a) // 2 if j > 0 else 0
+        ib = (b + segs[j + 1][0]) // 2 if j + 1 < len(segs) else v.size
         cut_start, cut_end = a == 0, b >= v.size  # a move cut by the record: its ramp there is not fitted
         sign = 1.0 if np.median(v[a:b]) >= 0 else -1.0
         s, ss = sign * v[a:b], sign * sm[a:b]
@@ -107,9 +110,74 @@ def fit_moves(v: np.ndarray, fs_hz: float, ramp: tuple[float, float] = MEASURED_
             "speed": speed if cruise else None, "direction": sign,
             "accel": acc[0] if acc else None, "decel": -dec[0] if dec else None,
             "t_start": acc[1] if acc else None, "t_stop": dec[1] if dec else None,
-            "distance": None if cut_start or cut_end else float(np.sum(s)) / fs_hz,
+            "distance": None if cut_start or cut_end else abs(float(np.sum(v[ia:ib]))) / fs_hz,
             "samples": (acc[2] if acc else 0) + (dec[2] if dec else 0)})
     return moves
+
+
+def _trapezoid_position(t: np.ndarray, t0: float, accel: float, speed: float, dist: float) -> np.ndarray:
+    """Distance travelled (mm) at times ``t`` (s) by a trapezoidal move of ``dist`` mm starting
+    at ``t0`` with ``accel`` (mm/s²) up to ``speed`` (mm/s); a triangular one when ``dist`` is
+    shorter than speed²/accel."""
+    ta = min(speed / accel, math.sqrt(dist / accel))
+    vpk = accel * ta
+    tm = 2 * ta + max(dist - vpk * ta, 0.0) / vpk
+    tau = np.clip(t - t0, 0.0, tm)
+    up = 0.5 * accel * np.minimum(tau, ta) ** 2
+    cruise = vpk * np.clip(tau - ta, 0.0, tm - 2 * ta)
+    rem = np.clip(tm - tau, 0.0, ta)
+    down = np.where(tau > tm - ta, 0.5 * accel * ta ** 2 - 0.5 * accel * rem ** 2, 0.0)
+    return up + cruise + down
+
+
+def fit_command(x: np.ndarray, fs_hz: float) -> list[dict]:
+    """The moves of a commanded position ``x`` (n,) mm at ``fs_hz``, each fitted as a whole:
+    the trapezoid (start time, acceleration, cruise speed; the distance between the rests
+    fixed) least-squares fitted to the position samples of the move and half of each rest
+    around it (``scipy.optimize.least_squares``), started from :func:`fit_moves` on the
+    increments. Position samples of a trapezoid are exact wherever the sampling falls, where
+    the increments across a corner of the profile are not: this fit is exact for a command
+    sampled at any phase. Returns :func:`fit_moves`'s dicts with the fitted values."""
+    from scipy import optimize
+
+    x = np.asarray(x, dtype=float)
+    moves = fit_moves(np.diff(x) * fs_hz, fs_hz, COMMAND_RAMP)
+    t = np.arange(x.size) / fs_hz
+    starts = [m["t_start"] for m in moves]
+    out = []
+    for j, m in enumerate(moves):
+        if m["t_start"] is None or m["t_stop"] is None or m["speed"] is None or m["accel"] is None:
+            out.append(m)
+            continue
+        lo = 0.5 * (moves[j - 1]["t_stop"] + m["t_start"]) if j > 0 and moves[j - 1]["t_stop"] else m["t_start"] - 0.05
+        hi = (0.5 * (m["t_stop"] + starts[j + 1]) if j + 1 < len(moves) and starts[j + 1] is not None
+              else m["t_stop"] + 0.05)
+        sel = (t >= lo) & (t <= hi)
+        tt, xx = t[sel], x[sel]
+        if tt.size < 8:
+            out.append(m)
+            continue
+        x0, x1 = float(xx[0]), float(xx[-1])
+        dist, sign = abs(x1 - x0), (1.0 if x1 >= x0 else -1.0)
+
+        def resid(p: np.ndarray, tt=tt, xx=xx, x0=x0, dist=dist, sign=sign) -> np.ndarray:
+            return x0 + sign * _trapezoid_position(tt, p[0], p[1], p[2], dist) - xx
+
+        p0 = np.array([m["t_start"], 0.5 * (m["accel"] + (m["decel"] or m["accel"])), m["speed"]])
+        sol = optimize.least_squares(resid, p0, x_scale=np.array([1.0 / fs_hz, 0.01 * p0[1], 0.001 * p0[2]]),
+                                     bounds=([-np.inf, 0.5 * p0[1], 0.5 * p0[2]], [np.inf, 2 * p0[1], 2 * p0[2]]),
+                                     xtol=1e-12, ftol=1e-12)
+        t0, acc, speed = (float(v) for v in sol.x)
+        tm = float(_move_time(acc, speed, dist))
+        out.append({**m, "speed": speed, "accel": acc, "decel": acc, "t_start": t0, "t_stop": t0 + tm,
+                    "distance": dist})
+    return out
+
+
+def _move_time(accel: float, speed: float, dist: float) -> float:
+    ta = min(speed / accel, math.sqrt(dist / accel))
+    vpk = accel * ta
+    return 2 * ta + max(dist - vpk * ta, 0.0) / vpk
 
 
 def routine_of_moves(moves: list[list[dict]]) -> dict:
@@ -203,8 +271,7 @@ def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3, capt
                     run = m.phase2(sessions[0], r)
                     x = run.position_cmd * 1e3
                     fs = run.position_cmd_fs_hz
-                    # the command's increments between samples: exact mean speeds at mid-interval
-                    recs.append(fit_moves(np.diff(x) * fs, fs, COMMAND_RAMP))
+                    recs.append(fit_command(x, fs))
                     lo.append(float(x.min()))
                     hi.append(float(x.max()))
                 prof = routine_of_moves(recs)

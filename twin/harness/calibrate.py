@@ -49,7 +49,7 @@ from analysis.calibration.drive import imu_ripple, recording_statistics
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
 from analysis.files import write_json, write_text
-from analysis.ingest.routine import COMMAND_RAMP, MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
+from analysis.ingest.routine import MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
 from twin.config import get_dotted, set_dotted
 from twin.executors import default_processes
 from twin.scenario import Scenario, ScenarioError, from_dict, load
@@ -82,9 +82,8 @@ FITTED = (
     ("axis.drag_viscous_Nm_s_per_rad", "viscous_drag", "N·m·s/rad"),
     ("axis.torque_ripple_Nm", "ripple", "N·m"),
     ("phase1.accel_mm_s2", "accel", "mm/s²"),
-    ("phase2.accel_mm_s2", "accel2", "mm/s²"),
 )
-STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel", "accel2")
+STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel")
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
 NOT_INFORMED = {
@@ -153,7 +152,7 @@ def _key(s: Scenario) -> str:
 
 
 def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """(values (6,), standard errors (6,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    """(values (5,), standard errors (5,)) of :data:`STAT_NAMES` over the Phase I ``captures``
     and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
     statistics of the captures, with the ripple read on the IMU of the runs when there are any
     (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
@@ -175,18 +174,7 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
                             SPEED_SMOOTH_S):
             slopes += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
     acc, acc_se = _mean_se(slopes)
-    # the Phase II routine's ramps on the command, sampled as the recording samples it (a
-    # command interpolated onto the IMU's clock bends the short ramps' slopes: the same in the
-    # twin, so the fit through it is exact)
-    slopes2 = []
-    for a, b in runs:
-        run = m.phase2(a, b)
-        x = np.asarray(run.position_cmd, float) * 1e3
-        fs = float(run.position_cmd_fs_hz)
-        for mv in fit_moves(np.diff(x) * fs, fs, COMMAND_RAMP):
-            slopes2 += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
-    acc2, acc2_se = _mean_se(slopes2)
-    return np.append(mean, [acc, acc2]), np.append(se, [acc_se, acc2_se])
+    return np.append(mean, acc), np.append(se, acc_se)
 
 
 def _mean_se(x: list[float]) -> tuple[float, float]:
@@ -397,8 +385,6 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         stat = FITTED[i][1]
         if stat == "accel":
             note = f"fitted through the twin's servo to the ramps of {len(caps)} Phase I captures"
-        elif stat == "accel2":
-            note = f"fitted through the twin's sampling of the command to the ramps of {len(runs)} Phase II runs"
         elif stat == "ripple" and runs:
             note = (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {len(runs)} Phase II "
                     f"runs at {session_h:g} h")

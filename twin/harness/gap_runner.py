@@ -888,8 +888,9 @@ def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> di
     fitted = [v["key"] for v in values if v.get("source") == "fitted"]
     again = sorted(n for n in names if n in PARAMETERS and set(PARAMETERS[n].factor.keys) & set(fitted))
     words = (f"The calibrated parameters {', '.join(again)} stay candidates (factor 1 = the calibrated value)."
-             if again else "The calibrated parameters are not candidates here (kinds without 'parameter'): "
-             "what remains is looked for among the unmodelled effects and the acquisition's artefacts.")
+             if again else "The calibrated parameters are not candidates here (--kinds without 'parameter', or "
+             "--candidate naming none of them): what remains is looked for among the unmodelled effects and "
+             "the acquisition's artefacts.")
     return {"recording": cal.get("recording"), "version": cal.get("version"), "values": values,
             "defaults": list(cal.get("defaults", [])), "candidates_again": again, "candidates": words}
 
