@@ -24,7 +24,8 @@ from analysis.ingest.routine import COMMAND_RAMP, MEASURED_RAMP, fit_command, fi
 
 REPO = Path(__file__).resolve().parent.parent
 #: A smaller stroke and shorter captures than the shipped scenario: the round trip in make test.
-SMALL = ("phase2.start_mm=40.0", "phase2.end_mm=240.0", "phase1.capture_s=1.5")
+SMALL = ("phase2.start_mm=40.0", "phase2.end_mm=240.0", "phase1.capture_s=1.5", "phase2.session_hours=[50.0, 250.0]",
+         "phase1.sample_interval_hours=200.0")
 
 
 def _trapezoids(fs: float, speed: float, accel: float, dwell: float, stroke: float, n_moves: int = 4) -> np.ndarray:
@@ -135,7 +136,10 @@ def round_trip(tmp_path_factory):
     run_twin("import", spec, "-o", tmp / "campaign")
     cal = run_twin("calibrate", tmp / "campaign", "-o", tmp / "axis.toml", "--workers", "1")
     run_twin("scenario", "init", tmp / "campaign", "-o", tmp / "init.toml")
-    common = ["--seeds", "3", "--candidate", "gain:torque", "--resim-seeds", "0", "--response-seeds", "1",
+    # 6 seeds: with 3, the spread of a statistic that varies with the machine's draw (the rails'
+    # lateral waviness seen by the IMU at 80 mm/s) is too rough, and a recording within the
+    # machines' scatter can be called a gap
+    common = ["--seeds", "6", "--candidate", "gain:torque", "--resim-seeds", "0", "--response-seeds", "1",
               "--workers", "1"]
     for name in ("axis", "init"):
         run_twin("diagnose", tmp / "campaign", "--scenario", tmp / f"{name}.toml", "-o", tmp / f"diag-{name}",
@@ -177,8 +181,9 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
     assert "carriage_mass_kg" in text and "# fitted: fitted jointly to the torque's inertia" in text
     assert "nut_stiffness_N_per_um" in text and "twin default: the recording cannot inform it: no statistic" in text
     assert "[calibration]" in text
-    said = " ".join(cal.stdout.split())
-    assert "axis.carriage_mass_kg" in said and "next: twin diagnose" in said
+    assert "axis.drag_viscous_Nm_s_per_rad" in cal.stdout  # the table of values, on stdout
+    said = " ".join(cal.stderr.split())
+    assert "twin default: axis.nut_stiffness_N_per_um" in said and "next: twin diagnose" in said
     assert "calibrate: layer c:" in cal.stderr  # one line per step when not a terminal
 
 
@@ -204,7 +209,7 @@ def test_calibrate_refuses_a_budget_too_small_naming_the_estimate(round_trip, tm
                  "--workers", "1", "--cache", tmp_path / "c", check=False)
     assert r.returncode == 2
     said = " ".join(r.stderr.split())
-    assert "the joint fit needs about" in said and "--budget-minutes 0.01 is too small: give at least" in said
+    assert "the calibration needs about" in said and "--budget-minutes 0.01 is too small: give at least" in said
     assert not (tmp_path / "a.toml").exists()
 
 

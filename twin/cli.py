@@ -654,7 +654,7 @@ def calibrate(
     for v in rec["values"]:
         iv = f"{v['low']:.4g} to {v['high']:.4g}" if v["low"] is not None else ""
         table.add_row(v["key"], f"{v['value']:.6g}", iv, v["source"])
-    console.print(table)
+    Console(width=max(120, Console().width)).print(table)
     for d in rec["defaults"]:
         console.print(f"twin default: {d['key']} ({d['why']})", markup=False, highlight=False)
     for n in rec["notes"]:

@@ -256,10 +256,11 @@ def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_
 
 def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float | None,
                  workers: int, scheduler: str | None = None,
-                 progress: Callable[[str], None] = _progress) -> FitResult:
+                 progress: Callable[[str], None] = _progress, spent_s: float = 0.0) -> FitResult:
     """Layer (c) of the module docstring on ``recording`` against ``base`` (layers a and b
-    applied). Raises :class:`CalibrationError` when the budget cannot hold (after timing the
-    first simulation: the estimate and the smallest budget that would do)."""
+    applied). Raises :class:`CalibrationError` when ``budget_s`` (the whole calibration's, of
+    which ``spent_s`` is spent) cannot hold: after timing the twin's first simulations, with the
+    estimate and the smallest budget that would do."""
     from twin.harness.gap_runner import run_tasks
 
     t0 = time.perf_counter()
@@ -331,13 +332,14 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     unit_s = (time.perf_counter() - t_first) / max(1.0, len(seeds) / max(1, workers))
     n_sims = MAX_JACOBIANS * (len(keys) + 1) * FIT_SEEDS
     estimate = unit_s * n_sims / max(1, min(workers, len(keys))) * 0.6 + unit_s
+    total = spent_s + (time.perf_counter() - t0) + estimate
     progress(f"layer c: {len(keys)} parameters jointly; one twin evaluation {unit_s:.1f} s; at most "
-             f"{n_sims} evaluations, about {estimate / 60:.1f} min")
-    if budget_s is not None and estimate > budget_s:
+             f"{n_sims} evaluations: the calibration takes about {total / 60:.1f} min")
+    if budget_s is not None and total > budget_s:
         raise CalibrationError(
-            f"{recording}: the joint fit needs about {estimate / 60:.1f} min on {workers} worker(s) "
-            f"(one evaluation of the twin takes {unit_s:.1f} s, at most {n_sims} of them); "
-            f"--budget-minutes {budget_s / 60:g} is too small: give at least {math.ceil(estimate / 60 * 1.2):g}")
+            f"{recording}: the calibration needs about {total / 60:.1f} min on {workers} worker(s) (the joint "
+            f"fit: one evaluation of the twin takes {unit_s:.1f} s, at most {n_sims} of them); --budget-minutes "
+            f"{budget_s / 60:g} is too small: give at least {math.ceil(total / 60 * 1.2 * 10) / 10:g}")
     sim_se = np.array(first_eval[1])[stat_idx] / math.sqrt(FIT_SEEDS)
     seed_sd = np.nanstd(np.array([r[0] for r in spread])[:, stat_idx], axis=0, ddof=1)
     # the recording is one machine (one draw: its seed scatter counts whole), the twin's
@@ -485,8 +487,8 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     for key, v in measured.items():
         set_dotted(data, key, float(f"{v.value:.6g}"), source="calibrate")
     base_b = from_dict(data)
-    fit = fit_physical(base_b, recording, cache / "fit", None if budget_s is None else
-                       budget_s - (time.perf_counter() - t0), workers, scheduler, progress)
+    fit = fit_physical(base_b, recording, cache / "fit", budget_s, workers, scheduler, progress,
+                       spent_s=time.perf_counter() - t0)
     sens = corrected_sensor_values(measured, {k: float(f"{v.value:.6g}") for k, v in measured.items()},
                                    fit.instruments)
     values = sens + fit.values
