@@ -523,6 +523,8 @@ def _describe(v: Any) -> str:
 
 def _scalar(v: Any, what: str) -> float:
     """``v`` as a finite float, else :class:`BadValue` naming ``what`` and the value."""
+    if v is None or isinstance(v, str | bytes):
+        raise BadValue(f"{what} is {_describe(v)}; expected a number")
     try:
         arr = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
