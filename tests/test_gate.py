@@ -14,7 +14,8 @@ line: every check passes, JUnit XML written), then reused warm by every other te
   suite, to keep it short);
 - the pytest plugin: a developer's test file calling ``assert_recovers_backlash`` and
   ``assert_detects_preload_loss`` with the ``twin_gate_cache`` fixture; it imports no NumPy or
-  MuJoCo when pytest loads it.
+  MuJoCo when pytest loads it;
+- the CI workflow example (docs/ci/twin-gate.yml) uses the gate's cache path, key and options.
 
 ``pytest -s`` prints every check's figure and the cold and warm times.
 """
@@ -353,3 +354,30 @@ def test_pytest_plugin_in_a_developers_suite(cold, tmp_path):
         print(sorted(m for m in ("numpy", "mujoco", "h5py", "analysis", "twin.harness.gate") if m in sys.modules))
         """)], env=env, capture_output=True, text=True, check=True)
     assert light.stdout.strip() == "[]"
+
+
+def test_ci_workflow_example_is_consistent_with_the_gate(tmp_path, monkeypatch):
+    """docs/ci/twin-gate.yml: valid YAML whose cache path is the gate's default root on a fresh
+    runner (no XDG_CACHE_HOME), whose key step prints this version's cache folder name, and whose
+    `twin gate` line uses options the command has (it cannot run a GitHub runner here)."""
+    import shlex
+
+    import yaml
+
+    doc = yaml.safe_load((REPO / "docs/ci/twin-gate.yml").read_text())
+    steps = doc["jobs"]["gate"]["steps"]
+    cached = next(s for s in steps if s.get("uses", "").startswith("actions/cache@"))
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert gate.default_root() == Path(cached["with"]["path"]).expanduser()
+    env = {**os.environ, "PYTHONPATH": str(REPO), "GITHUB_OUTPUT": str(tmp_path / "out"),
+           "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+    key = next(s for s in steps if s.get("id") == "key")
+    subprocess.run(["bash", "-c", key["run"]], env=env, check=True, cwd=tmp_path)
+    assert (tmp_path / "out").read_text().strip() == f"name={gate.cache_dir(None, SUITE).name}"
+    run = next(s["run"] for s in steps if s.get("name") == "twin gate")
+    args = shlex.split(run)
+    assert args[:2] == ["twin", "gate"]
+    flags = {a for a in args if a.startswith("--")}
+    helptext = gate_cli("--help")[0].stdout
+    assert flags == {"--estimator", "--detector", "--junit"} and all(f in helptext for f in flags)
