@@ -191,15 +191,22 @@ class ReturnsArray(BacklashEstimator):
         return np.array([r.delta_backlash_shift_m, r.delta_backlash_pitch_m])
 
 
+class WritesInput(BacklashEstimator):
+    def estimate(self, X):
+        X.slow.forward[:] = 0.0
+        return super().estimate(X)
+
+
 def test_bad_estimators_fail_their_checks_naming_what_went_wrong(cache):
     two = ["steps-command-100mm_s", "slow-reversal-eq9"]  # a shift-based check and Eq. 9's
-    results = gate.run_gate([Raises(), ReturnsNaN(), WrongShape(), ReturnsArray(), "shift"], [], cache, two)
+    results = gate.run_gate([Raises(), ReturnsNaN(), WrongShape(), ReturnsArray(), WritesInput(), "shift"],
+                            [], cache, two)
     by: dict[str, list] = {}
     for r in results:
         by.setdefault(r.method, []).append(r)
     n = len(two)
     assert {m: len(rs) for m, rs in by.items()} == {m: n for m in ("Raises", "ReturnsNaN", "WrongShape",
-                                                                  "ReturnsArray", "shift")}
+                                                                  "ReturnsArray", "WritesInput", "shift")}
     for r in by["Raises"]:
         assert not r.passed and r.error.startswith(f"RuntimeError: no traces today (at {HERE}:")
     for r in by["ReturnsNaN"]:
@@ -212,6 +219,8 @@ def test_bad_estimators_fail_their_checks_naming_what_went_wrong(cache):
         which = "pitch" if r.check == "slow-reversal-eq9" else "shift"
         assert r.error == (f"estimate(s0000) returned ndarray of shape (2,); expected a SessionBacklash "
                            f"with delta_backlash_{which}_m")
+    for r in by["WritesInput"]:  # the inputs are read-only: the next method gets them intact
+        assert r.error.startswith(f"ValueError: assignment destination is read-only (at {HERE}:")
     assert all(r.passed for r in by["shift"])  # the checks after the bad ones still ran
     print("\n" + "\n".join(f"{r.method} {r.check}: {r.figure}" for r in results if not r.passed)[:2000])
 
@@ -264,6 +273,9 @@ def test_bad_command_line_input_exits_2(cold):
     assert proc.returncode == 2 and "--suite 'huge' is unknown; expected one of standard" in proc.stderr
     proc, _ = gate_cli("--cache", root, "--detector", "pca_t2", "--check", "speed")
     assert proc.returncode == 2 and "--check 'speed' is unknown; expected one of steps-command-100mm_s" in proc.stderr
+    proc, _ = gate_cli("--cache", root, "--detector", "pca_t2", "--check", "steps-imu-20mm_s")
+    assert proc.returncode == 2
+    assert "no check to run: 1 backlash checks for 0 estimators, 0 detection checks for 1 detectors" in proc.stderr
 
 
 TINY = gate.Suite(

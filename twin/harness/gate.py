@@ -309,6 +309,14 @@ def _save_error_motions(path: Path, ems: list, injected_um: np.ndarray, axis: tu
         np.savez(fh, **arrays)
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """``a`` made read-only: a method that writes into its input fails its check (naming the
+    error) instead of changing what the next method is given."""
+    a = np.array(a)
+    a.setflags(write=False)
+    return a
+
+
 @dataclass(frozen=True)
 class Phase2Input:
     """What a backlash check feeds the estimator: the sessions' error motions in hours order
@@ -328,9 +336,9 @@ def _load_error_motions(path: Path) -> Phase2Input:
         names, hours, refs = z["sessions"], z["hours"], z["position_reference"]
         ems = []
         for i, name in enumerate(names):
-            parts = {part: DirectionalTraces(z[f"{i}/{part}/x_m"], z[f"{i}/{part}/forward"],
-                                             z[f"{i}/{part}/reverse"],
-                                             z[f"{i}/{part}/band_m"] if f"{i}/{part}/band_m" in z else None)
+            parts = {part: DirectionalTraces(_frozen(z[f"{i}/{part}/x_m"]), _frozen(z[f"{i}/{part}/forward"]),
+                                             _frozen(z[f"{i}/{part}/reverse"]),
+                                             _frozen(z[f"{i}/{part}/band_m"]) if f"{i}/{part}/band_m" in z else None)
                      for part in ("combined", "slow")}
             ems.append(SessionErrorMotions(session=str(name), hours=float(hours[i]),
                                            runs=tuple(str(r) for r in z[f"{i}/runs"]),
@@ -370,9 +378,9 @@ def _load_phase1(path: Path) -> Phase1Input:
         if tuple(str(n) for n in z["names"]) != tuple(FEATURE_NAMES):
             raise GateError(f"{path}: its feature names are not this package's")
         onset = float(z["onset_hours"])
-        return Phase1Input(np.array(z["hours"]), np.array(z["X"]), np.array(z["ae"]),
+        return Phase1Input(_frozen(z["hours"]), _frozen(z["X"]), _frozen(z["ae"]),
                            None if math.isnan(onset) else onset,
-                           np.array(z["labels"]) if "labels" in z else None)
+                           _frozen(z["labels"]) if "labels" in z else None)
 
 
 def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str], None]) -> None:
@@ -557,14 +565,16 @@ def method_name(kind: str, method: Any) -> str:
         return type(method).__name__
 
 
-def _fresh(kind: str, method: Any, params: dict) -> Any:
+def _fresh(kind: str, method: Any, params: dict, defaults: dict | None = None) -> Any:
     """A fresh, unfitted instance of ``method`` (a registered name, ``module:Class`` or an
-    instance, which is cloned) with ``params`` set where it takes them."""
+    instance, which is cloned) with ``params`` set where it takes them, and ``defaults`` where it
+    takes them and (an instance) leaves them None."""
     from analysis import registry
 
+    defaults = defaults or {}
     if isinstance(method, str):
         entry = registry.get(kind, method)
-        return registry.create(kind, method, **{k: v for k, v in params.items()
+        return registry.create(kind, method, **{k: v for k, v in {**defaults, **params}.items()
                                                 if registry.accepts(entry.factory, k)})
     try:
         from sklearn.base import clone
@@ -574,7 +584,8 @@ def _fresh(kind: str, method: Any, params: dict) -> Any:
         est = copy.deepcopy(method)
     if hasattr(est, "get_params") and hasattr(est, "set_params"):
         own = est.get_params(deep=False)
-        take = {k: v for k, v in params.items() if k in own}
+        take = {k: v for k, v in defaults.items() if k in own and own[k] is None}
+        take.update({k: v for k, v in params.items() if k in own})
         if take:
             est.set_params(**take)
     return est
@@ -655,7 +666,7 @@ def run_detection_checks(method: Any, cache: GateCache, checks: Sequence[Detecti
     try:
         for key in (suite.fault, suite.healthy):
             inp = cache.phase1(key)
-            det = _fresh("detectors", method, {"random_state": 0})
+            det = _fresh("detectors", method, {}, {"random_state": 0})
             if getattr(det, "phase1_input", "features") == "torque_windows":
                 data = inp.ae
             else:
@@ -819,6 +830,9 @@ def command(estimators: Sequence[str], detectors: Sequence[str], suite: str = "s
         estimators, detectors = _default("backlash_estimators"), _default("detectors")
     estimators, detectors = _expand("backlash_estimators", estimators), _expand("detectors", detectors)
     b_checks, d_checks = select_checks(s, checks)
+    if not ((b_checks and estimators) or (d_checks and detectors)):
+        raise GateError(f"no check to run: {len(b_checks)} backlash checks for {len(estimators)} estimators, "
+                        f"{len(d_checks)} detection checks for {len(detectors)} detectors")
     folder = cache_dir(root, s)
     if (rebuild or verify(folder, s) is not None) and not _has_simulator():
         raise GateError(f"gate cache {folder} must be built, which needs the simulator: "
