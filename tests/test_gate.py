@@ -3,8 +3,8 @@
 One cold cache is built per module (``twin gate`` with the paper's methods, through the command
 line: every check passes, JUnit XML written), then reused warm by every other test:
 
-- the built-in estimator passes every backlash check, every built-in detector the delay check
-  and PCA-T² and the one-class SVM the false-alarm check; Eq. 4 alone fails the drift check that
+- the built-in estimator passes every backlash check (the cold run), every built-in detector the
+  delay check and PCA-T² and the one-class SVM the false-alarm check; Eq. 4 alone fails the drift check that
   Eq. 5 must pass;
 - an estimator biased by +3 µm fails exactly the five checks of the shift-based estimate and
   passes Eq. 9's (its pitch estimate is the built-in's);
@@ -113,14 +113,14 @@ def test_cold_gate_passes_the_papers_methods_and_writes_junit(cold):
     assert warm_s < 180
 
 
-def test_builtin_estimator_and_detectors(cache):
-    results = gate.run_backlash_checks("shift", cache)
+def test_builtin_estimator_and_detectors(cold, cache):
+    """The cold run above passed ``shift`` through every backlash check (its JUnit XML); here
+    every built-in detector: all detect within the tolerance, PCA-T² and the one-class SVM raise
+    no false alarm (the other four's false-alarm figures are printed: docs/ci-gate.md)."""
     det = [r for m in ("pca_t2", "gmm_md", "som_mqe", "iforest", "ocsvm", "autoencoder")
            for r in gate.run_detection_checks(m, cache)]
-    for r in [*results, *det]:
+    for r in det:
         print(f"{'PASS' if r.passed else 'FAIL'} {r.check} [{r.method}]: {r.figure}")
-    assert [r.check for r in results] == [c.name for c in SUITE.backlash]
-    assert all(r.passed for r in results)
     by = {(r.method, r.check): r for r in det}
     assert all(by[(m, "detection-delay")].passed for m, _ in by)
     for m in ("pca_t2", "ocsvm"):
@@ -333,8 +333,9 @@ class Biased(BacklashEstimator):
 
 
 def test_the_papers_estimator(twin_gate_cache):
-    results = assert_recovers_backlash(BacklashEstimator(), cache=twin_gate_cache)
-    assert len(results) == 6
+    results = assert_recovers_backlash(BacklashEstimator(), cache=twin_gate_cache,
+                                       checks=["steps-command-100mm_s"])
+    assert [r.check for r in results] == ["steps-command-100mm_s"] and results[0].value < 1.0
 
 
 def test_the_papers_detector(twin_gate_cache):
