@@ -1,6 +1,6 @@
 """The ``twin`` command line, the face of the tool: ``simulate`` and ``export-model`` (the
 simulator), ``detect`` and ``backlash`` (the analysis), ``score``, ``report``, ``demo``, ``sweep``,
-``view``, ``diagnose`` and ``diagnose-benchmark`` (the harness). Each verb parses its options,
+``view``, ``diagnose``, ``diagnose-benchmark`` and ``gate`` (the harness). Each verb parses its options,
 calls one function of the package below it and prints a summary; errors of the user's input exit
 with code 2 and one message naming the file, key and value."""
 
@@ -488,6 +488,32 @@ def backlash(
                       markup=False, highlight=False)
     console.print(f"wrote {out / 'backlash.json'}" + (f" and {len(figures)} figures" if figures else ""))
 # --- end of Phase II backlash ---------------------------------------------------------------------
+
+
+# --- the recovery gate for a method developer's CI ----------------------------------------------
+@app.command()
+def gate(
+    estimator: list[str] = typer.Option([], "--estimator", help="backlash estimator to check: a registered "
+                                        "name, module:Class or 'all', repeatable"),
+    detector: list[str] = typer.Option([], "--detector", help="Phase I detector to check: a registered "
+                                       "name, module:Class or 'all', repeatable"),
+    suite: str = typer.Option("standard", "--suite", help="the suite of checks"),
+    junit: Path | None = typer.Option(None, "--junit", help="write the verdicts as JUnit XML to this file"),
+    cache: Path | None = typer.Option(None, "--cache", help="cache root (default "
+                                      "$XDG_CACHE_HOME/ballscrew-twin/gate)"),
+    check: list[str] = typer.Option([], "--check", help="run only this check, repeatable"),
+    rebuild: bool = typer.Option(False, "--rebuild", help="rebuild the cache even if it verifies"),
+) -> None:
+    """Recovery checks of a backlash estimator or a Phase I detector on cached campaigns with
+    injected backlash and preload loss: figure, tolerance and verdict per check; exit 0 only if
+    every check passes (1 otherwise). Without --estimator and --detector: the paper's methods."""
+    from twin.harness.gate import GateError, command
+
+    try:
+        code = command(estimator, detector, suite, junit, cache, check, rebuild)
+    except GateError as exc:
+        _fail(str(exc))
+    raise typer.Exit(code)
 
 
 # --- bringing a real axis's recordings in: import, check ------------------------------------------

@@ -35,6 +35,7 @@ from analysis.phase1.standardise import BaselineScaler
 
 __all__ = [
     "N_BASELINE",
+    "baseline_standardised",
     "ExtractionError",
     "FeatureTable",
     "extract",
@@ -182,6 +183,16 @@ def make_detector(name: str, random_state: int = 0, **params):
     return registry.create("detectors", name, **params)
 
 
+def baseline_standardised(X: np.ndarray, selected: Sequence[int], n_baseline: int = N_BASELINE) -> np.ndarray:
+    """What every detector is fitted on and scores: the raw features ``X`` (n, 46) standardised
+    with the mean and standard deviation of the first ``n_baseline`` rows (NaN in the baseline
+    replaced by its column mean first), NaN set to the baseline mean (0), the ``selected``
+    columns kept: (n, k), dimensionless."""
+    base = X[:n_baseline]
+    Z = BaselineScaler().fit(np.where(np.isnan(base), np.nanmean(base, axis=0), base)).transform(X)
+    return np.nan_to_num(Z, nan=0.0)[:, list(selected)]
+
+
 def run_detectors(table: FeatureTable, selected: Sequence[int], methods: Sequence[str] | None = None,
                   n_baseline: int = N_BASELINE, random_state: int = 0) -> dict[str, dict]:
     """Fit every method on the first ``n_baseline`` samples and score all samples.
@@ -198,10 +209,7 @@ def run_detectors(table: FeatureTable, selected: Sequence[int], methods: Sequenc
     if n <= n_baseline:
         raise ValueError(f"{table.source}: {n} Phase I samples; expected more than the "
                          f"{n_baseline} baseline samples")
-    Z = BaselineScaler().fit(np.where(np.isnan(table.X[:n_baseline]),
-                                      np.nanmean(table.X[:n_baseline], axis=0),
-                                      table.X[:n_baseline])).transform(table.X)
-    Z = np.nan_to_num(Z, nan=0.0)[:, list(selected)]
+    Z = baseline_standardised(table.X, selected, n_baseline)
     out = {}
     with threadpool_limits(1):  # tiny matrices: BLAS threads only contend
         for spec in methods:
