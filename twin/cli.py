@@ -636,6 +636,43 @@ def scenario_init(
                   f"twin diagnose {directory} --scenario {out}", markup=False, highlight=False)
 # --- end of import, check, scenario init ----------------------------------------------------------
 
+@app.command("calibrate-benchmark")
+def calibrate_benchmark(
+    out: Path = typer.Option(..., "-o", "--out", help="output directory"),
+    cases: int = typer.Option(24, "--cases", min=1, help="foreign axes drawn"),
+    seed: int = typer.Option(2026, "--seed", min=0, help="seed of the draws"),
+    diagnose: bool = typer.Option(False, "--diagnose/--no-diagnose", help=(
+        "also diagnose each recording against its calibrated twin (the right verdict: no significant gap)")),
+    seeds: TwinSeeds = 6,
+    workers: Workers = None,
+) -> None:
+    """The round trip of `twin calibrate`, blind: foreign axes drawn from a seed, simulated, written
+    out as a lab's files (CSV, TDMS, MAT, MDF in turn), imported, calibrated (and diagnosed),
+    scored against the draws. Writes OUT/calibrate-benchmark.json."""
+    _require("calibrate-benchmark", "sim")
+    from twin.executors import default_processes
+    from twin.harness.calibrate_benchmark import run_benchmark
+
+    _writable_dir(out)
+    doc = run_benchmark(out, cases=cases, seed=seed, workers=workers or default_processes(), diagnose=diagnose,
+                        seeds=seeds, progress=lambda t: console.print(t, markup=False, highlight=False))
+    sm = doc["summary"]
+    table = Table(title=f"calibrate-benchmark: {sm['cases']} foreign axes (seed {seed})", title_justify="left")
+    table.add_column("figure")
+    table.add_column("value", justify="right")
+    table.add_row("routine values within 0.1 % (or a sample)", f"{100 * sm['routine_within']:.0f} %")
+    table.add_row("(case, parameter) pairs inside the 90 % interval",
+                  f"{100 * sm['parameters_inside']:.0f} % of {sm['parameter_pairs']}")
+    for k, v in sm["per_parameter_inside"].items():
+        table.add_row(f"  {k}", f"{100 * v:.0f} %")
+    if "null_no_gap" in sm:
+        table.add_row("diagnosis: no significant gap", f"{100 * sm['null_no_gap']:.0f} % of {sm['diagnosed']}")
+    table.add_row("formats", ", ".join(sm["formats_used"]))
+    table.add_row("calibration, median", f"{sm['calibrate_s_median']:.0f} s")
+    Console(width=max(100, Console().width)).print(table)
+    console.print(f"wrote {out / 'calibrate-benchmark.json'} ({doc['seconds'] / 60:.1f} min)")
+
+
 
 @app.command()
 def calibrate(

@@ -234,18 +234,22 @@ def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3, capt
     with open_measurements(path) as m:
         axis = AxisDescription.from_dict(m.axis(), m.label)
         out["axis"] = axis
-        caps = [m.phase1(c) for c in m.phase1_captures()]
-        if caps:
-            by_sample: dict[int, list] = {}
-            for c in caps:
-                by_sample.setdefault(c.sample, []).append(c)
+        names = m.phase1_captures()
+        if names:
+            # the layout from the headers (no array read: a paper-size recording has 1040
+            # captures); the durations and the routine from the first captures
+            heads = {n: m.phase1_header(n) for n in names}
+            by_sample: dict[int, list[float]] = {}
+            for hours, sample, _ in heads.values():
+                by_sample.setdefault(sample, []).append(hours)
             counts = sorted({len(v) for v in by_sample.values()})
-            first = [min(c.hours for c in v) for _, v in sorted(by_sample.items())]
-            within = [h for v in by_sample.values() for h in np.diff(sorted(c.hours for c in v))]
+            first = [min(v) for _, v in sorted(by_sample.items())]
+            within = [h for v in by_sample.values() for h in np.diff(sorted(v))]
+            caps = [m.phase1(n) for n in names[:captures_to_measure]]
             p1 = {"samples": len(by_sample), "captures_per_sample": counts,
-                  "fs_hz": sorted({c.fs_hz for c in caps}),
+                  "fs_hz": sorted({fs for _, _, fs in heads.values()}),
                   "capture_s": float(np.median([len(c.speed) / c.fs_hz for c in caps])),
-                  "first_hours": first[0], "last_hours": max(c.hours for c in caps),
+                  "first_hours": first[0], "last_hours": max(h for h, _, _ in heads.values()),
                   "sample_interval_hours": _spacing(first),
                   "capture_interval_minutes": float(np.median(within)) * 60 if within else None}
             lead = axis.lead_mm
@@ -253,7 +257,7 @@ def measure_recording(path: str | os.PathLike, *, runs_to_measure: int = 3, capt
                 # every capture's moves (up to ``captures_to_measure``), the ramps pooled
                 p1["routine"] = routine_of_moves([
                     fit_moves(c.speed * lead / (2 * math.pi), c.fs_hz, MEASURED_RAMP, SPEED_SMOOTH_S)
-                    for c in caps[:captures_to_measure]])
+                    for c in caps])
             out["phase1"] = p1
         sessions = m.phase2_sessions()
         if sessions:
