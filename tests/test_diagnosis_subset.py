@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -143,14 +144,23 @@ def test_diagnose_with_a_budget_uses_a_subset_and_finds_no_gap(recording, tmp_pa
     assert "Phase I sample 0 has 3 capture(s); the scenario has 2" in " ".join(refused.stderr.split())
 
     out = tmp_path / "diag"
+    # 0.6 s cannot hold even the smallest subset: refused before anything is simulated beyond the
+    # unit costs, with the estimate and the smallest budget that would do
     r = run_twin("diagnose", recording, *common, "-o", out, "--budget-minutes", "0.01", check=False)
+    assert r.returncode == 2, r.stderr[-3000:]
+    said = " ".join(r.stderr.split())
+    assert ("the smallest subset of the recording (2 Phase I sample(s) of 2 captures, 2 Phase II session(s) "
+            "of 2 runs)") in said
+    assert "--budget-minutes 0.01 is too small: give at least" in said
+    least = re.search(r"give at least ([0-9.]+)", said).group(1)
+    r = run_twin("diagnose", recording, *common, "-o", out, "--budget-minutes", least, check=False)
     assert r.returncode == 0, r.stderr[-3000:]
     res = json.loads((out / "diagnosis.json").read_text())
     assert res["recording"] == str(recording)
     assert res["verdict"] == "no significant gap"
     sub = res["subset"]
-    # 0.6 s cannot hold even the smallest subset: the minimum, said so
-    assert sub["fits"] is False and sub["budget_minutes"] == 0.01
+    # the smallest budget that does: the smallest subset, within the budget
+    assert sub["fits"] is True and sub["budget_minutes"] == float(least)
     assert sub["phase1"] == {"samples": [0, 2], "hours": [0.05, 200.05], "captures_per_sample": 2,
                              "of_samples": 3, "of_captures_per_sample": 3}
     assert sub["phase2"] == {"sessions": ["s0000", "s0002"], "hours": [50.0, 250.0], "runs_per_session": 2,
@@ -171,13 +181,13 @@ def test_diagnose_with_a_budget_uses_a_subset_and_finds_no_gap(recording, tmp_pa
     said = " ".join(r.stdout.split())
     assert ("Diagnosed on a subset of the recording (subset/measurements.h5): Phase I samples 0, 2 "
             "(2 of 3, 0.05–200.1 h), the first 2 of 3 captures of each; Phase II sessions s0000, s0002 "
-            "(2 of 3, 50–250 h), the first 2 of 3 runs of each. Budget 0.01 min on 1 worker") in said
-    assert "the smallest subset does not fit the budget, so it was used" in said
+            "(2 of 3, 50–250 h), the first 2 of 3 runs of each. Budget ") in said
+    assert "the smallest subset does not fit the budget" not in said
     page = (out / "report" / "index.html").read_text()
     assert '<p id="subset">Diagnosed on a subset of the recording' in page
 
     # The calibration is kept in the cache: a second run measures nothing and picks the same.
-    again = run_twin("diagnose", recording, *common, "-o", tmp_path / "again", "--budget-minutes", "0.01")
+    again = run_twin("diagnose", recording, *common, "-o", tmp_path / "again", "--budget-minutes", least)
     assert again.returncode == 0
     res2 = json.loads((tmp_path / "again" / "diagnosis.json").read_text())
     assert res2["subset"]["calibration_s"] == 0 and res2["subset"]["unit_costs_s"] == sub["unit_costs_s"]

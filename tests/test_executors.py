@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import re
 
 import h5py
 import numpy as np
@@ -124,9 +125,13 @@ def test_budgeted_diagnosis_on_a_dask_scheduler_equals_local_processes(scheduler
     docs = {}
     for label, where in (("local", ["--workers", "2"]), ("dask", ["--scheduler", scheduler])):
         # 5 seeds: the minimum subset's 2 samples give the spread fewer degrees of freedom
-        r = run_twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, *cands, "--seeds", "5",
-                     "--budget-minutes", "0.01", *where, "-o", tmp_path / label,
-                     "--cache", tmp_path / f"cache-{label}")
+        args = ["diagnose", tmp_path / "real", "--scenario", bench, *sets, *cands, "--seeds", "5", *where,
+                "-o", tmp_path / label, "--cache", tmp_path / f"cache-{label}"]
+        # 0.6 s holds no subset: refused, naming the smallest budget that does (the minimum)
+        r = run_twin(*args, "--budget-minutes", "0.01", check=False)
+        assert r.returncode == 2 and "is too small: give at least" in r.stderr, r.stderr[-2000:]
+        least = re.search(r"give at least ([0-9.]+)", " ".join(r.stderr.split())).group(1)
+        r = run_twin(*args, "--budget-minutes", least)
         assert "Traceback" not in r.stderr
         docs[label] = json.loads((tmp_path / label / "diagnosis.json").read_text())
     sub = docs["local"]["subset"]
@@ -135,7 +140,8 @@ def test_budgeted_diagnosis_on_a_dask_scheduler_equals_local_processes(scheduler
     assert docs["local"]["heldout_gap_before"] > docs["local"]["heldout_gap_critical"]
     assert docs["local"]["added"] and docs["local"]["resimulation"]["done"]
     for doc in docs.values():
-        for k in ("estimated_minutes", "actual_minutes", "calibration_s", "subset_write_s", "unit_costs_s"):
+        for k in ("estimated_minutes", "actual_minutes", "calibration_s", "subset_write_s", "unit_costs_s",
+                  "budget_minutes"):
             doc["subset"].pop(k)
     assert docs["dask"] == docs["local"]
 

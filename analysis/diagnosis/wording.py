@@ -393,8 +393,7 @@ def subset_phrase(result: dict) -> str | None:
                      f"{p2['of_sessions']}, {number(p2['hours'][0], 4)}–{number(p2['hours'][-1], 4)} h), "
                      f"the first {p2['runs_per_session']} of {p2['of_runs_per_session']} runs of each")
     took = (f", took {number(sub['actual_minutes'], 2)} min" if sub.get("actual_minutes") is not None else "")
-    fit = ("" if sub["fits"] else
-           "; the smallest subset does not fit the budget, so it was used")
+    fit = "" if sub["fits"] else "; the smallest subset does not fit the budget"
     return (f"Diagnosed on a subset of the recording ({sub['file']}): " + "; ".join(parts)
             + f". Budget {number(sub['budget_minutes'], 3)} min on {sub['workers']} worker"
             + ("s" if sub["workers"] != 1 else "")

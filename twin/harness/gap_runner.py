@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import shutil
 import time
 from collections.abc import Callable
@@ -863,6 +864,14 @@ def prepare_subset(real_dir: Path, nominal: Scenario, out: Path, cache: Path, bu
     costs, spent = calibrate(nominal, inv, cache)
     work = workload(nominal, seeds, library, kinds, resim_seeds, workers, response_seeds)
     sub = subset.choose(inv, costs, work, max(budget_s - spent, 1e-9))
+    if not sub.fits:
+        need = (spent + sub.estimated_s) / 60.0
+        raise ValueError(
+            f"{src}: the smallest subset of the recording ({len(sub.samples)} Phase I sample(s) of {sub.captures} "
+            f"captures, {len(sub.sessions)} Phase II session(s) of {sub.runs} runs) needs about {need:.2g} min on "
+            f"{work.workers} worker(s) ({work.campaigns} twin campaigns; the unit costs measured on this machine "
+            f"are kept in {Path(cache) / 'calibration'}); --budget-minutes {budget_minutes:g} is too small: give "
+            f"at least {math.ceil(sub.estimated_s / 60.0 * 1.2 * 100) / 100:g}")
     t0 = time.perf_counter()
     subset.write_subset(src, Path(out) / "subset" / "measurements.h5", inv, sub)
     entry = {**sub.to_json(inv), "file": "subset/measurements.h5", "budget_minutes": float(budget_minutes),
