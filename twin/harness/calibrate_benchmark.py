@@ -193,10 +193,14 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     rng = np.random.default_rng(seed)
     scenarios = [draw_case(rng, i) for i in range(cases)]
     t0 = time.perf_counter()
-    done = [run_case(i, s, out, workers, diagnose, seeds, progress) for i, s in enumerate(scenarios)]
-    doc = {"version": BENCH_VERSION, "seed": seed, "workers": workers, "diagnose": diagnose,
-           "seconds": time.perf_counter() - t0, "summary": summarise(done), "cases": done}
-    write_json(out / "calibrate-benchmark.json", doc, nan_as_null=True)
+    done: list[dict] = []
+    for i, s in enumerate(scenarios):
+        done.append(run_case(i, s, out, workers, diagnose, seeds, progress))
+        # written after every case: a long benchmark stopped early keeps what it measured
+        doc = {"version": BENCH_VERSION, "seed": seed, "workers": workers, "diagnose": diagnose,
+               "cases_drawn": cases, "seconds": time.perf_counter() - t0, "summary": summarise(done),
+               "cases": done}
+        write_json(out / "calibrate-benchmark.json", doc, nan_as_null=True)
     return doc
 
 
