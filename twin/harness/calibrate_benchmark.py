@@ -49,9 +49,9 @@ def _base() -> dict:
 def draw_case(rng: np.random.Generator, i: int) -> Scenario:
     """A foreign axis within the priors: lead 4–20 mm, stroke 150–800 mm, moving mass 30–400 kg
     (log-uniform), Phase I speed up to 2400 rpm of the motor and its acceleration, two Phase II
-    speeds, Phase I DAQ rate 5.12–25.6 kHz, IMU rate 1–2 kHz, noise floors ×0.5–2 of the
-    twin's, rail friction 5–40 N, viscous drag 1–5 × 10⁻⁴ N·m·s/rad, torque ripple 0.005–0.03 N·m
-    (log-uniform)."""
+    speeds (the slower no longer than 8 s a move), Phase I DAQ rate 5.12–25.6 kHz, IMU rate
+    1–2 kHz, noise floors ×0.5–2 of the twin's, rail friction 5–40 N, viscous drag
+    1–5 × 10⁻⁴ N·m·s/rad, torque ripple 0.005–0.03 N·m (log-uniform)."""
     d = _base()
     lead = float(rng.choice([4.0, 5.0, 8.0, 10.0, 12.0, 16.0, 20.0]))
     stroke = float(rng.uniform(150.0, 800.0))
@@ -71,8 +71,9 @@ def draw_case(rng: np.random.Generator, i: int) -> Scenario:
                        start_mm=start1, end_mm=round(start1 + p1_stroke, 2),
                        dwell_s=round(float(rng.uniform(0.2, 0.4)), 3), capture_s=2.0)
     vmax2 = min(300.0, 2400.0 / 60.0 * lead)
-    s_lo = round(float(rng.uniform(0.1, 0.3)) * vmax2, 2)
-    s_hi = round(float(rng.uniform(0.6, 1.0)) * vmax2, 2)
+    # the slow speed: no move longer than 8 s (the cost of a case), the fast one above it
+    s_lo = round(max(float(rng.uniform(0.15, 0.4)) * vmax2, stroke / 8.0), 2)
+    s_hi = round(max(float(rng.uniform(0.6, 1.0)) * vmax2, 1.5 * s_lo), 2)
     d["phase2"].update(speeds_mm_s=[s_lo, s_hi], accel_mm_s2=round(float(rng.uniform(5000.0, 20000.0)), 1),
                        start_mm=30.0, end_mm=round(30.0 + stroke, 2),
                        dwell_s=round(float(rng.uniform(0.5, 1.0)), 3))
@@ -83,6 +84,8 @@ def draw_case(rng: np.random.Generator, i: int) -> Scenario:
               imu_gyro_noise_urad_s_per_rthz=round(35.0 * loguni(0.5, 2.0), 3),
               nut_acc_noise_ug_per_rthz=round(20.0 * loguni(0.5, 2.0), 3),
               torque_noise_Nm=float(f"{0.005 * loguni(0.5, 2.0):.4g}"))
+    d["phase2"]["session_hours"] = [50.0, 250.0]  # two sessions: a calibration and a held-out part each
+    d["phase1"]["sample_interval_hours"] = 200.0
     d["name"], d["seed"] = f"foreign-{i:03d}", int(rng.integers(0, 2**31))
     d["description"] = f"calibrate-benchmark case {i}"
     return from_dict(d)
