@@ -220,3 +220,18 @@ def test_calibrate_bad_input(tmp_path):
     assert r.returncode == 2 and "is a directory; expected a scenario file path" in " ".join(r.stderr.split())
     r = run_twin("calibrate", tmp_path, "-o", tmp_path / "a.toml", "--budget-minutes", "0", check=False)
     assert r.returncode == 2 and "--budget-minutes 0: expected a positive number of minutes" in r.stderr
+
+
+@pytest.mark.slow
+def test_calibrate_benchmark_meets_its_targets(tmp_path):
+    """The blind round trip (issue 30, item 3): 24 foreign axes in the four lab formats,
+    calibrated and diagnosed against their calibrated twin: routine values within 0.1 %,
+    (case, parameter) pairs inside their 90 % interval in at least 85 %, "no significant gap"
+    in at least 90 % of the nominal recordings."""
+    run_twin("calibrate-benchmark", "-o", tmp_path, "--cases", "24", "--diagnose")
+    doc = json.loads((tmp_path / "calibrate-benchmark.json").read_text())
+    sm = doc["summary"]
+    assert sm["cases"] == 24 and sm["formats_used"] == ["csv", "mat", "mdf", "tdms"]
+    assert sm["routine_within"] == 1.0, sm["routine_worst_error"]
+    assert sm["parameters_inside"] >= 0.85, sm["per_parameter_inside"]
+    assert sm["null_no_gap"] >= 0.90

@@ -68,6 +68,8 @@ SPREAD_SEEDS = 5
 #: deterministic); one seed alone lets a component of random phase at the ripple's order
 #: (the machine's draw) bias the ripple's fit.
 FIT_SEEDS = 2
+#: Standard errors a parameter's statistic must move for a factor 2 of it to be fitted.
+MIN_SEEN = 3.0
 #: Step of the finite differences in log(parameter).
 LOG_STEP = 0.03
 #: Student's t 95th percentile with SPREAD_SEEDS − 1 degrees of freedom: a two-sided 90 %
@@ -282,8 +284,11 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     use = []
     for i, (key, stat, _) in enumerate(FITTED):
         if not np.isfinite(real[i]):
-            skipped[key] = (f"the recording's {stat.replace('_', ' ')} cannot be measured (no ramp, or no cruise "
-                            "of 4 ripple periods, in its first Phase I sample)")
+            skipped[key] = (
+                "the ripple's order is above half the IMU accelerometer's bandwidth at every Phase II speed, or "
+                "no cruise spans 4 of its periods" if stat == "ripple" and runs else
+                f"the recording's {stat.replace('_', ' ')} cannot be measured (no ramp, or no cruise of 4 "
+                "ripple periods, in its first Phase I sample)")
         else:
             use.append(i)
     data0 = _fit_scenario(base, hours, len(caps), session_h, len(runs))
@@ -359,31 +364,56 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 memo[p.tobytes()] = r
         return [memo[p.tobytes()] for p in points]
 
-    def resid(x: np.ndarray) -> np.ndarray:
-        return np.nan_to_num((values_at([x])[0] - target) / se, nan=1e6)
+    rows = np.arange(len(keys))  # the statistics in the fit (one per parameter)
 
-    def jac(x: np.ndarray) -> np.ndarray:
-        pts = [x.copy() for _ in keys]
-        for j, p in enumerate(pts):
+    def resid(x: np.ndarray) -> np.ndarray:
+        return np.nan_to_num((values_at([x])[0] - target) / se, nan=1e6)[rows]
+
+    def jac(x: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """d(residual)/d(log p) of the parameters ``cols`` at ``x`` (all parameters)."""
+        pts = [x.copy() for _ in cols]
+        for p, j in zip(pts, cols, strict=True):
             p[j] += LOG_STEP
         f0 = resid(x)
-        cols = values_at(pts)
+        vals = values_at(pts)
         at = ", ".join(f"{k.split('.')[-1]}={np.exp(v):.4g}" for k, v in zip(keys, x, strict=True))
         progress(f"layer c: Jacobian at {at} ({sims[0]} evaluations so far)")
-        return np.column_stack([(np.nan_to_num((c - target) / se, nan=1e6) - f0) / LOG_STEP for c in cols])
+        return np.column_stack([(np.nan_to_num((c - target) / se, nan=1e6)[rows] - f0) / LOG_STEP for c in vals])
+
+    # A parameter whose statistic moves by less than MIN_SEEN standard errors for a factor 2 of
+    # it is not informed by this recording (e.g. the rails' friction behind a screw of 5 mm
+    # lead): kept at its start, its statistic out of the fit.
+    all_cols = np.arange(len(keys))
+    j0 = jac(x0, all_cols)
+    seen = np.abs(np.diag(j0)) * math.log(2.0) >= MIN_SEEN
+    for j in np.flatnonzero(~seen):
+        skipped[keys[j]] = (f"the recording's {FITTED[use[j]][1].replace('_', ' ')} moves by "
+                            f"{abs(j0[j, j]) * math.log(2.0):.2g} standard errors for a factor 2 of it (under "
+                            f"{MIN_SEEN:g}): not informed, kept at {start[j]:.6g}")
+    free = np.flatnonzero(seen)
+    rows = free
+
+    def embed(z: np.ndarray) -> np.ndarray:
+        x = x0.copy()
+        x[free] = z
+        return x
 
     lo, hi = x0 - math.log(10.0), x0 + math.log(10.0)
-    sol = optimize.least_squares(resid, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac",
-                                 xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
-    J = jac(sol.x)
-    try:
-        cov = np.linalg.inv(J.T @ J)
-        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    except np.linalg.LinAlgError:
-        sd = np.full(len(keys), np.inf)
+    if free.size:
+        sol = optimize.least_squares(lambda z: resid(embed(z)), x0[free], jac=lambda z: jac(embed(z), free),
+                                     bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
+                                     xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
+        xs, fun = embed(sol.x), sol.fun
+        J = jac(xs, free)
+        try:
+            sd = np.sqrt(np.clip(np.diag(np.linalg.inv(J.T @ J)), 0, None))
+        except np.linalg.LinAlgError:
+            sd = np.full(free.size, np.inf)
+    else:
+        xs, fun, sd = x0, np.zeros(0), np.zeros(0)
     values = []
-    for j, (k, x) in enumerate(zip(keys, sol.x, strict=True)):
-        i = use[j]
+    for jj, j in enumerate(free):
+        k, x, i = keys[j], xs[j], use[j]
         stat = FITTED[i][1]
         if stat == "accel":
             note = f"fitted through the twin's servo to the ramps of {len(caps)} Phase I captures"
@@ -393,16 +423,17 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         else:
             note = (f"fitted jointly to the torque's {stat.replace('_', ' ')} of {len(caps)} Phase I captures "
                     f"at {hours:g} h")
-        w = T90 * sd[j]
+        w = T90 * sd[jj]
         low, high = (float(np.exp(x - w)), float(np.exp(x + w))) if np.isfinite(w) else (None, None)
         values.append(Value(k, float(np.exp(x)), "fitted", low, high, note))
     progress(f"layer c: done in {sims[0]} evaluations, {time.perf_counter() - t0:.1f} s; residual "
-             f"{', '.join(f'{r:+.2f}' for r in sol.fun)} standard errors")
+             f"{', '.join(f'{r:+.2f}' for r in fun)} standard errors")
     inst: dict[str, list[float]] = {}
     for r in spread:
         for k, v in r[2].items():
             inst.setdefault(k, []).append(float(v))
-    return FitResult(values, keys, skipped, sims[0], time.perf_counter() - t0, [float(r) for r in sol.fun], inst)
+    return FitResult(values, [keys[j] for j in free], skipped, sims[0], time.perf_counter() - t0,
+                     [float(r) for r in fun], inst)
 
 
 # ---------------------------------------------------------------------------------------------
