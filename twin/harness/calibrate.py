@@ -23,7 +23,7 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
 Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters
 (each responds mostly to one: J to the mass, T_c to the constant drag, c_v to the viscous drag, the
 ripple amplitude to the ripple, the ramps' slope to the commanded acceleration), the problem is
-square and small (5 unknowns), and with common random numbers the residual is deterministic,
+square and small (6 unknowns), and with common random numbers the residual is deterministic,
 so a Gauss–Newton method converges in a few Jacobians where a Bayesian optimiser would need tens
 of evaluations; its Jacobian is also what the intervals need.
 
@@ -63,7 +63,7 @@ FIT_RUNS = 2
 MAX_JACOBIANS = 6
 #: Twin seeds simulated at the start point: their scatter is the machine-to-machine part of the
 #: statistics' error (the twin's random geometry, ripple phase, ... at the same parameters).
-SPREAD_SEEDS = 5
+SPREAD_SEEDS = 8
 #: Twin seeds each evaluation averages (common to every evaluation: the residual stays
 #: deterministic); one seed alone lets a component of random phase at the ripple's order
 #: (the machine's draw) bias the ripple's fit.
@@ -73,8 +73,8 @@ MIN_SEEN = 3.0
 #: Step of the finite differences in log(parameter).
 LOG_STEP = 0.03
 #: Student's t 95th percentile with SPREAD_SEEDS − 1 degrees of freedom: a two-sided 90 %
-#: interval whose error is estimated from the seeds' scatter (scipy.stats.t.ppf(0.95, 4)).
-T90 = 2.131846786326649
+#: interval whose error is estimated from the seeds' scatter (scipy.stats.t.ppf(0.95, 7)).
+T90 = 1.894578605061305
 Z90 = 1.6448536269514722  # the standard normal's 95th percentile: a two-sided 90 % interval
 
 #: The fitted parameters of layer (c): (scenario key, auxiliary statistic, unit).
@@ -84,8 +84,9 @@ FITTED = (
     ("axis.drag_viscous_Nm_s_per_rad", "viscous_drag", "N·m·s/rad"),
     ("axis.torque_ripple_Nm", "ripple", "N·m"),
     ("phase1.accel_mm_s2", "accel", "mm/s²"),
+    ("phase1.dwell_s", "dwell", "s"),
 )
-STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel")
+STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel", "dwell")
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
 NOT_INFORMED = {
@@ -154,13 +155,14 @@ def _key(s: Scenario) -> str:
 
 
 def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """(values (5,), standard errors (5,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    """(values (6,), standard errors (6,)) of :data:`STAT_NAMES` over the Phase I ``captures``
     and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
     statistics of the captures, with the ripple read on the IMU of the runs when there are any
     (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
     other content at its order; in the Phase I torque a component of random phase at the same
-    order hides it), and the routine fit's acceleration (mm/s², its error from the scatter of
-    the ramps' slopes)."""
+    order hides it), and the routine fit's acceleration (mm/s²) and dwell (s) of Phase I, their
+    errors from the scatter of the ramps' slopes and of the rests (the servo's lag at the start
+    and at the end of a move differ a little: both are fitted through the twin's servo)."""
     order = s.axis.torque_ripple_per_rev
     mean, se = recording_statistics(m, captures, order)
     if runs:
@@ -169,14 +171,18 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
         rip = [r for r in rip if np.isfinite(r)]
         mean[3] = float(np.mean(rip)) if rip else float("nan")
         se[3] = float(np.std(rip, ddof=1) / math.sqrt(len(rip))) if len(rip) > 1 else float("nan")
-    slopes = []
+    slopes, dwells = [], []
     for name in captures:
         c = m.phase1(name)
-        for mv in fit_moves(np.asarray(c.speed) * s.axis.lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
-                            SPEED_SMOOTH_S):
+        moves = fit_moves(np.asarray(c.speed) * s.axis.lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
+                          SPEED_SMOOTH_S)
+        for mv in moves:
             slopes += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
+        dwells += [b["t_start"] - a["t_stop"] for a, b in zip(moves, moves[1:], strict=False)
+                   if a["t_stop"] is not None and b["t_start"] is not None]
     acc, acc_se = _mean_se(slopes)
-    return np.append(mean, acc), np.append(se, acc_se)
+    dwell, dwell_se = _mean_se(dwells)
+    return np.append(mean, [acc, dwell]), np.append(se, [acc_se, dwell_se])
 
 
 def _mean_se(x: list[float]) -> tuple[float, float]:
@@ -238,6 +244,8 @@ class FitResult:
     seconds: float
     residual: list[float]
     instruments: dict[str, list[float]]
+    scenario: dict | None = None
+    seeds: tuple[int, ...] = ()
 
 
 def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
@@ -415,8 +423,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     for jj, j in enumerate(free):
         k, x, i = keys[j], xs[j], use[j]
         stat = FITTED[i][1]
-        if stat == "accel":
-            note = f"fitted through the twin's servo to the ramps of {len(caps)} Phase I captures"
+        if stat in ("accel", "dwell"):
+            note = f"fitted through the twin's servo to the moves of {len(caps)} Phase I captures"
         elif stat == "ripple" and runs:
             note = (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {len(runs)} Phase II "
                     f"runs at {session_h:g} h")
@@ -433,7 +441,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         for k, v in r[2].items():
             inst.setdefault(k, []).append(float(v))
     return FitResult(values, [keys[j] for j in free], skipped, sims[0], time.perf_counter() - t0,
-                     [float(r) for r in fun], inst)
+                     [float(r) for r in fun], inst, data0, tuple(seeds))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -462,15 +470,40 @@ def sensor_values(recording: Path, base: Scenario) -> tuple[dict[str, Measured],
     return {k: v for k, v in meas.items() if k in SENSOR_KEYS}, notes
 
 
+def twin_instruments(fit: FitResult, values: dict[str, float], cache: Path, workers: int,
+                     scheduler: str | None = None) -> dict[str, list[float]]:
+    """The instruments the twin's rests give ({key: [value per seed]}) with ``values`` set
+    (scenario keys) on the fit's scenario, at each of the fit's spread seeds."""
+    from twin.harness.gap_runner import run_tasks
+
+    data = json.loads(json.dumps(fit.scenario))
+    for k, v in values.items():
+        set_dotted(data, k, float(v), source="calibrate")
+    payloads = []
+    for sd in fit.seeds:
+        data["seed"] = int(sd)
+        payloads.append(from_dict(data).to_json())
+    size = max(1, -(-len(payloads) // max(1, workers)))
+    batches = [payloads[k:k + size] for k in range(0, len(payloads), size)]
+    out: dict[str, list[float]] = {}
+    for res in run_tasks(evaluate, [(b, str(cache)) for b in batches], workers, scheduler):
+        for r in res:
+            for k, v in r[2].items():
+                out.setdefault(k, []).append(float(v))
+    return out
+
+
 def corrected_sensor_values(measured: dict[str, Measured], set_to: dict[str, float],
                             twin: dict[str, list[float]]) -> list[Value]:
     """Layer (b)'s values, each measurement corrected by the twin's own: the twin set to
-    ``set_to[key]`` and measured the same way at each seed of the spread (``twin[key]``) gives
-    the measurement's bias ratio r = mean(twin) / set (what its rests hold beside the noise,
-    the estimator's own bias); the value is measured / r (one step of indirect inference; the
-    statistic is proportional to the value near it). The 90 % interval combines the
-    recording's own error and the ratio's scatter over the seeds (Student's t with the seeds'
-    degrees of freedom). Without the twin's measurement the raw value and its own error."""
+    ``set_to[key]`` and measured the same way at each seed of the spread (``twin[key]``)
+    reads mean(twin) where the recording reads ``measured``; the value is
+    set · measured / mean(twin) (a step of indirect inference: the statistic is nearly
+    proportional to the value; what the rests hold beside the noise and the estimator's own bias
+    cancel). :func:`calibrate` takes two steps, the second from the first's values. The 90 %
+    interval combines the recording's own error and the twin's scatter over the seeds (Student's
+    t with the seeds' degrees of freedom). Without the twin's measurement the raw value and its
+    own error."""
     out = []
     for key, v in measured.items():
         tw = np.array(twin.get(key, []), dtype=float)
@@ -479,7 +512,8 @@ def corrected_sensor_values(measured: dict[str, Measured], set_to: dict[str, flo
             ratio = tw / set_to[key]
             r = float(np.mean(ratio))
             rel = math.sqrt(v.rel_se ** 2 + (float(np.std(ratio, ddof=1)) / r) ** 2 * (1 + 1 / tw.size))
-            value, note = v.value / r, f"{v.note}; corrected by the twin's own measurement (× {1 / r:.4f})"
+            value = set_to[key] * v.value / float(np.mean(tw))
+            note = f"{v.note}; corrected by the twin's own measurement (× {value / v.value:.4f})"
             w = T90 * rel
         else:
             value, note, w = v.value, v.note, Z90 * v.rel_se
@@ -522,6 +556,13 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
                        spent_s=time.perf_counter() - t0)
     sens = corrected_sensor_values(measured, {k: float(f"{v.value:.6g}") for k, v in measured.items()},
                                    fit.instruments)
+    if fit.scenario is not None and sens:
+        # the second step: the twin set to the first step's floors (and the fitted drive) measured again
+        progress("layer b: the sensor chain corrected again by the calibrated twin's rests")
+        first = {v.key: v.value for v in sens}
+        again = twin_instruments(fit, {**first, **{v.key: v.value for v in fit.values}}, cache / "fit",
+                                 workers, scheduler)
+        sens = corrected_sensor_values(measured, first, again)
     values = sens + fit.values
     defaults = {k: why for k, why in NOT_INFORMED.items()}
     defaults.update(fit.skipped)
