@@ -161,7 +161,7 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
     rec = json.loads((tmp / "axis.calibration.json").read_text())
     got = {v["key"]: v for v in rec["values"]}
     fitted = {"axis.carriage_mass_kg", "axis.rail_friction_N", "axis.drag_viscous_Nm_s_per_rad",
-              "axis.torque_ripple_Nm", "phase1.accel_mm_s2"}
+              "axis.torque_ripple_Nm", "phase1.accel_mm_s2", "phase1.dwell_s"}
     measured = {"sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_hz",
                 "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz",
                 "sensors.nut_acc_noise_ug_per_rthz", "sensors.torque_noise_Nm"}
