@@ -519,12 +519,37 @@ def import_(
         except (ImportSpecError, DatasetError) as exc:
             progress.stop()
             _fail(str(exc))
+    _print_mapping(s.mapping or [])
+    for w in s.warnings or []:
+        console.print(f"warning: {w}", style="yellow", markup=False, highlight=False, soft_wrap=True)
     hours = "-" if s.hours is None else f"{s.hours[0]:g}–{s.hours[1]:g} h"
     console.print(f"imported {s.captures} Phase I captures, {s.sessions} Phase II sessions ({s.runs} runs), "
                   f"{hours}: {s.converted} files read, {s.reused} kept from before, "
                   f"{time.perf_counter() - t0:.1f} s", markup=False, highlight=False)
     console.print(f"wrote {s.output / 'measurements.h5'} and {s.output / 'import.json'}; next: "
                   f"twin check {s.output}", markup=False, highlight=False)
+
+
+#: Rows of the file -> capture / session, run -> hours table `twin import` prints (all are in import.json).
+MAPPING_ROWS = 200
+
+
+def _print_mapping(mapping: list[dict]) -> None:
+    """The file -> capture or session/run (the lab's session name) -> hours table of an import."""
+    if not mapping:
+        return
+    table = Table(title=f"what came from where ({len(mapping)} files; import.json lists them all)")
+    for col in ("file", "phase", "stored as", "lab's session", "hours", "hours from"):
+        table.add_column(col)
+    for r in mapping[:MAPPING_ROWS]:
+        stored = r.get("capture") or f"{r['session']}/{r['run']}"
+        hours = f"{r['hours']:g}" if r.get("file_hours", r["hours"]) == r["hours"] else \
+            f"{r['hours']:g} (file {r['file_hours']:g})"
+        table.add_row(Path(r["file"]).name, r["phase"], stored, str(r.get("session_name") or "-"), hours,
+                      str(r.get("hours_from") or "-"))
+    Console(width=max(120, Console().width), stderr=True).print(table)
+    if len(mapping) > MAPPING_ROWS:
+        console.print(f"... and {len(mapping) - MAPPING_ROWS} more files (import.json lists them all)")
 
 
 @app.command()
