@@ -64,6 +64,40 @@ def _writable_dir(out: Path, what: str = "output directory") -> None:
             return
 
 
+def gate_recording(directory: Path, force: bool, verb: str) -> dict:
+    """``twin check`` before an analysis: exit 2 listing the errors unless ``force``; print the
+    warnings (and forced errors). Returns the record the analysis writes into its JSON
+    (:func:`analysis.ingest.check.check_record`). ``twin calibrate`` calls it the same way."""
+    from analysis.dataset import DatasetError
+    from analysis.ingest.check import RecordingRefused, check_record, require_clean_recording
+
+    try:
+        findings = require_clean_recording(directory, force, f"twin {verb}")
+    except RecordingRefused as exc:
+        _fail(str(exc))
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    for f in findings:
+        console.print(f"{'warning' if f.level == 'warning' else 'error (forced)'}: twin check: {f.where}: {f.what}",
+                      style="yellow", markup=False, highlight=False, soft_wrap=True)
+    return check_record(findings, force)
+
+
+def record_check(json_path: Path, record: dict) -> None:
+    """Add the ``check`` record to an analysis's JSON output (``detection.json``, ...)."""
+    from analysis.files import read_json, write_json
+
+    if json_path.is_file():
+        doc = read_json(json_path, "the analysis's results")
+        doc["check"] = record
+        write_json(json_path, doc)
+
+
+Force = Annotated[bool, typer.Option("--force", help=(
+    "analyse a recording that twin check finds errors in (default: exit 2 listing them); the "
+    "errors are written into the JSON"))]
+
+
 # Options several verbs take, defined once (typer reads the option from the ``Annotated`` type).
 ScenarioOverrides = Annotated[list[str], typer.Option(
     "--set", help="scenario override KEY=VALUE (TOML value), repeatable")]
@@ -347,6 +381,7 @@ def detect(
     method: list[str] = typer.Option([], "--method", help="detector(s) to run: a registered name or "
                                      "module:Class, repeatable (default: every registered detector)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
+    force: Force = False,
 ) -> None:
     """Phase I incipient-fault detection (paper section IV): writes OUT/detection.json and OUT/detection.png."""
     from analysis.phase1.detect import run
@@ -357,6 +392,7 @@ def detect(
             _fail(f"{d}: no measurements.h5; expected the {what} in the dataset format "
                   "(docs/dataset-format.md)")
     _writable_dir(out)
+    checked = gate_recording(directory, force, "detect")
     existed = out.is_dir() and any(out.iterdir())
     try:
         details = run(directory, reference, out, method or None, consecutive)
@@ -376,6 +412,7 @@ def detect(
                       fmt(r["delay_hours"]), fmt(r["delay_samples"]),
                       f"{r['false_alarms']} / {r['healthy_test_samples']}", str(r["baseline_alarms"]))
     Console(width=max(100, Console().width)).print(table)
+    record_check(out / "detection.json", checked)
     console.print(f"selected features: {', '.join(details['selected_features'])}")
     console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}")
 # --- end of Phase I detection ---------------------------------------------------------------------
@@ -407,6 +444,7 @@ def backlash(
                                         help="estimator parameter KEY=VALUE (TOML value), repeatable"),
     workers: Workers = None,
     scheduler: Scheduler = None,
+    force: Force = False,
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
@@ -439,9 +477,13 @@ def backlash(
             raise ValueError(process_noise)
     except ValueError:
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
+    if position_reference not in ("auto", "command", "imu"):
+        _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
+    if not (directory / "measurements.h5").is_file():
+        _fail(f"{directory}: no measurements.h5; expected a recording in the dataset format "
+              "(docs/dataset-format.md)")
+    checked = gate_recording(directory, force, "backlash")
     try:
-        if position_reference not in ("auto", "command", "imu"):
-            _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
                  baseline_sessions=baseline_sessions, position_reference=position_reference,
                  estimator=estimator, params=params,
@@ -450,6 +492,7 @@ def backlash(
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated
         _fail(f"{directory}: {exc}")
+    record_check(out / "backlash.json", checked)
     result, records, prog, figures = br.result, br.doc["sessions"], br.prognosis, br.figures
     ses = result.sessions
     for session, run_name, why in result.skipped_runs:
@@ -828,6 +871,7 @@ def diagnose(
         "diagnose a subset of the recording that fits this time (samples and sessions spread "
         "over its hours, the first captures and runs of each; the costs measured on this "
         "machine at the start): for a campaign-sized recording. Default: the whole recording")),
+    force: Force = False,
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
@@ -858,6 +902,7 @@ def diagnose(
               "(docs/dataset-format.md)")
     out = out or real_dir / "diagnosis"
     _writable_dir(out)
+    checked = gate_recording(real_dir, force, "diagnose")
     console.print(f"diagnosing {real_dir} against scenario [bold]{s.name}[/] "
                   f"({seeds} twin seeds) -> {out}")
     t0 = time.perf_counter()
@@ -874,6 +919,7 @@ def diagnose(
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))
+    record_check(out / "diagnosis.json", checked)
     _print_diagnosis(res)
     console.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'diagnosis.json'} and "
                   f"{out / 'report' / 'index.html'}")

@@ -301,3 +301,39 @@ def _gravity(rep: CheckReport, key: str, acc: np.ndarray) -> None:
         axis = "xyz"[int(np.argmax(np.abs(mean)))]
         rep.findings.append(Finding("warning", key, f"gravity is on the {axis} axis (mean {np.round(mean, 2).tolist()} "
                                                     "m/s^2); expected it on z (axes swapped or sensor tilted?)"))
+
+
+class RecordingRefused(ValueError):
+    """An analysis refuses a recording that ``twin check`` finds errors in (the message lists them)."""
+
+
+#: Errors listed in a refusal (``twin check`` lists all).
+REFUSAL_LISTED = 20
+
+
+def require_clean_recording(directory: str | os.PathLike, force: bool = False,
+                            verb: str = "the analysis") -> list[Finding]:
+    """Run :func:`check_recording` on ``directory`` before an analysis (``twin detect``,
+    ``backlash``, ``diagnose``, ``calibrate``).
+
+    Returns the findings the analysis carries into its output: the warnings, and with ``force``
+    the errors too. Raises :class:`RecordingRefused` listing the errors when there are any and
+    ``force`` is false; DatasetError / FileNotFoundError when the file cannot be opened at all
+    (as :func:`check_recording`)."""
+    rep = check_recording(directory)
+    errors = rep.errors
+    if errors and not force:
+        listed = "\n".join(f"  {f.where}: {f.what}" for f in errors[:REFUSAL_LISTED])
+        more = (f"\n  ... and {len(errors) - REFUSAL_LISTED} more (twin check {directory} lists all)"
+                if len(errors) > REFUSAL_LISTED else "")
+        raise RecordingRefused(f"{rep.file}: twin check finds {len(errors)} error(s), so {verb} refuses the "
+                               f"recording (--force analyses it anyway):\n{listed}{more}")
+    return [f for f in rep.findings if f.level == "warning" or force]
+
+
+def check_record(findings: list[Finding], forced: bool) -> dict:
+    """What an analysis writes into its JSON under ``"check"``: the findings of ``twin check``
+    it ran with (``errors`` only when ``forced``), and whether it was forced."""
+    return {"forced": forced, "errors": [asdict(f) for f in findings if f.level == "error"],
+            "warnings": [asdict(f) for f in findings if f.level == "warning"],
+            "note": "findings of twin check on the recording, carried into this analysis"}
