@@ -517,11 +517,24 @@ def backlash(
         table.add_column(col)
     for rec in records:
         g = [v for v in rec["gamma"].values() if v is not None]
+        withheld = (rec.get("pitch_note") or "").startswith("withheld")
         table.add_row(rec["session"], f"{rec['hours']:g}", fmt(rec["delta_backlash_um_shift"]),
-                      fmt(rec["delta_backlash_um_pitch"]), fmt(rec.get("smoothed_um")),
+                      "withheld" if withheld else fmt(rec["delta_backlash_um_pitch"]), fmt(rec.get("smoothed_um")),
                       fmt(rec.get("dial_delta_um")), fmt(rec["observed_pitch_mm"], "{:.6f}"),
                       fmt(max(g) if g else None, "{:.3f}"))
     Console(width=max(100, Console().width)).print(table)
+    notes = {}
+    for rec in records:
+        if rec.get("pitch_note"):
+            notes.setdefault(rec["pitch_note"].split(":")[0], []).append(rec)
+    for kind, recs in notes.items():
+        if kind == "withheld":
+            for rec in recs:
+                console.print(f"note: Δb pitch (Eq. 9) of {rec['session']} {rec['pitch_note']}", markup=False,
+                              highlight=False, soft_wrap=True)
+        else:
+            console.print(f"note: Δb pitch (Eq. 9) of {', '.join(r['session'] for r in recs)}: "
+                          f"{recs[0]['pitch_note']}", markup=False, highlight=False, soft_wrap=True)
     if prog is not None:
         p = prog.to_json()
         console.print(f"prognosis: {fmt(p['level_um'])} µm at {p['at_hours']:g} h, rate "
