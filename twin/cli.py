@@ -425,8 +425,10 @@ def backlash(
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/backlash)"),
     strict: bool = typer.Option(False, "--strict", help="exit 2 on a bad run instead of skipping it"),
     plots: bool = typer.Option(True, "--plots/--no-plots", help="write the PNG figures"),
-    process_noise: str = typer.Option("1e-23", "--process-noise",
-                                      help="Kalman process noise q in m²/h³, or 'ml' (maximum likelihood)"),
+    process_noise: str = typer.Option("auto", "--process-noise",
+                                      help="Kalman process noise q in m²/h³, 'ml' (maximum likelihood), or "
+                                           "'auto': 1e-23 unless a likelihood-ratio test on the sessions "
+                                           "rejects it for the maximum-likelihood q"),
     baseline_sessions: int = typer.Option(1, "--baseline-sessions", min=1,
                                           help="leading sessions known to share the initial backlash; "
                                                "the estimates are re-zeroed on their mean (1 = the paper's "
@@ -472,11 +474,11 @@ def backlash(
     out = estimator_dir(out or directory / "backlash", entry.name)
     _writable_dir(out)
     try:
-        q = process_noise if process_noise == "ml" else float(process_noise)
-        if q != "ml" and not (math.isfinite(q) and q >= 0):
+        q = process_noise if process_noise in ("ml", "auto") else float(process_noise)
+        if q not in ("ml", "auto") and not (math.isfinite(q) and q >= 0):
             raise ValueError(process_noise)
     except ValueError:
-        _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
+        _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23), 'ml' or 'auto'")
     if position_reference not in ("auto", "command", "imu"):
         _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
     if not (directory / "measurements.h5").is_file():
