@@ -382,8 +382,9 @@ def run_import(spec_path: str | os.PathLike, *, output: str | os.PathLike | None
         assemble_measurements(out / "measurements.h5", axis.to_dict(), phase1(), phase2(), dial)
     except DatasetError:
         raise
-    except ValueError as e:  # the truth-leak guard
-        raise ImportSpecError(str(e)) from None
+    except ValueError as e:  # the truth-leak guard, a value the format cannot store
+        msg = str(e)
+        raise ImportSpecError(msg if str(out) in msg or str(spec_dir) in msg else f"{spec_path}: {msg}") from None
     mapping = [{"file": m["source"], "phase": "phase1", "capture": name, "sample": sample,
                 "hours": m["hours"], "hours_from": m.get("hours_from")} for name, sample, m, _ in p1_named]
     mapping += [{"file": m["source"], "phase": "phase2", "session": f"s{j:04d}", "run": f"r{k:04d}",
@@ -416,9 +417,12 @@ def _length_warnings(parts: dict[str, list[tuple[dict, Path]]]) -> list[str]:
                 if med > 0 and abs(d - med) > LENGTH_TOLERANCE * med:
                     out.append(f"{src}: {ch} lasts {d:.6g} s where the other files of {phase} last {med:.6g} s "
                                f"(median); a file cut short or a run stopped early?")
-            rates = sorted({m["fs_hz"][ch] for m, _ in items if ch in m["fs_hz"]})
-            if len(rates) > 1:
-                out.append(f"{phase}: {ch} at different rates {rates} Hz in different files")
+            rates = [(m["source"], m["fs_hz"][ch]) for m, _ in items if ch in m["fs_hz"]]
+            values = [f for _, f in rates]
+            common = max(set(values), key=values.count) if values else None
+            for src, f in rates:
+                if f != common:
+                    out.append(f"{src}: {ch} at {f:.9g} Hz where the other files of {phase} are at {common:.9g} Hz")
     return sorted(set(out))
 
 

@@ -25,7 +25,11 @@ line above a CSV header. :func:`start_time` reads when a file was recorded (TDMS
 
 from __future__ import annotations
 
+import contextlib
+import gc
+import logging
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -80,11 +84,11 @@ def read_channels(path: Path, names: list[str], *, reader: str | None = None, gr
         if kind == "mat":
             return _mat(path, names)
         if kind == "tdms":
-            return _tdms(path, names, group)
+            return _tdms(path, names, group, warnings)
         return _mdf(path, names)
     except ImportSpecError:
         raise
-    except (OSError, ValueError, KeyError, TypeError) as e:
+    except Exception as e:  # noqa: BLE001 - a third-party parser on a damaged file raises anything
         raise ImportSpecError(f"{path}: not a readable {kind.upper()} file ({type(e).__name__}: {e})") from None
 
 
@@ -98,7 +102,7 @@ def _cut_lines(path: Path, delimiter: str, header_line: int, n_columns: int, war
     """Refuse a data line with fewer fields than the header's ``n_columns`` (a file cut mid-line,
     or a line lost in the middle), naming it; warn when the last line has no line end."""
     raw = path.read_bytes()
-    lines = raw.decode("utf-8", errors="replace").splitlines()
+    lines = raw.decode("utf-8-sig", errors="replace").splitlines()
     data = [(i + 1, line) for i, line in enumerate(lines[header_line:], start=header_line) if line.strip()]
     if not data or len(delimiter) != 1:
         return
@@ -124,7 +128,8 @@ def _csv(path: Path, names: list[str], delimiter: str, header_line: int, decimal
          warnings: list[str]) -> dict[str, Channel]:
     import pandas as pd
 
-    kw = dict(sep=delimiter, skiprows=header_line - 1, decimal=decimal, skipinitialspace=True)
+    kw = dict(sep=delimiter, skiprows=header_line - 1, decimal=decimal, skipinitialspace=True,
+              encoding="utf-8-sig", engine="c" if len(delimiter) == 1 else "python")
     header = pd.read_csv(path, nrows=0, **kw).columns
     header = [str(c).strip() for c in header]
     for n in names:
@@ -159,11 +164,29 @@ def _mat(path: Path, names: list[str]) -> dict[str, Channel]:
         with h5py.File(path, "r") as f:
             return {n: Channel(n, _mat_pick(path, n, lambda parts: _h5_get(f, parts), list(f.keys())))
                     for n in names}
-    from scipy.io import loadmat
+    from scipy.io import loadmat, whosmat
 
+    _mat_sizes(path, whosmat(path))
     data = loadmat(path, squeeze_me=False, struct_as_record=True, simplify_cells=True)
     top = [k for k in data if not k.startswith("__")]
     return {n: Channel(n, _mat_pick(path, n, lambda parts: _dict_get(data, parts), top)) for n in names}
+
+
+#: A MAT v5 variable may declare at most this many bytes per byte of the file (MATLAB's v7
+#: compression of constant data reaches a few hundred); beyond, the header is damaged.
+MAT_EXPANSION = 2000
+
+
+def _mat_sizes(path: Path, variables: list[tuple[str, tuple, str]]) -> None:
+    """Refuse a MAT file whose variables declare more data than the file can hold (a damaged
+    header), before loading them: (name, shape, class) from ``scipy.io.whosmat``."""
+    limit = MAT_EXPANSION * max(path.stat().st_size, 1024)
+    for name, shape, _ in variables:
+        n = 8 * int(np.prod([max(int(d), 0) for d in shape], dtype=object))
+        if n > limit:
+            raise ImportSpecError(f"{path}: MAT variable {name!r} declares {' x '.join(map(str, shape))} values, "
+                                  f"more than a {path.stat().st_size}-byte file holds (a damaged file?); expected "
+                                  "a readable MAT file")
 
 
 def _dict_get(data, parts):
@@ -208,12 +231,95 @@ def _mat_pick(path: Path, name: str, get, top) -> np.ndarray:
     return arr[:, col]
 
 
-def _tdms(path: Path, names: list[str], group: str | None) -> dict[str, Channel]:
+class _Collect(logging.Handler):
+    def __init__(self):
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+def _from_asammdf(u) -> bool:
+    tb, files = u.exc_traceback, []
+    while tb is not None:
+        files.append(tb.tb_frame.f_code.co_filename)
+        tb = tb.tb_next
+    return isinstance(u.exc_value, AttributeError) and any("asammdf" in f for f in files)
+
+
+@contextlib.contextmanager
+def _asammdf_quiet(path: Path):
+    """asammdf on a damaged file: its log records are collected (not printed), its exception
+    becomes an :class:`ImportSpecError` naming ``path``, and the ``AttributeError`` its half-built
+    ``MDF4.__del__`` raises at garbage collection is dropped instead of printed as "Exception
+    ignored ... Traceback" (the refusal says what is wrong). Yields the collecting handler."""
+    log, handler = logging.getLogger("asammdf"), _Collect()
+    old_hook, propagate = sys.unraisablehook, log.propagate
+    sys.unraisablehook = lambda u: None if _from_asammdf(u) else old_hook(u)
+    log.addHandler(handler)
+    log.propagate = False
+    err = None
+    try:
+        yield handler
+    except ImportSpecError:
+        raise
+    except Exception as e:  # noqa: BLE001 - asammdf on a damaged file raises anything
+        err = f"{path}: not a readable MDF file ({type(e).__name__}: {e})"
+    finally:
+        gc.collect()
+        sys.unraisablehook = old_hook
+        log.removeHandler(handler)
+        log.propagate = propagate
+    if err is not None:
+        raise ImportSpecError(err)
+
+
+def _open_mdf(path: Path):
+    """``asammdf.MDF(path)``, or :class:`ImportSpecError` naming the file; call it inside
+    :func:`_asammdf_quiet`. The half-built object of a failed open is collected here, after the
+    exception (whose traceback holds it) is gone, while the quiet hook is in place."""
+    from asammdf import MDF
+
+    try:
+        return MDF(path)
+    except Exception as e:  # noqa: BLE001 - asammdf on a damaged file raises anything
+        msg = f"{path}: not a readable MDF file ({type(e).__name__}: {e})"
+    gc.collect()
+    raise ImportSpecError(msg)
+
+
+#: npTDMS's warnings that mean the file ends before its segments do.
+_TDMS_CUT = ("less data than expected", "metadata is incomplete", "not a multiple of the chunk size")
+
+
+def _tdms(path: Path, names: list[str], group: str | None, warnings: list[str] | None = None) -> dict[str, Channel]:
     try:
         from nptdms import TdmsFile
     except ImportError:
         raise ImportSpecError(f"{path}: reading TDMS needs the npTDMS package (pip install npTDMS)") from None
-    f = TdmsFile.read(path)
+    # npTDMS's modules log through their own stream handlers: collected here instead, and said in
+    # a refusal or a warning
+    log, handler = logging.getLogger("nptdms"), _Collect()
+    own = {name: lg.handlers[:] for name, lg in logging.Logger.manager.loggerDict.items()
+           if name.startswith("nptdms") and isinstance(lg, logging.Logger)}
+    for name in own:
+        logging.getLogger(name).handlers = []
+    log.addHandler(handler)
+    propagate, log.propagate = log.propagate, False
+    try:
+        f = TdmsFile.read(path)
+    finally:
+        log.removeHandler(handler)
+        log.propagate = propagate
+        for name, handlers in own.items():
+            logging.getLogger(name).handlers = handlers
+    cut = [m for m in handler.messages if any(k in m for k in _TDMS_CUT)]
+    if cut:
+        raise ImportSpecError(f"{path}: the TDMS file is cut short (npTDMS: {'; '.join(cut)}); expected whole "
+                              "segments (an interrupted copy or recording?)")
+    if warnings is not None:
+        warnings.extend(f"{path}: npTDMS: {m}" for m in handler.messages)
     groups = [group] if group is not None else [g.name for g in f.groups()]
     if group is not None and group not in [g.name for g in f.groups()]:
         raise ImportSpecError(f"{path}: TDMS group {group!r} not found; the file has "
@@ -235,11 +341,11 @@ def _tdms(path: Path, names: list[str], group: str | None) -> dict[str, Channel]
 
 def _mdf(path: Path, names: list[str]) -> dict[str, Channel]:
     try:
-        from asammdf import MDF
+        import asammdf  # noqa: F401 - only whether it is installed
     except ImportError:
         raise ImportSpecError(f"{path}: reading MDF needs the asammdf package (pip install asammdf)") from None
     out = {}
-    with MDF(path) as mdf:
+    with _asammdf_quiet(path), _open_mdf(path) as mdf:
         avail = list(mdf.channels_db)
         for n in names:
             if n not in mdf.channels_db:
@@ -301,16 +407,15 @@ def read_property(path: Path, name: str, *, reader: str | None = None, group: st
         return _csv_preamble(path, name, delimiter, header_line, decimal)
     except ImportSpecError:
         raise
-    except (OSError, ValueError, KeyError, TypeError) as e:
+    except Exception as e:  # noqa: BLE001 - a third-party parser on a damaged file raises anything
         raise ImportSpecError(f"{path}: not a readable {kind.upper()} file ({type(e).__name__}: {e})") from None
 
 
 def _mdf_header(path: Path, name: str) -> tuple[float, str]:
     import xml.etree.ElementTree as ET
 
-    from asammdf import MDF
 
-    with MDF(path) as mdf:
+    with _asammdf_quiet(path), _open_mdf(path) as mdf:
         h = mdf.header
         fields = {k: getattr(h, k, None) for k in ("author", "department", "project", "subject")}
         comment = h.comment or ""
@@ -339,7 +444,7 @@ def _csv_preamble(path: Path, name: str, delimiter: str, header_line: int, decim
         if len(parts) == 2:
             seen.append(parts[0].strip())
             if parts[0].strip() == name:
-                return _number(path, name, parts[1].strip(), f"line {i}:"), f"line {i} {name!r}"
+                return _number(path, name, parts[1].strip(), f"line {i}:", decimal), f"line {i} {name!r}"
     raise ImportSpecError(f"{path}: no line {name!r}{delimiter}value above the header (line {header_line}); "
                           f"the lines above it name {', '.join(map(repr, seen)) or 'nothing'}")
 
@@ -366,14 +471,13 @@ def start_time(path: Path, *, reader: str | None = None, group: str | None = Non
             raise ImportSpecError(f"{path}: no channel states its wf_start_time; expected a start time "
                                   "(or hours_clock.source = 'mtime')")
         if kind == "mdf":
-            from asammdf import MDF
 
-            with MDF(path) as mdf:
+            with _asammdf_quiet(path), _open_mdf(path) as mdf:
                 t = mdf.header.start_time
             return t if t.tzinfo is not None else t.replace(tzinfo=dt.UTC)
     except ImportSpecError:
         raise
-    except (OSError, ValueError, KeyError, TypeError, OverflowError) as e:
+    except Exception as e:  # noqa: BLE001 - a third-party parser on a damaged file raises anything
         raise ImportSpecError(f"{path}: not a readable {kind.upper()} file ({type(e).__name__}: {e})") from None
     raise ImportSpecError(f"{path}: a {kind.upper()} file states no start time; use hours_clock.source = "
                           "'mtime' (the file's modification time) or another source of hours")
