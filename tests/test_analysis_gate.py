@@ -92,3 +92,27 @@ def test_warnings_are_carried_into_the_json_and_the_console(small_campaign, tmp_
     doc = json.loads((d / "backlash" / "backlash.json").read_text())
     assert doc["check"]["forced"] is False and doc["check"]["errors"] == []
     assert [w["where"] for w in doc["check"]["warnings"]] == [f"/{key}[{a}]" for a in "xyz"]
+
+
+def test_the_check_is_cached_until_the_recording_changes(small_campaign, tmp_path, monkeypatch):
+    """The gate reads a recording once: a second analysis reuses .twin-check.json while
+    measurements.h5 is unchanged, and checks again after it changed."""
+    import analysis.ingest.check as chk
+
+    d = tmp_path / "camp"
+    d.mkdir()
+    shutil.copy(small_campaign / "measurements.h5", d)
+    assert require_clean_recording(d) == []
+    assert (d / chk.CACHE_NAME).is_file()
+    calls = []
+    real = chk.check_recording
+    monkeypatch.setattr(chk, "check_recording", lambda p: calls.append(p) or real(p))
+    assert require_clean_recording(d) == [] and calls == []
+    with h5py.File(d / "measurements.h5", "a") as f:  # m/s² labelled g
+        key = "phase2/s0000/r0000/imu_acc"
+        arr, attrs = f[key][()] * G, dict(f[key].attrs)
+        del f[key]
+        f.create_dataset(key, data=arr, fletcher32=True).attrs.update(attrs)
+    with pytest.raises(RecordingRefused):
+        require_clean_recording(d)
+    assert len(calls) == 1

@@ -15,6 +15,7 @@ Findings are *errors* (the analysis would fail or be wrong: ``twin check`` exits
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from dataclasses import asdict, dataclass, field
@@ -303,6 +304,47 @@ def _gravity(rep: CheckReport, key: str, acc: np.ndarray) -> None:
                                                     "m/s^2); expected it on z (axes swapped or sensor tilted?)"))
 
 
+#: Bumped when the checks change, so that a cached report is not reused.
+CHECK_VERSION = 2
+CACHE_NAME = ".twin-check.json"
+
+
+def _signature(h5: Path) -> str:
+    parts = [str(CHECK_VERSION)]
+    for f in (h5, h5.parent / "import.json"):
+        st = f.stat() if f.is_file() else None
+        parts.append(f"{f.name}:{st.st_size}:{st.st_mtime_ns}" if st else f"{f.name}:-")
+    return "|".join(parts)
+
+
+def cached_check(directory: str | os.PathLike) -> CheckReport:
+    """:func:`check_recording`, kept in ``<directory>/.twin-check.json`` for as long as
+    ``measurements.h5`` and ``import.json`` (size, modification time) and :data:`CHECK_VERSION`
+    are unchanged: the analyses check a recording before every run, and a campaign of tens of
+    GB is read once. A cache that cannot be written (a read-only folder) is skipped."""
+    from analysis.files import write_json
+
+    path = Path(directory)
+    h5 = path if path.suffix == ".h5" and not path.is_dir() else path / "measurements.h5"
+    cache, sig = h5.parent / CACHE_NAME, None
+    try:
+        sig = _signature(h5)
+        doc = json.loads(cache.read_text(encoding="utf-8")) if cache.is_file() else None
+        if isinstance(doc, dict) and doc.get("signature") == sig:
+            rep = CheckReport(doc["report"]["file"], doc["report"]["summary"],
+                              [Finding(**f) for f in doc["report"]["findings"]])
+            return rep
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    rep = check_recording(directory)
+    if sig is not None:
+        try:
+            write_json(cache, {"signature": sig, "report": rep.to_json()})
+        except (OSError, ValueError):
+            pass
+    return rep
+
+
 class RecordingRefused(ValueError):
     """An analysis refuses a recording that ``twin check`` finds errors in (the message lists them)."""
 
@@ -320,7 +362,7 @@ def require_clean_recording(directory: str | os.PathLike, force: bool = False,
     the errors too. Raises :class:`RecordingRefused` listing the errors when there are any and
     ``force`` is false; DatasetError / FileNotFoundError when the file cannot be opened at all
     (as :func:`check_recording`)."""
-    rep = check_recording(directory)
+    rep = cached_check(directory)
     errors = rep.errors
     if errors and not force:
         listed = "\n".join(f"  {f.where}: {f.what}" for f in errors[:REFUSAL_LISTED])
