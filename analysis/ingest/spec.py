@@ -23,6 +23,11 @@ Layout::
     imu_acc = {channels = ["ax", "ay", "az"], unit = "g"}
     [dial]                              # dial-indicator readings (optional)
     file = "dial.csv"                   # columns hours, backlash_um
+
+The operating hours of a phase come from exactly one of: a ``hours`` group of ``name_pattern``,
+``hours_channel``, ``hours_table`` (:class:`Table`: per file, or per session / sample joined on
+a group of the name), ``hours_property`` (a number the file states) or ``hours_clock``
+(:class:`Clock`: the files' time stamps with an offset).
 """
 
 from __future__ import annotations
