@@ -334,8 +334,8 @@ def test_diagnose_refuses_missing_channel_and_other_rate(benchmark, tmp_path):
     with h5py.File(broken / "measurements.h5", "a") as f:
         name = sorted(f["phase1"])[1]
         del f[f"phase1/{name}/acc2"]
-    proc = run_twin("diagnose", str(broken), "--scenario", str(BENCH_SCENARIO), "-o",
-                    str(tmp_path / "d1"), "--cache", str(out_b / "cache"), check=False)
+    proc = run_twin("diagnose", str(broken), "--scenario", str(BENCH_SCENARIO), "-o",  # --force: past
+                    str(tmp_path / "d1"), "--cache", str(out_b / "cache"), "--force", check=False)  # twin check
     assert proc.returncode == 2
     assert f"/phase1/{name}/acc2 is missing" in proc.stderr
     assert "does not match the scenario" in proc.stderr

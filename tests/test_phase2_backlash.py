@@ -187,7 +187,8 @@ def test_pitch_formula_eq9_on_stretched_traces(synthetic):
     profiles, screw, x = synthetic
     L, p = 0.45, 0.010
     ref = directional(0, 0.0, 0.0, x, profiles, screw)
-    est = BacklashEstimator(travel_m=L, lead_m=p, pitch_dofs=("E_XX",)).fit(ref)
+    # only the pitch is stretched here (the shifts stay 0), so the bound by the shifts is off
+    est = BacklashEstimator(travel_m=L, lead_m=p, pitch_dofs=("E_XX",), pitch_bound_factor=math.inf).fit(ref)
     assert est.reference_pitch_m_ == pytest.approx(p, abs=0.1e-6)
     for b in (5e-6, 20e-6):
         s = L / (L - b)
@@ -200,6 +201,58 @@ def test_pitch_formula_eq9_on_stretched_traces(synthetic):
         # from the session's own autocorrelation)
         cross = r.shifts[("E_XX", "forward")].spacing_m * 8
         assert cross == pytest.approx(p * (1 + s) / 2, abs=0.1e-6)
+
+
+def test_eq9_beyond_its_plausibility_bound_is_withheld_with_the_reason(synthetic):
+    """Issue 31, deliverable 5: a perceived pitch stretched by L/(L − b) with b = 200 µm while
+    the shifts show no change: Eq. 9 reads about 200 µm, beyond max(3 × 0, 5 µm), and is withheld
+    (NaN) naming the value and the bound; with b = 2 µm it is within the bound and kept."""
+    profiles, screw, x = synthetic
+    L, p = 0.45, 0.010
+    est = BacklashEstimator(travel_m=L, lead_m=p, pitch_dofs=("E_XX",)).fit(
+        directional(0, 0.0, 0.0, x, profiles, screw))
+    for b, kept in ((200e-6, False), (2e-6, True)):
+        s = L / (L - b)
+        tr = DirectionalTraces(x, screw(x / s)[None].repeat(6, 0), screw(x / s)[None].repeat(6, 0))
+        r = est.estimate(tr)
+        assert abs(r.delta_backlash_shift_m) < 0.1e-6
+        assert r.delta_backlash_pitch_raw_m == pytest.approx(b, rel=0.1)
+        if kept:
+            assert r.delta_backlash_pitch_m == r.delta_backlash_pitch_raw_m and r.pitch_note == ""
+        else:
+            assert math.isnan(r.delta_backlash_pitch_m)
+            assert r.pitch_note == (f"withheld: Eq. 9 gives {r.delta_backlash_pitch_raw_m * 1e6:.2f} µm (pitch "
+                                    f"{r.observed_pitch_m * 1e3:.6f} mm), beyond the plausibility bound 5.00 µm "
+                                    f"(3 × the {abs(r.delta_backlash_shift_m) * 1e6:.2f} µm by shifts, at least 5 µm)")
+            assert r.to_json()["delta_backlash_um_pitch"] is None
+            assert r.to_json()["pitch_note"] == r.pitch_note
+
+
+def test_eq9_never_prints_the_issues_nonsense(tmp_path_factory):
+    """Issue 31: with threshold=0.5 Eq. 9 on backlash-steps reads tens to thousands of µm (the
+    commanded reference cannot show backlash in the pitch); every such value is withheld in
+    backlash.json and the table says so; with the defaults the JSON says why there is no pitch."""
+    d = steps_campaign(tmp_path_factory)
+    out = d / "bl-threshold"
+    r = run_twin("backlash", d, "-o", out, "--no-plots", "--set-param", "threshold=0.5")
+    doc = json.loads((out / "backlash.json").read_text())
+    text = " ".join(r.stderr.split())
+    for rec in doc["sessions"]:
+        est, raw = rec["delta_backlash_um_pitch"], rec["delta_backlash_um_pitch_unbounded"]
+        bound = max(3 * abs(rec["delta_backlash_um_shift"]), 5.0)
+        if est is None:
+            assert rec["pitch_note"].startswith(f"withheld: Eq. 9 gives {raw:.2f} µm")
+            assert abs(raw) > bound
+            assert f"note: Δb pitch (Eq. 9) of {rec['session']} withheld: Eq. 9 gives {raw:.2f} µm" in text
+        else:
+            assert abs(est) <= bound
+    print("\nEq. 9 on backlash-steps, threshold 0.5: (session, shift, pitch shown, unbounded) µm",
+          [(x["session"], round(x["delta_backlash_um_shift"], 2), x["delta_backlash_um_pitch"],
+            x["delta_backlash_um_pitch_unbounded"]) for x in doc["sessions"]])
+    assert sum(x["delta_backlash_um_pitch"] is None for x in doc["sessions"]) >= 3
+    default = backlash_json(d, "--no-plots")
+    assert all(x["delta_backlash_um_pitch"] is None and x["pitch_note"].startswith("no comb")
+               for x in default["sessions"])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -51,7 +51,7 @@ def test_every_dataset_carries_a_checksum_and_flipped_bytes_are_named(copy):
                             "written (a corrupt copy or disk); restore the file from a good copy")
     assert good.shape[1] == 3
     # twin backlash skips that run, naming it and the reason, and analyses the others.
-    r_ = run_twin("backlash", d, "--no-plots", check=False)
+    r_ = run_twin("backlash", d, "--no-plots", "--force", check=False)  # past twin check's refusal
     assert r_.returncode == 0, r_.stderr
     doc = json.loads((d / "backlash" / "backlash.json").read_text())
     assert {(x["session"], x["run"]) for x in doc["skipped_runs"]} == {(s, r)}
@@ -73,7 +73,7 @@ def test_gyro_beyond_its_physical_range_is_skipped_with_the_reason(copy):
     assert str(e.value) == (f"{h5}: {key} has 1 value(s) beyond the physical range of the channel, the largest "
                             "1e+30 rad/s at index (5, 1); expected |x| <= 100 rad/s (a wrong unit or scale "
                             "factor, or corrupt data)")
-    out = run_twin("backlash", d, "--no-plots", check=False)
+    out = run_twin("backlash", d, "--no-plots", "--force", check=False)  # past twin check's refusal
     assert out.returncode == 0
     assert f"warning: skipped session {s} run {r}: " in one_line(out.stderr)
     out = run_twin("backlash", d, "--no-plots", "--strict", check=False)
@@ -85,7 +85,7 @@ def test_negative_hours_are_refused(copy):
     s, _ = _first_run(h5)
     with h5py.File(h5, "a") as f:
         f[f"/phase2/{s}"].attrs["hours"] = -1.0
-    out = run_twin("backlash", d, "--no-plots", check=False)
+    out = run_twin("backlash", d, "--no-plots", "--force", check=False)  # the reader's own refusal
     assert out.returncode == 2
     assert one_line(out.stderr) == (f"error: {h5}: /phase2/{s}@hours is -1.0; expected a finite number of "
                                     "operating hours >= 0")
@@ -113,9 +113,14 @@ def test_wrongly_typed_lead_is_refused(copy, value, shown):
         axis = json.loads(f.attrs["axis"])
         axis["lead_mm"] = value
         f.attrs["axis"] = json.dumps(axis)
-    out = run_twin("backlash", d, "--no-plots", check=False)
+    out = run_twin("backlash", d, "--no-plots", check=False)  # twin check's error, listed in the refusal
     assert out.returncode == 2 and "Traceback" not in out.stderr
-    assert one_line(out.stderr).startswith(f"error: {h5}: /@axis.lead_mm is {shown}; expected ")
+    assert one_line(out.stderr).startswith(f"error: {h5}: twin check finds 1 error(s), so twin backlash refuses "
+                                           f"the recording (--force analyses it anyway): /@axis: {h5}: "
+                                           f"/@axis.lead_mm is {shown}; expected ")
+    out = run_twin("backlash", d, "--no-plots", "--force", check=False)  # the axis contract's own refusal
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert f"error: {h5}: /@axis.lead_mm is {shown}; expected " in one_line(out.stderr)
 
 
 def test_absurd_dimension_and_links_are_refused_before_reading(copy):

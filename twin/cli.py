@@ -64,6 +64,40 @@ def _writable_dir(out: Path, what: str = "output directory") -> None:
             return
 
 
+def gate_recording(directory: Path, force: bool, verb: str) -> dict:
+    """``twin check`` before an analysis: exit 2 listing the errors unless ``force``; print the
+    warnings (and forced errors). Returns the record the analysis writes into its JSON
+    (:func:`analysis.ingest.check.check_record`). ``twin calibrate`` calls it the same way."""
+    from analysis.dataset import DatasetError
+    from analysis.ingest.check import RecordingRefused, check_record, require_clean_recording
+
+    try:
+        findings = require_clean_recording(directory, force, f"twin {verb}")
+    except RecordingRefused as exc:
+        _fail(str(exc))
+    except (DatasetError, FileNotFoundError, OSError) as exc:
+        _fail(str(exc))
+    for f in findings:
+        console.print(f"{'warning' if f.level == 'warning' else 'error (forced)'}: twin check: {f.where}: {f.what}",
+                      style="yellow", markup=False, highlight=False, soft_wrap=True)
+    return check_record(findings, force)
+
+
+def record_check(json_path: Path, record: dict) -> None:
+    """Add the ``check`` record to an analysis's JSON output (``detection.json``, ...)."""
+    from analysis.files import read_json, write_json
+
+    if json_path.is_file():
+        doc = read_json(json_path, "the analysis's results")
+        doc["check"] = record
+        write_json(json_path, doc)
+
+
+Force = Annotated[bool, typer.Option("--force", help=(
+    "analyse a recording that twin check finds errors in (default: exit 2 listing them); the "
+    "errors are written into the JSON"))]
+
+
 # Options several verbs take, defined once (typer reads the option from the ``Annotated`` type).
 ScenarioOverrides = Annotated[list[str], typer.Option(
     "--set", help="scenario override KEY=VALUE (TOML value), repeatable")]
@@ -347,6 +381,7 @@ def detect(
     method: list[str] = typer.Option([], "--method", help="detector(s) to run: a registered name or "
                                      "module:Class, repeatable (default: every registered detector)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
+    force: Force = False,
 ) -> None:
     """Phase I incipient-fault detection (paper section IV): writes OUT/detection.json and OUT/detection.png."""
     from analysis.phase1.detect import run
@@ -357,6 +392,7 @@ def detect(
             _fail(f"{d}: no measurements.h5; expected the {what} in the dataset format "
                   "(docs/dataset-format.md)")
     _writable_dir(out)
+    checked = gate_recording(directory, force, "detect")
     existed = out.is_dir() and any(out.iterdir())
     try:
         details = run(directory, reference, out, method or None, consecutive)
@@ -376,6 +412,7 @@ def detect(
                       fmt(r["delay_hours"]), fmt(r["delay_samples"]),
                       f"{r['false_alarms']} / {r['healthy_test_samples']}", str(r["baseline_alarms"]))
     Console(width=max(100, Console().width)).print(table)
+    record_check(out / "detection.json", checked)
     console.print(f"selected features: {', '.join(details['selected_features'])}")
     console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}")
 # --- end of Phase I detection ---------------------------------------------------------------------
@@ -388,8 +425,10 @@ def backlash(
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/backlash)"),
     strict: bool = typer.Option(False, "--strict", help="exit 2 on a bad run instead of skipping it"),
     plots: bool = typer.Option(True, "--plots/--no-plots", help="write the PNG figures"),
-    process_noise: str = typer.Option("1e-23", "--process-noise",
-                                      help="Kalman process noise q in m²/h³, or 'ml' (maximum likelihood)"),
+    process_noise: str = typer.Option("auto", "--process-noise",
+                                      help="Kalman process noise q in m²/h³, 'ml' (maximum likelihood), or "
+                                           "'auto': 1e-23 unless a likelihood-ratio test on the sessions "
+                                           "rejects it for the maximum-likelihood q"),
     baseline_sessions: int = typer.Option(1, "--baseline-sessions", min=1,
                                           help="leading sessions known to share the initial backlash; "
                                                "the estimates are re-zeroed on their mean (1 = the paper's "
@@ -407,6 +446,7 @@ def backlash(
                                         help="estimator parameter KEY=VALUE (TOML value), repeatable"),
     workers: Workers = None,
     scheduler: Scheduler = None,
+    force: Force = False,
 ) -> None:
     """Phase II backlash (paper section V): change of backlash per session by signal shifts and by
     perceived pitch, Kalman trend and remaining hours to 10 µm. Writes OUT/backlash.json and PNGs.
@@ -434,14 +474,18 @@ def backlash(
     out = estimator_dir(out or directory / "backlash", entry.name)
     _writable_dir(out)
     try:
-        q = process_noise if process_noise == "ml" else float(process_noise)
-        if q != "ml" and not (math.isfinite(q) and q >= 0):
+        q = process_noise if process_noise in ("ml", "auto") else float(process_noise)
+        if q not in ("ml", "auto") and not (math.isfinite(q) and q >= 0):
             raise ValueError(process_noise)
     except ValueError:
-        _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23) or 'ml'")
+        _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23), 'ml' or 'auto'")
+    if position_reference not in ("auto", "command", "imu"):
+        _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
+    if not (directory / "measurements.h5").is_file():
+        _fail(f"{directory}: no measurements.h5; expected a recording in the dataset format "
+              "(docs/dataset-format.md)")
+    checked = gate_recording(directory, force, "backlash")
     try:
-        if position_reference not in ("auto", "command", "imu"):
-            _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
                  baseline_sessions=baseline_sessions, position_reference=position_reference,
                  estimator=estimator, params=params,
@@ -450,6 +494,7 @@ def backlash(
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated
         _fail(f"{directory}: {exc}")
+    record_check(out / "backlash.json", checked)
     result, records, prog, figures = br.result, br.doc["sessions"], br.prognosis, br.figures
     ses = result.sessions
     for session, run_name, why in result.skipped_runs:
@@ -474,11 +519,24 @@ def backlash(
         table.add_column(col)
     for rec in records:
         g = [v for v in rec["gamma"].values() if v is not None]
+        withheld = (rec.get("pitch_note") or "").startswith("withheld")
         table.add_row(rec["session"], f"{rec['hours']:g}", fmt(rec["delta_backlash_um_shift"]),
-                      fmt(rec["delta_backlash_um_pitch"]), fmt(rec.get("smoothed_um")),
+                      "withheld" if withheld else fmt(rec["delta_backlash_um_pitch"]), fmt(rec.get("smoothed_um")),
                       fmt(rec.get("dial_delta_um")), fmt(rec["observed_pitch_mm"], "{:.6f}"),
                       fmt(max(g) if g else None, "{:.3f}"))
     Console(width=max(100, Console().width)).print(table)
+    notes = {}
+    for rec in records:
+        if rec.get("pitch_note"):
+            notes.setdefault(rec["pitch_note"].split(":")[0], []).append(rec)
+    for kind, recs in notes.items():
+        if kind == "withheld":
+            for rec in recs:
+                console.print(f"note: Δb pitch (Eq. 9) of {rec['session']} {rec['pitch_note']}", markup=False,
+                              highlight=False, soft_wrap=True)
+        else:
+            console.print(f"note: Δb pitch (Eq. 9) of {', '.join(r['session'] for r in recs)}: "
+                          f"{recs[0]['pitch_note']}", markup=False, highlight=False, soft_wrap=True)
     if prog is not None:
         p = prog.to_json()
         console.print(f"prognosis: {fmt(p['level_um'])} µm at {p['at_hours']:g} h, rate "
@@ -545,12 +603,37 @@ def import_(
         except (ImportSpecError, DatasetError) as exc:
             progress.stop()
             _fail(str(exc))
+    _print_mapping(s.mapping or [])
+    for w in s.warnings or []:
+        console.print(f"warning: {w}", style="yellow", markup=False, highlight=False, soft_wrap=True)
     hours = "-" if s.hours is None else f"{s.hours[0]:g}–{s.hours[1]:g} h"
     console.print(f"imported {s.captures} Phase I captures, {s.sessions} Phase II sessions ({s.runs} runs), "
                   f"{hours}: {s.converted} files read, {s.reused} kept from before, "
                   f"{time.perf_counter() - t0:.1f} s", markup=False, highlight=False)
     console.print(f"wrote {s.output / 'measurements.h5'} and {s.output / 'import.json'}; next: "
                   f"twin check {s.output}", markup=False, highlight=False)
+
+
+#: Rows of the file -> capture / session, run -> hours table `twin import` prints (all are in import.json).
+MAPPING_ROWS = 200
+
+
+def _print_mapping(mapping: list[dict]) -> None:
+    """The file -> capture or session/run (the lab's session name) -> hours table of an import."""
+    if not mapping:
+        return
+    table = Table(title=f"what came from where ({len(mapping)} files; import.json lists them all)")
+    for col in ("file", "phase", "stored as", "lab's session", "hours", "hours from"):
+        table.add_column(col)
+    for r in mapping[:MAPPING_ROWS]:
+        stored = r.get("capture") or f"{r['session']}/{r['run']}"
+        hours = f"{r['hours']:g}" if r.get("file_hours", r["hours"]) == r["hours"] else \
+            f"{r['hours']:g} (file {r['file_hours']:g})"
+        table.add_row(Path(r["file"]).name, r["phase"], stored, str(r.get("session_name") or "-"), hours,
+                      str(r.get("hours_from") or "-"))
+    Console(width=max(120, Console().width), stderr=True).print(table)
+    if len(mapping) > MAPPING_ROWS:
+        console.print(f"... and {len(mapping) - MAPPING_ROWS} more files (import.json lists them all)")
 
 
 @app.command()
@@ -921,6 +1004,7 @@ def diagnose(
         "diagnose a subset of the recording that fits this time (samples and sessions spread "
         "over its hours, the first captures and runs of each; the costs measured on this "
         "machine at the start): for a campaign-sized recording. Default: the whole recording")),
+    force: Force = False,
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
     of the library, a twin parameter set wrong, a signal artefact), and how far the gap shrinks
@@ -951,6 +1035,7 @@ def diagnose(
               "(docs/dataset-format.md)")
     out = out or real_dir / "diagnosis"
     _writable_dir(out)
+    checked = gate_recording(real_dir, force, "diagnose")
     console.print(f"diagnosing {real_dir} against scenario [bold]{s.name}[/] "
                   f"({seeds} twin seeds) -> {out}")
     t0 = time.perf_counter()
@@ -967,6 +1052,7 @@ def diagnose(
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))
+    record_check(out / "diagnosis.json", checked)
     _print_diagnosis(res)
     console.print(f"{time.perf_counter() - t0:.1f} s; wrote {out / 'diagnosis.json'} and "
                   f"{out / 'report' / 'index.html'}")

@@ -32,7 +32,7 @@ _UNIT_SUFFIX = re.compile(r"_(m|mm|um|cm|in|kg|g|lb|s|ms|hz|khz|mm_s|m_s|m_s2|mm
 
 
 class _Part(BaseModel):
-    model_config = ConfigDict(extra="allow", frozen=True)
+    model_config = ConfigDict(extra="allow", frozen=True, allow_inf_nan=False)
 
     @model_validator(mode="before")
     @classmethod

@@ -23,10 +23,16 @@ Layout::
     imu_acc = {channels = ["ax", "ay", "az"], unit = "g"}
     [dial]                              # dial-indicator readings (optional)
     file = "dial.csv"                   # columns hours, backlash_um
+
+The operating hours of a phase come from exactly one of: a ``hours`` group of ``name_pattern``,
+``hours_channel``, ``hours_table`` (:class:`Table`: per file, or per session / sample joined on
+a group of the name), ``hours_property`` (a number the file states) or ``hours_clock``
+(:class:`Clock`: the files' time stamps with an offset).
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import re
 import tomllib
 from pathlib import Path
@@ -74,9 +80,39 @@ class ChannelMap(_Model):
 
 
 class Table(_Model):
-    """Hours of each file from a CSV table with the columns ``file`` (file name) and ``hours``."""
+    """Operating hours from a table (CSV): one line per file, session or sample.
+
+    ``key``: what a line names: ``"file"`` (the file name, default) or a named group of
+    ``name_pattern`` (``"session"``, ``"sample"``, ...), joined on its value (numbers compare as
+    numbers: ``03`` matches ``3``). ``key_column`` (default: the ``key``) and ``hours_column``
+    (default ``hours``) name the table's columns; ``delimiter`` (default: sniffed among
+    ``, ; tab |``), ``decimal`` and ``header_line`` as for the data files."""
 
     file: str
+    key: str = "file"
+    key_column: str | None = None
+    hours_column: str = "hours"
+    delimiter: str | None = None
+    decimal: str = "."
+    header_line: int = Field(1, ge=1)
+
+    def key_col(self) -> str:
+        return self.key_column if self.key_column is not None else self.key
+
+
+class Clock(_Model):
+    """Operating hours from the files' own time stamps:
+    ``hours = hours_at_origin + duty * (stamp - origin) / 1 h``.
+
+    ``source``: ``"start_time"`` (the time the file states: TDMS ``wf_start_time``, the MDF
+    header's start time) or ``"mtime"`` (the file's modification time, which a copy may reset);
+    ``origin``: an ISO date-time (UTC unless it names its zone) at which the hour meter read
+    ``hours_at_origin``; ``duty``: the fraction of the wall-clock time the axis runs (1: always)."""
+
+    source: Literal["start_time", "mtime"] = "start_time"
+    origin: dt.datetime
+    hours_at_origin: float = Field(0.0, ge=0)
+    duty: float = Field(1.0, gt=0, le=1)
 
 
 class PhaseSpec(_Model):
@@ -91,6 +127,9 @@ class PhaseSpec(_Model):
     name_pattern: str | None = None
     hours_channel: str | None = None
     hours_table: Table | None = None
+    hours_property: str | None = None
+    hours_clock: Clock | None = None
+    max_session_span_hours: float = Field(24.0, ge=0)
     fs_hz: float | None = Field(None, gt=0)
     time_channel: str | None = None
     time_unit: Literal["s", "ms", "us"] = "s"
@@ -153,12 +192,17 @@ class ImportSpec(_Model):
                     raise ValueError(f"{phase}.channels.{c}.unit is {m.unit!r}; expected one of "
                                      f"{', '.join(units)} ({QUANTITY[c]})")
             g = p.groups()
-            timing = ["hours" in g, p.hours_channel is not None, p.hours_table is not None]
+            timing = ["hours" in g, p.hours_channel is not None, p.hours_table is not None,
+                      p.hours_property is not None, p.hours_clock is not None]
             if sum(timing) != 1:
                 raise ValueError(f"{phase}: the operating hours come from {sum(timing)} places; expected "
                                  "exactly one of a (?P<hours>...) group in name_pattern, hours_channel, "
-                                 "hours_table")
-            if phase == "phase2" and "session" not in g and p.hours_table is None and "hours" not in g:
+                                 "hours_table, hours_property, hours_clock")
+            if p.hours_table is not None and p.hours_table.key != "file" and p.hours_table.key not in g:
+                raise ValueError(f"{phase}.hours_table.key is {p.hours_table.key!r}; expected 'file' or a "
+                                 f"named group of {phase}.name_pattern ({', '.join(sorted(g)) or 'none'})")
+            if phase == "phase2" and "session" not in g and p.hours_table is None and "hours" not in g \
+                    and p.hours_property is None:
                 raise ValueError("phase2: expected a (?P<session>...) or (?P<hours>...) group in "
                                  "name_pattern to group the runs into sessions")
         return self

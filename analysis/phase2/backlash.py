@@ -53,6 +53,17 @@ L/(L − b), and recovers b on such traces; under the commanded reference the co
 screw angle, so its spacing cannot change with backlash (nor with the lead's thermal growth), and
 this estimate only shows its noise (its size on the paper's campaign: docs/validation.md).
 
+Plausibility of Eq. 9: L/p multiplies the pitch's noise (45 on the paper's axis, 60 on a 300 mm
+stroke with a 5 mm lead), so a comb read at 0.1 % off gives hundreds of µm. An Eq. 9 value is
+withheld (NaN, with the reason in ``SessionBacklash.pitch_note``) when its magnitude exceeds
+the bound min(``pitch_bound_lead_fraction`` · p, max(``pitch_bound_factor`` · |ΔBacklash by
+shifts|, ``pitch_bound_floor_m``)): by default 1 % of the lead (100 µm on the paper's screw, ten
+times the 10 µm change the paper reports at the end of its campaign, Pandhare et al. Fig. 13),
+and three times the change the recording's shifts (Eqs. 4–6) show, but never below 5 µm. These
+are the choices of this tool, not of the paper: what the recording can physically show is the
+lost motion the shifts measure, and no ball screw keeps running with a clearance of a sizeable
+part of its lead.
+
 Units: SI inside (m, rad); results carry µm / mm only in the names of the JSON fields.
 """
 
@@ -81,6 +92,12 @@ STRAIGHTNESS = ("E_YX", "E_ZX")
 COMB_TOLERANCE = 0.01
 """A comb of correlation peaks counts as a pitch only if h·spacing is within 1 % of the nominal
 lead and the peaks sit within 5 % of the spacing (rms) from their line."""
+PITCH_BOUND_FACTOR = 3.0
+"""Eq. 9 is withheld beyond this multiple of |ΔBacklash by shifts| (see the module's doc)."""
+PITCH_BOUND_FLOOR_M = 5e-6
+"""... but the bound is never below this, m."""
+PITCH_BOUND_LEAD_FRACTION = 0.01
+"""... nor above this fraction of the lead."""
 
 
 @dataclass(frozen=True)
@@ -97,6 +114,8 @@ class SessionBacklash:
         observed_pitch_m: perceived pitch p_i (Eq. 8), m (NaN if no comb of peaks).
         delta_backlash_pitch_m: ΔBacklash_i by pitch (Eq. 9), m.
         pitch_by: {"dof/direction": p_ijk} used in Eq. 8, m (NaN: no comb).
+        delta_backlash_pitch_raw_m: Eq. 9 before the plausibility bound, m.
+        pitch_note: why ``delta_backlash_pitch_m`` is NaN ("" when it is a number).
     """
 
     session: str
@@ -109,6 +128,8 @@ class SessionBacklash:
     observed_pitch_m: float
     delta_backlash_pitch_m: float
     pitch_by: dict = field(repr=False, default_factory=dict)
+    delta_backlash_pitch_raw_m: float = float("nan")
+    pitch_note: str = ""
 
     def to_json(self) -> dict:
         """The session record of ``backlash.json`` (µm and mm as the names say)."""
@@ -120,6 +141,8 @@ class SessionBacklash:
             "delta_backlash_um_shift": num(self.delta_backlash_shift_m, 1e6),
             "delta_backlash_um_pitch": num(self.delta_backlash_pitch_m, 1e6),
             "observed_pitch_mm": num(self.observed_pitch_m, 1e3),
+            "delta_backlash_um_pitch_unbounded": num(self.delta_backlash_pitch_raw_m, 1e6),
+            "pitch_note": self.pitch_note or None,
             "gamma": {d: num(g) for d, g in self.gamma.items()},
             "gamma_by_direction": {f"{d}/{k}": num(r.gamma) for (d, k), r in self.shifts.items()},
             "position_shift_um": {f"{d}/{k}": num(r.shift_m, 1e6) for (d, k), r in self.shifts.items()},
@@ -220,6 +243,9 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
             (:meth:`observed_pitch`).
         stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
         travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).
+        pitch_bound_factor, pitch_bound_floor_m, pitch_bound_lead_fraction: the plausibility
+            bound of Eq. 9 (module doc; ``pitch_bound_lead_fraction=inf`` with
+            ``pitch_bound_factor=inf`` switches it off).
     """
 
     primary_estimate = "shift"
@@ -229,7 +255,10 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
                  fit_fraction: float = 0.8, upsample: int = 8, min_peaks: int = 3,
                  max_lag_m: float = 5e-3, sigma: int = SIGMA, dofs: tuple = STRAIGHTNESS,
                  pitch_dofs: tuple = DOFS, stationary: str = "command", travel_m: float = 0.45,
-                 lead_m: float = 0.010, pitch_method: str = "harmonic"):
+                 lead_m: float = 0.010, pitch_method: str = "harmonic",
+                 pitch_bound_factor: float = PITCH_BOUND_FACTOR,
+                 pitch_bound_floor_m: float = PITCH_BOUND_FLOOR_M,
+                 pitch_bound_lead_fraction: float = PITCH_BOUND_LEAD_FRACTION):
         self.cutoff_wavelength_m = cutoff_wavelength_m
         self.window_definition = window_definition
         self.threshold = threshold
@@ -244,6 +273,9 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
         self.travel_m = travel_m
         self.lead_m = lead_m
         self.pitch_method = pitch_method
+        self.pitch_bound_factor = pitch_bound_factor
+        self.pitch_bound_floor_m = pitch_bound_floor_m
+        self.pitch_bound_lead_fraction = pitch_bound_lead_fraction
 
     # -- helpers ---------------------------------------------------------------------------
     def _check_params(self) -> None:
@@ -254,6 +286,10 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
         for d in (*self.dofs, *self.pitch_dofs):
             if d not in DOFS:
                 raise ValueError(f"unknown DOF {d!r}; expected one of {DOFS}")
+        for k in ("pitch_bound_factor", "pitch_bound_floor_m", "pitch_bound_lead_fraction"):
+            v = getattr(self, k)
+            if not (isinstance(v, (int, float)) and v >= 0):
+                raise ValueError(f"{k} is {v!r}; expected a number >= 0")
         if not (self.travel_m > 0 and self.lead_m > 0):
             raise ValueError(f"travel_m = {self.travel_m!r} and lead_m = {self.lead_m!r}: expected > 0 m")
 
@@ -338,12 +374,42 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
                     for d in self.pitch_dofs for k in DIRECTIONS}
         p_i = weighted_sum(list(pitch_by.values()),
                            [shifts[key].gamma for key in pitch_by], self.sigma)
-        by_pitch = self.travel_m / self.lead_m * (p_i - self.reference_pitch_m_)
+        raw = self.travel_m / self.lead_m * (p_i - self.reference_pitch_m_)
+        by_pitch, note = self.bounded_pitch_estimate(raw, by_shift, p_i)
         return SessionBacklash(session=name, hours=hours, shifts=shifts,
                                delta_position_shift_m=dps, delta_backlash_dof_m=dbl, gamma=gamma,
                                delta_backlash_shift_m=by_shift, observed_pitch_m=p_i,
                                delta_backlash_pitch_m=by_pitch,
-                               pitch_by={f"{d}/{k}": v for (d, k), v in pitch_by.items()})
+                               pitch_by={f"{d}/{k}": v for (d, k), v in pitch_by.items()},
+                               delta_backlash_pitch_raw_m=raw, pitch_note=note)
+
+    def pitch_bound_m(self, by_shift_m: float) -> float:
+        """The largest |Eq. 9| shown, m: min(fraction · lead, max(factor · |by shifts|, floor))
+        (the module's doc); without a shift estimate, the lead's fraction."""
+        lead_part = self.pitch_bound_lead_fraction * self.lead_m
+        if not math.isfinite(by_shift_m) or math.isinf(self.pitch_bound_factor):
+            return lead_part
+        return min(lead_part, max(self.pitch_bound_factor * abs(by_shift_m), self.pitch_bound_floor_m))
+
+    def bounded_pitch_estimate(self, raw_m: float, by_shift_m: float, pitch_m: float) -> tuple[float, str]:
+        """(Eq. 9's change of backlash, m, or NaN; why NaN) after the plausibility bound."""
+        if not math.isfinite(self.reference_pitch_m_):
+            return float("nan"), (f"no comb of correlation peaks in the reference session (threshold "
+                                  f"{self.threshold:g} of the main peak, {self.min_peaks} peaks, h·spacing within "
+                                  f"{COMB_TOLERANCE:.0%} of the {self.lead_m * 1e3:g} mm lead): Eq. 8 has no pitch")
+        if not math.isfinite(pitch_m):
+            return float("nan"), (f"no comb of correlation peaks in this session (threshold {self.threshold:g}, "
+                                  f"{self.min_peaks} peaks, within {COMB_TOLERANCE:.0%} of the lead): Eq. 8 has "
+                                  "no pitch")
+        bound = self.pitch_bound_m(by_shift_m)
+        if abs(raw_m) > bound:
+            why = (f"{self.pitch_bound_lead_fraction:g} of the {self.lead_m * 1e3:g} mm lead"
+                   if bound == self.pitch_bound_lead_fraction * self.lead_m else
+                   f"{self.pitch_bound_factor:g} × the {abs(by_shift_m) * 1e6:.2f} µm by shifts, at least "
+                   f"{self.pitch_bound_floor_m * 1e6:g} µm")
+            return float("nan"), (f"withheld: Eq. 9 gives {raw_m * 1e6:.2f} µm (pitch {pitch_m * 1e3:.6f} mm), "
+                                  f"beyond the plausibility bound {bound * 1e6:.2f} µm ({why})")
+        return raw_m, ""
 
     def transform(self, X) -> np.ndarray:
         """(n, 2) [ΔBacklash by shifts, by pitch] in m for the sessions ``X`` (a sequence)."""

@@ -70,7 +70,7 @@ def estimator_dir(out: str | Path, name: str) -> Path:
 
 
 def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = False,
-        plots: bool = True, process_noise: float | str = 1e-23,
+        plots: bool = True, process_noise: float | str = "auto",
         baseline_sessions: int = 1, estimator: BacklashEstimator | str | None = None,
         position_reference: str = "auto", params: dict | None = None,
         map_sessions=None) -> BacklashRun:
@@ -81,7 +81,9 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         out: output directory (default ``directory/backlash``); ``backlash.json`` and, with
             ``plots``, the PNGs of Figs. 7–13 are written there.
         strict: raise on a bad run (missing, cut short, non-finite) instead of skipping it.
-        process_noise: Kalman process noise q in m²/h³, or ``"ml"`` (maximum likelihood).
+        process_noise: Kalman process noise q in m²/h³, ``"ml"`` (maximum likelihood) or ``"auto"``
+            (the default: 1e-23 unless a likelihood-ratio test rejects it,
+            :mod:`analysis.phase2.prognosis`).
         baseline_sessions: leading sessions known to share the initial backlash; the estimates
             are re-zeroed on their mean.
         estimator: an unfitted backlash estimator, or a registered name or ``module:Class``
@@ -164,6 +166,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
                        "baseline_offset_um": {"shift": result.baseline_offset_m[0] * 1e6,
                                               "pitch": result.baseline_offset_m[1] * 1e6},
                        "kalman_process_noise_m2_per_h3": None if trend is None else trend.process_noise,
+                       "kalman_process_noise_choice": None if trend is None else trend.process_noise_choice,
+                       "kalman_measurement_std_um": None if trend is None else trend.measurement_std * 1e6,
                        "savgol": None if savgol is None else {"window_sessions": savgol.window,
                                                                "polyorder": savgol.polyorder},
                        "window_definition": est.window_definition, "threshold": est.threshold,
