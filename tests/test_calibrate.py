@@ -235,3 +235,36 @@ def test_calibrate_benchmark_meets_its_targets(tmp_path):
     assert sm["routine_within"] == 1.0, sm["routine_worst_error"]
     assert sm["parameters_inside"] >= 0.85, sm["per_parameter_inside"]
     assert sm["null_no_gap"] >= 0.90
+
+
+def test_a_flagged_channel_keeps_its_defaults():
+    """Nothing is fitted to a channel `twin check` flags: a clipped torque keeps the drive's
+    parameters fitted on it and the torque's noise at the twin's defaults, named."""
+    from twin.harness.calibrate import flagged_keys
+
+    check = {"errors": [], "warnings": [{"level": "warning", "where": "/phase1/c000003/torque",
+                                         "what": "clipping: 12 samples at the maximum 2.5"}]}
+    flagged = flagged_keys(check)
+    assert set(flagged) == {"axis.carriage_mass_kg", "axis.rail_friction_N", "axis.drag_viscous_Nm_s_per_rad",
+                            "sensors.torque_noise_Nm"}
+    assert flagged["axis.carriage_mass_kg"] == ("twin check flags the channel torque (/phase1/c000003/torque: "
+                                                "clipping: 12 samples at the maximum 2.5): nothing fitted to it")
+    assert flagged_keys(None) == {}
+
+
+def test_calibrate_refuses_a_recording_check_rejects(round_trip, tmp_path):
+    import shutil
+
+    import h5py
+
+    tmp, _ = round_trip
+    bad = tmp_path / "bad"
+    shutil.copytree(tmp / "campaign", bad)
+    with h5py.File(bad / "measurements.h5", "r+") as f:
+        name = sorted(f["phase1"])[0]
+        f[f"phase1/{name}/torque"][...] = 0.25
+    r = run_twin("calibrate", bad, "-o", tmp_path / "a.toml", check=False)
+    assert r.returncode == 2
+    said = " ".join(r.stderr.split())
+    assert f"/phase1/{name}/torque" in said and "flat line" in said and "--force" in said
+    assert not (tmp_path / "a.toml").exists()

@@ -768,6 +768,7 @@ def calibrate(
     workers: Workers = None,
     scheduler: Scheduler = None,
     cache: Path | None = typer.Option(None, "--cache", help="simulation cache (default: beside OUT)"),
+    force: Force = False,
 ) -> None:
     """The twin fitted to a recording, in three layers: the routine and layout (measured), the
     sensor chain (measured at rest), the drive's mass, drags, torque ripple and the Phase I
@@ -787,9 +788,10 @@ def calibrate(
     if not (directory / "measurements.h5").is_file():
         _fail(f"{directory}: no measurements.h5; expected a recording in the dataset format "
               "(docs/dataset-format.md)")
+    checked = gate_recording(directory, force, "calibrate")
     try:
         rec = run_calibration(directory, out, budget_minutes=budget_minutes, workers=workers,
-                              scheduler=scheduler, cache=cache, name=name)
+                              scheduler=scheduler, cache=cache, name=name, check=checked)
     except (CalibrationError, DatasetError, FileNotFoundError, OSError) as exc:
         _fail(str(exc))
     except ScenarioError as exc:

@@ -18,7 +18,9 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
    errors (delta method: Cov = (JᵀJ)⁻¹ for residuals in units of their standard error); an
    error is the recording's own (the scatter over its captures), the twin's, and the scatter of
    the statistic over :data:`SPREAD_SEEDS` twin seeds at the start (the machine's random
-   geometry and ripple phase, which one recording cannot average out).
+   geometry and ripple phase, which one recording cannot average out); the interval uses the
+   statistics' full covariance over those seeds (Cov = J⁻¹ Σ J⁻ᵀ: one regression gives J, T_c
+   and c_v, and a machine's draw moves them together).
 
 Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters
 (each responds mostly to one: J to the mass, T_c to the constant drag, c_v to the viscous drag, the
@@ -109,6 +111,31 @@ NOT_INFORMED = {
 SENSOR_KEYS = ("sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_hz",
                "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz",
                "sensors.nut_acc_noise_ug_per_rthz", "sensors.torque_noise_Nm")
+
+
+#: The channels each calibrated key is fitted or measured on: a key whose channel `twin check`
+#: flags keeps the twin's default (nothing is fitted to a flagged channel).
+CHANNELS = {
+    "axis.carriage_mass_kg": ("speed", "torque"), "axis.rail_friction_N": ("speed", "torque"),
+    "axis.drag_viscous_Nm_s_per_rad": ("speed", "torque"), "axis.torque_ripple_Nm": ("imu_acc", "position_cmd"),
+    "phase1.accel_mm_s2": ("speed",), "phase1.dwell_s": ("speed",),
+    "sensors.imu_acc_noise_ug_per_rthz": ("imu_acc",), "sensors.imu_acc_bandwidth_hz": ("imu_acc",),
+    "sensors.imu_gyro_noise_urad_s_per_rthz": ("imu_gyro",), "sensors.imu_gyro_bandwidth_hz": ("imu_gyro",),
+    "sensors.nut_acc_noise_ug_per_rthz": ("acc1", "acc2"), "sensors.torque_noise_Nm": ("torque",),
+}
+
+
+def flagged_keys(check: dict | None) -> dict[str, str]:
+    """{calibrated key: why it keeps its default} for the channels that ``check`` (the record of
+    ``twin check``: :func:`analysis.ingest.check.check_record`) flags: a finding whose HDF5 key
+    ends in a channel's name flags that channel."""
+    out: dict[str, str] = {}
+    for f in (check or {}).get("errors", []) + (check or {}).get("warnings", []):
+        ch = str(f["where"]).rstrip("/").rsplit("/", 1)[-1]
+        for key, chans in CHANNELS.items():
+            if ch in chans and key not in out:
+                out[key] = f"twin check flags the channel {ch} ({f['where']}: {f['what']}): nothing fitted to it"
+    return out
 
 
 class CalibrationError(ValueError):
@@ -412,9 +439,17 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                                      bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
                                      xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
         xs, fun = embed(sol.x), sol.fun
-        J = jac(xs, free)
+        # the delta method with the statistics' full covariance: one regression gives J, T_c and
+        # c_v, and a machine's draw moves them together, so their errors correlate
+        J = jac(xs, free) * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
+        spread_vals = np.array([r[0] for r in spread])[:, stat_idx][:, free]
+        ok = np.all(np.isfinite(spread_vals), axis=1)
+        cov_seed = np.cov(spread_vals[ok].T, ddof=1).reshape(free.size, free.size) if ok.sum() > 2 else 0.0
+        own = real_se[stat_idx][free] ** 2 + np.nan_to_num(sim_se[free], nan=0.0) ** 2
+        cov_stat = np.diag(np.nan_to_num(own, nan=0.0)) + cov_seed * (1 + 1 / FIT_SEEDS)
         try:
-            sd = np.sqrt(np.clip(np.diag(np.linalg.inv(J.T @ J)), 0, None))
+            jinv = np.linalg.inv(J)
+            sd = np.sqrt(np.clip(np.diag(jinv @ cov_stat @ jinv.T), 0, None))
         except np.linalg.LinAlgError:
             sd = np.full(free.size, np.inf)
     else:
@@ -529,10 +564,13 @@ def corrected_sensor_values(measured: dict[str, Measured], set_to: dict[str, flo
 
 def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: float | None = None,
               workers: int | None = None, scheduler: str | None = None, cache: str | Path | None = None,
-              name: str | None = None, progress: Callable[[str], None] = _progress) -> dict:
+              name: str | None = None, progress: Callable[[str], None] = _progress,
+              check: dict | None = None) -> dict:
     """Calibrate the twin to ``recording`` (a campaign directory) and write the scenario to
     ``out_toml`` with the provenance of every value, and ``<out_toml>.calibration.json`` (what
-    was measured, fitted and left, the fit's residuals and time). Returns that JSON's content."""
+    was measured, fitted and left, the fit's residuals and time). ``check``: the record of ``twin
+    check`` on the recording (the CLI refuses errors unless forced): a value whose channel it flags
+    keeps the twin's default (:func:`flagged_keys`). Returns that JSON's content."""
     from twin.scenario_init import scenario_text
 
     t0 = time.perf_counter()
@@ -566,7 +604,10 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     values = sens + fit.values
     defaults = {k: why for k, why in NOT_INFORMED.items()}
     defaults.update(fit.skipped)
-    record = {"version": CALIBRATE_VERSION, "recording": str(recording.resolve()),
+    flagged = flagged_keys(check)
+    values = [v for v in values if v.key not in flagged]
+    defaults.update(flagged)
+    record = {"version": CALIBRATE_VERSION, "recording": str(recording.resolve()), "check": check,
               "values": [v.to_json() for v in values],
               "defaults": [{"key": k, "why": w} for k, w in defaults.items()],
               "notes": notes + sens_notes, "simulations": fit.simulations,
