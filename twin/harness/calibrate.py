@@ -271,8 +271,7 @@ class FitResult:
     seconds: float
     residual: list[float]
     instruments: dict[str, list[float]]
-    scenario: dict | None = None
-    seeds: tuple[int, ...] = ()
+    first_sensors: dict[str, float]
 
 
 def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
@@ -293,11 +292,14 @@ def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_
 
 def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float | None,
                  workers: int, scheduler: str | None = None,
-                 progress: Callable[[str], None] = _progress, spent_s: float = 0.0) -> FitResult:
+                 progress: Callable[[str], None] = _progress, spent_s: float = 0.0,
+                 sensors: dict[str, Measured] | None = None) -> FitResult:
     """Layer (c) of the module docstring on ``recording`` against ``base`` (layers a and b
     applied). Raises :class:`CalibrationError` when ``budget_s`` (the whole calibration's, of
     which ``spent_s`` is spent) cannot hold: after timing the twin's first simulations, with the
-    estimate and the smallest budget that would do."""
+    estimate and the smallest budget that would do. ``sensors``: layer (b) as measured; the
+    spread at the solution is simulated with their first correction set
+    (:func:`corrected_sensor_values`), so its instruments give the second."""
     from twin.harness.gap_runner import run_tasks
 
     t0 = time.perf_counter()
@@ -305,7 +307,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         names = m.phase1_captures()
         if not names:
             return FitResult([], [], {k: "no Phase I capture: no torque to fit" for k, _, _ in FITTED}, 0,
-                             0.0, [], {})
+                             0.0, [], {}, {})
         first = min(m.phase1_header(n)[1] for n in names)
         caps = [n for n in names if m.phase1_header(n)[1] == first][:FIT_CAPTURES]
         hours = float(m.phase1(caps[0]).hours)
@@ -340,8 +342,12 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     cache.mkdir(parents=True, exist_ok=True)
     sims = [0]
 
+    extra: dict[str, float] = {}  # set at every evaluation (the sensors' first correction, at the end)
+
     def scenario_at(logp: np.ndarray, seed: int | None = None) -> str:
         data = json.loads(json.dumps(data0))
+        for k, v in extra.items():
+            set_dotted(data, k, float(v), source="calibrate")
         for k, lp in zip(keys, logp, strict=True):
             set_dotted(data, k, float(np.exp(lp)), source="calibrate")
         if seed is not None:
@@ -370,7 +376,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     spread = run([x0], seeds)
     first_eval = spread[0]
     unit_s = (time.perf_counter() - t_first) / max(1.0, len(seeds) / max(1, workers))
-    n_sims = MAX_JACOBIANS * (len(keys) + 1) * FIT_SEEDS
+    n_sims = MAX_JACOBIANS * (len(keys) + 1) * FIT_SEEDS + SPREAD_SEEDS
     estimate = unit_s * n_sims / max(1, min(workers, len(keys))) * 0.6 + unit_s
     total = spent_s + (time.perf_counter() - t0) + estimate
     progress(f"layer c: {len(keys)} parameters jointly; one twin evaluation {unit_s:.1f} s; at most "
@@ -434,6 +440,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         return x
 
     lo, hi = x0 - math.log(10.0), x0 + math.log(10.0)
+    xs, fun, sd = x0, np.zeros(0), np.zeros(0)
     if free.size:
         sol = optimize.least_squares(lambda z: resid(embed(z)), x0[free], jac=lambda z: jac(embed(z), free),
                                      bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
@@ -442,7 +449,20 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         # the delta method with the statistics' full covariance: one regression gives J, T_c and
         # c_v, and a machine's draw moves them together, so their errors correlate
         J = jac(xs, free) * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
-        spread_vals = np.array([r[0] for r in spread])[:, stat_idx][:, free]
+    # the machine-to-machine scatter at the solution (it grows with the ripple, the drags, the
+    # noise): the spread's seeds again, with layer (b)'s first correction set
+    first: dict[str, float] = {}
+    if sensors:
+        inst0: dict[str, list[float]] = {}
+        for r in spread:
+            for k, v in r[2].items():
+                inst0.setdefault(k, []).append(float(v))
+        first = {v.key: v.value for v in corrected_sensor_values(
+            sensors, {k: float(f"{m.value:.6g}") for k, m in sensors.items()}, inst0)}
+        extra.update(first)
+    final = run([xs], seeds)
+    if free.size:
+        spread_vals = np.array([r[0] for r in final])[:, stat_idx][:, free]
         ok = np.all(np.isfinite(spread_vals), axis=1)
         cov_seed = np.cov(spread_vals[ok].T, ddof=1).reshape(free.size, free.size) if ok.sum() > 2 else 0.0
         own = real_se[stat_idx][free] ** 2 + np.nan_to_num(sim_se[free], nan=0.0) ** 2
@@ -452,8 +472,6 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             sd = np.sqrt(np.clip(np.diag(jinv @ cov_stat @ jinv.T), 0, None))
         except np.linalg.LinAlgError:
             sd = np.full(free.size, np.inf)
-    else:
-        xs, fun, sd = x0, np.zeros(0), np.zeros(0)
     values = []
     for jj, j in enumerate(free):
         k, x, i = keys[j], xs[j], use[j]
@@ -472,11 +490,11 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     progress(f"layer c: done in {sims[0]} evaluations, {time.perf_counter() - t0:.1f} s; residual "
              f"{', '.join(f'{r:+.2f}' for r in fun)} standard errors")
     inst: dict[str, list[float]] = {}
-    for r in spread:
+    for r in final:
         for k, v in r[2].items():
             inst.setdefault(k, []).append(float(v))
     return FitResult(values, [keys[j] for j in free], skipped, sims[0], time.perf_counter() - t0,
-                     [float(r) for r in fun], inst, data0, tuple(seeds))
+                     [float(r) for r in fun], inst, first)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -503,29 +521,6 @@ def sensor_values(recording: Path, base: Scenario) -> tuple[dict[str, Measured],
                      + (" (a sensitivity error or local gravity: check the IMU's unit and sensitivity)"
                         if abs(g - 1) > 0.003 else ""))
     return {k: v for k, v in meas.items() if k in SENSOR_KEYS}, notes
-
-
-def twin_instruments(fit: FitResult, values: dict[str, float], cache: Path, workers: int,
-                     scheduler: str | None = None) -> dict[str, list[float]]:
-    """The instruments the twin's rests give ({key: [value per seed]}) with ``values`` set
-    (scenario keys) on the fit's scenario, at each of the fit's spread seeds."""
-    from twin.harness.gap_runner import run_tasks
-
-    data = json.loads(json.dumps(fit.scenario))
-    for k, v in values.items():
-        set_dotted(data, k, float(v), source="calibrate")
-    payloads = []
-    for sd in fit.seeds:
-        data["seed"] = int(sd)
-        payloads.append(from_dict(data).to_json())
-    size = max(1, -(-len(payloads) // max(1, workers)))
-    batches = [payloads[k:k + size] for k in range(0, len(payloads), size)]
-    out: dict[str, list[float]] = {}
-    for res in run_tasks(evaluate, [(b, str(cache)) for b in batches], workers, scheduler):
-        for r in res:
-            for k, v in r[2].items():
-                out.setdefault(k, []).append(float(v))
-    return out
 
 
 def corrected_sensor_values(measured: dict[str, Measured], set_to: dict[str, float],
@@ -591,16 +586,12 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
         set_dotted(data, key, float(f"{v.value:.6g}"), source="calibrate")
     base_b = from_dict(data)
     fit = fit_physical(base_b, recording, cache / "fit", budget_s, workers, scheduler, progress,
-                       spent_s=time.perf_counter() - t0)
-    sens = corrected_sensor_values(measured, {k: float(f"{v.value:.6g}") for k, v in measured.items()},
-                                   fit.instruments)
-    if fit.scenario is not None and sens:
-        # the second step: the twin set to the first step's floors (and the fitted drive) measured again
-        progress("layer b: the sensor chain corrected again by the calibrated twin's rests")
-        first = {v.key: v.value for v in sens}
-        again = twin_instruments(fit, {**first, **{v.key: v.value for v in fit.values}}, cache / "fit",
-                                 workers, scheduler)
-        sens = corrected_sensor_values(measured, first, again)
+                       spent_s=time.perf_counter() - t0, sensors=measured)
+    if fit.first_sensors:
+        # the second step: the calibrated twin, set to the first step's floors, measured again
+        sens = corrected_sensor_values(measured, fit.first_sensors, fit.instruments)
+    else:  # no fit ran (no Phase I): the raw measurements with their own errors
+        sens = corrected_sensor_values(measured, {}, {})
     values = sens + fit.values
     defaults = {k: why for k, why in NOT_INFORMED.items()}
     defaults.update(fit.skipped)
