@@ -342,8 +342,11 @@ def export_model(
 @app.command()
 def detect(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
-    reference: Path = typer.Option(..., "--reference", help="reference data set directory (Fisher selection)"),
+    reference: Path | None = typer.Option(None, "--reference", help="reference data set directory (Fisher selection)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
+    save_model: Path | None = typer.Option(None, "--save-model", help="also write the fitted Phase I model there"),
+    model: Path | None = typer.Option(None, "--model", help="score with this model (from --save-model) "
+                                      "instead of fitting; no --reference then"),
     method: list[str] = typer.Option([], "--method", help="detector(s) to run: a registered name or "
                                      "module:Class, repeatable (default: every registered detector)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
@@ -352,14 +355,18 @@ def detect(
     from analysis.phase1.detect import run
 
     out = out or directory / "phase1"
+    if (reference is None) == (model is None) or (model is not None and save_model is not None):
+        _fail("give either --reference REF (fit; --save-model M to keep the fit) or --model M "
+              "(score with a saved model)")
     for d, what in ((directory, "recording"), (reference, "reference data set")):
-        if not (d / "measurements.h5").is_file():
+        if d is not None and not (d / "measurements.h5").is_file():
             _fail(f"{d}: no measurements.h5; expected the {what} in the dataset format "
                   "(docs/dataset-format.md)")
     _writable_dir(out)
     existed = out.is_dir() and any(out.iterdir())
     try:
-        details = run(directory, reference, out, method or None, consecutive)
+        details = run(directory, reference, out, method or None, consecutive, model=model,
+                      save_model=save_model)
     except (ValueError, FileNotFoundError) as exc:  # DatasetError, ExtractionError, DetectError
         kept = not existed and out.is_dir() and any(out.iterdir())
         _fail(f"{exc}" + (f" (what was computed before the error is in {out})" if kept else ""))
@@ -377,7 +384,8 @@ def detect(
                       f"{r['false_alarms']} / {r['healthy_test_samples']}", str(r["baseline_alarms"]))
     Console(width=max(100, Console().width)).print(table)
     console.print(f"selected features: {', '.join(details['selected_features'])}")
-    console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}")
+    console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}"
+                  + (f"; the model: {save_model}" if save_model else ""))
 # --- end of Phase I detection ---------------------------------------------------------------------
 
 
