@@ -151,11 +151,28 @@ def simulate(
     set_: ScenarioOverrides = (),
     workers: Workers = None,
     scheduler: Scheduler = None,
+    live: bool = typer.Option(False, "--live", help="publish the units into OUT/live/ in time order, "
+                              "as complete files, at their scaled times (the source of twin monitor)"),
+    speedup: float = typer.Option(3600.0, "--speedup", min=1e-6, help="with --live: operating hours "
+                                  "run this many times faster than real time (3600: an hour a second)"),
 ) -> None:
     """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed).
     SCENARIO is a TOML file or the name of a shipped scenario (quick, demo, paper-rtf, ...)."""
     _require("simulate", "sim", *(["cluster"] if scheduler is not None else []))
     _one_executor(scheduler, workers, "units")
+    if live:
+        from twin.live import simulate_live
+
+        try:
+            s = load(scenario, set_)
+        except ScenarioError as exc:
+            _fail(str(exc))
+        _writable_dir(out, "campaign directory")
+        summary = simulate_live(s, out, speedup, on_unit=lambda i, n, m: console.print(
+            f"published {i}/{n}: {m['kind']} {m['name']} at {m['hours']:g} h", highlight=False))
+        console.print(f"{summary['published']} units published in {out / 'live'} "
+                      f"({summary['seconds']:.1f} s); wrote {out / 'measurements.h5'} and {out / 'truth.h5'}")
+        return
     summary = _run_simulation(scenario, out, set_, workers, scheduler)
     console.print(f"{summary['simulated']} units simulated ({summary['executor']}), "
                   f"{summary['skipped']} reused, {summary['seconds']:.1f} s; wrote {out / 'measurements.h5'} and "
