@@ -406,6 +406,34 @@ def detect(
 # --- end of Phase I detection ---------------------------------------------------------------------
 
 
+@app.command()
+def monitor(
+    source: Path = typer.Argument(..., help="growing campaign folder (SOURCE/live/ from twin simulate --live)"),
+    model: Path = typer.Option(..., "--model", help="Phase I model from twin detect --save-model"),
+    out: Path = typer.Option(..., "-o", "--out", help="state directory: the event log events.jsonl"),
+    poll: float = typer.Option(0.2, "--poll", min=0.01, help="seconds between looks at SOURCE"),
+    exit_at_end: bool = typer.Option(False, "--exit-at-end", help="stop once the source says it is "
+                                     "finished and everything is processed"),
+) -> None:
+    """Watch SOURCE: score every new Phase I sample with the model, alarm, ask for Phase II and
+    estimate the change of backlash of the sessions that follow; events go to OUT/events.jsonl
+    (docs/monitoring.md). Killed, it resumes from OUT with no event lost or repeated."""
+    from analysis.phase1.model_file import ModelFileError
+    from twin.harness.monitor import Monitor, MonitorError
+
+    _writable_dir(out, "state directory")
+    try:
+        mon = Monitor(source, model, out, say=lambda s: console.print(s, markup=False, highlight=False))
+        console.print(f"monitoring {mon.live} with {model}; events -> {mon.log}", highlight=False)
+        n = mon.run(poll, exit_at_end)
+    except (ModelFileError, MonitorError) as exc:
+        _fail(str(exc))
+    except KeyboardInterrupt:
+        console.print(f"stopped; resume with: twin {shlex.join(sys.argv[1:])}")
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    console.print(f"source finished: {n} events in {mon.log}")
+
+
 # --- Phase II backlash ----------------------------------------------------------------------------
 @app.command()
 def backlash(

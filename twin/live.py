@@ -120,7 +120,7 @@ def simulate_live(s: Scenario, out_dir: str | Path, speedup: float = 3600.0,
     for seq, u in enumerate(units):
         stem = f"{seq:06d}-{u.kind}-{u.name}"
         mpath = live / f"{stem}.json"
-        if mpath.is_file() and manifest_ok(live, read_json(mpath)):
+        if mpath.is_file() and manifest_ok(live, read_json(mpath, "a live unit's manifest")):
             continue
         if not store.has(u.kind, u.name):
             run_unit(payload, u, str(out))
