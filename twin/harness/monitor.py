@@ -53,7 +53,11 @@ class MonitorError(ValueError):
 
 
 def live_dir_of(source: Path) -> Path:
-    return source / "live" if (source / "live").is_dir() else source
+    """Where the units are: ``source`` itself when it holds the live source's ``source.json`` or
+    unit manifests, else ``source/live`` (which may not exist yet)."""
+    if (source / "source.json").is_file() or any(source.glob("[0-9]*.json")):
+        return source
+    return source / "live"
 
 
 def read_events(path: Path) -> tuple[list[dict], int]:
@@ -144,6 +148,7 @@ class Monitor:
         self.pending: dict[int, list] = {}  # sample -> [(seq, manifest, summary or None)]
         self.estimator = None
         self.position_reference = None
+        self._checked = False
 
     # --- the log ------------------------------------------------------------------------------
     def _resume(self) -> int:
@@ -211,7 +216,10 @@ class Monitor:
         return not self.complete_units() and not self.pending
 
     def check_start(self) -> None:
-        """Refuse a model that does not match the recording (the first Phase I capture present)."""
+        """Refuse a model that does not match the recording: the first Phase I capture of the
+        source, checked once (at start, or when it arrives) before anything is scored."""
+        if self._checked:
+            return
         for man in self.complete_units():
             if man["kind"] == "phase1":
                 path = self.live / man["file"]
@@ -221,6 +229,7 @@ class Monitor:
                     self.model.check_recording(sig, f"{path}: /phase1/{man['name']}")
                 except ModelFileError as exc:
                     raise MonitorError(str(exc)) from None
+                self._checked = True
                 return
 
     # --- processing ---------------------------------------------------------------------------
@@ -233,7 +242,8 @@ class Monitor:
             rep = check_recording(path)
         except (DatasetError, OSError) as exc:
             return str(exc)
-        errors = [f"{f.where}: {f.message}" for f in rep.findings if f.level == "error"]
+        errors = [f"{path}: {f.what}" if f.what.startswith(f.where) else f"{path}: {f.where}: {f.what}"
+                  for f in rep.findings if f.level == "error"]
         if errors:
             return "; ".join(errors)
         if man["kind"] == "phase1":
@@ -427,6 +437,8 @@ class Monitor:
                       "wall_time": time.strftime("%Y-%m-%dT%H:%M:%S%z")}])
         idle = 0.0
         while True:
+            if not self._checked and not self.state.scored_samples:
+                self.check_start()
             if self.step():
                 idle = 0.0
                 continue
