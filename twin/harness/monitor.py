@@ -195,14 +195,18 @@ class Monitor:
         from twin.live import UNIT_FORMAT, manifest_ok
 
         out = []
+        pending = {item[0] for v in self.pending.values() for item in v}
         for p in sorted(self.live.glob("[0-9]*.json")):
+            head = p.name.split("-", 1)[0]
+            if head.isdigit() and (int(head) in self.state.covered or int(head) in pending):
+                continue  # accounted for: not even read
             try:
                 man = read_json(p, "a live unit's manifest")
             except (ValueError, OSError):
                 continue
             if man.get("format") != UNIT_FORMAT or man["seq"] in self.state.covered:
                 continue
-            if any(man["seq"] == item[0] for v in self.pending.values() for item in v):
+            if man["seq"] in pending:
                 continue
             if manifest_ok(self.live, man):
                 out.append(man)
@@ -256,11 +260,21 @@ class Monitor:
         return None
 
     def step(self) -> int:
-        """Process every complete unit not yet accounted for; returns how many."""
-        units = self.complete_units()
-        for man in units:
+        """Process the complete units not yet accounted for, in seq order and without a gap (a
+        unit whose predecessor is still being written waits for it, so the order, and with it
+        the log, never depends on when files arrive); returns how many."""
+        done = self.state.covered | {item[0] for v in self.pending.values() for item in v}
+        expected = 0
+        n = 0
+        for man in self.complete_units():
+            while expected in done:
+                expected += 1
+            if man["seq"] != expected:
+                break
             self._unit(man)
-        return len(units)
+            done.add(expected)
+            n += 1
+        return n
 
     def _unit(self, man: dict) -> None:
         seq, hours = man["seq"], float(man["hours"])
@@ -444,6 +458,11 @@ class Monitor:
                 continue
             if exit_at_end and self.finished():
                 return self.state.n_events
+            if exit_at_end and (self.live / "end.json").is_file() and self.pending \
+                    and not self.complete_units():
+                for sample in sorted(self.pending):  # the source ended inside a sample
+                    self._write(self._score_sample(sample))
+                continue
             if max_idle_s is not None and idle >= max_idle_s:
                 return self.state.n_events
             time.sleep(poll_s)
