@@ -250,5 +250,30 @@ def test_model_of_another_rate_is_refused_at_start(replay, tmp_path):
             "sampling rate fs_hz = 5000 Hz, the model expects 10000 Hz") in msg, msg
 
 
+def test_monitor_streams_scores_limits_alarms_and_backlash_to_rerun(replay, tmp_path):
+    """--rrd streams what --serve / --connect stream; read back on the hours timeline."""
+    from tests.test_view import _rows, _scalars, _store
+
+    rrd = tmp_path / "monitor.rrd"
+    run_twin("monitor", replay["live"], "--model", replay["model"], "-o", tmp_path / "state",
+             "--exit-at-end", "--rrd", rrd, timeout=600)
+    events = _events(tmp_path / "state/events.jsonl")
+    scored = [e for e in events if e["event"] == "sample scored"]
+    store = _store(rrd)
+    for name in ("pca_t2", "ocsvm"):
+        idx, vals = _scalars(store, f"/hours/phase1/{name}/score", "hours")
+        np.testing.assert_array_equal(idx, np.round(np.array([e["hours"] for e in scored]) * 3600e9))
+        np.testing.assert_array_equal(vals, [e["scores"][name] for e in scored])
+        _, lim = _scalars(store, f"/hours/phase1/{name}/limit", "hours")
+        assert len(set(lim)) == 1 and len(lim) == len(scored)
+    _, delta = _scalars(store, "/hours/backlash/delta_um", "hours")
+    phase2 = [e for e in events if e["event"].startswith("Phase II ") and "session" in e]
+    np.testing.assert_array_equal(delta, [e["delta_backlash_um"] for e in phase2])
+    _, texts = _rows(store, "/hours/events", "hours")
+    logged = [t[0] for t in texts["TextLog:text"]]
+    assert sum(t.startswith("alarm: ") for t in logged) == sum(e["event"] == "alarm" for e in events)
+    assert any(t.startswith("Phase II requested: ") for t in logged)
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__, "-q"]))

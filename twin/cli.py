@@ -414,6 +414,11 @@ def monitor(
     poll: float = typer.Option(0.2, "--poll", min=0.01, help="seconds between looks at SOURCE"),
     exit_at_end: bool = typer.Option(False, "--exit-at-end", help="stop once the source says it is "
                                      "finished and everything is processed"),
+    serve: bool = typer.Option(False, "--serve", help="stream scores, limits, alarms and backlash to a "
+                               "web viewer (Rerun) served here"),
+    connect: str | None = typer.Option(None, "--connect", help="stream to a running Rerun viewer at "
+                                       "this gRPC address (rerun+http://HOST:9876/proxy)"),
+    rrd: Path | None = typer.Option(None, "--rrd", help="stream into this .rrd file instead"),
 ) -> None:
     """Watch SOURCE: score every new Phase I sample with the model, alarm, ask for Phase II and
     estimate the change of backlash of the sessions that follow; events go to OUT/events.jsonl
@@ -422,9 +427,20 @@ def monitor(
     from twin.harness.monitor import Monitor, MonitorError
 
     _writable_dir(out, "state directory")
+    if sum((serve, connect is not None, rrd is not None)) > 1:
+        _fail("--serve, --connect and --rrd exclude each other: give one")
     try:
         mon = Monitor(source, model, out, say=lambda s: console.print(s, markup=False, highlight=False))
         console.print(f"monitoring {mon.live} with {model}; events -> {mon.log}", highlight=False)
+        if serve or connect or rrd:
+            _require("monitor --serve/--connect/--rrd", "view")
+            from twin.harness.view.monitor_view import MonitorView
+
+            view = MonitorView(mon.model.labels, mon.model.thresholds(), serve=serve, connect=connect,
+                               save=rrd)
+            mon.on_event = view.on_event
+            if view.url:
+                console.print(f"web viewer: {view.url}")
         n = mon.run(poll, exit_at_end)
     except (ModelFileError, MonitorError) as exc:
         _fail(str(exc))

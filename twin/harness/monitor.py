@@ -161,6 +161,9 @@ class Monitor:
             self.state.absorb(ev, self.model)
         if self.state.reference is not None:
             self._fit_reference(self.state.reference["file"], self.state.reference["session"])
+        if self.on_event:  # a viewer shows the history too
+            for ev in events:
+                self.on_event(ev)
         return len(events)
 
     def _write(self, events: list[dict]) -> None:
