@@ -275,5 +275,17 @@ def test_monitor_streams_scores_limits_alarms_and_backlash_to_rerun(replay, tmp_
     assert any(t.startswith("Phase II requested: ") for t in logged)
 
 
+def test_second_monitor_on_the_same_state_is_refused(replay, tmp_path):
+    from twin.harness.monitor import Monitor
+
+    first = Monitor(replay["live"], replay["model"], tmp_path / "state", say=lambda s: None)
+    first._lock()
+    proc = run_twin("monitor", replay["live"], "--model", replay["model"], "-o", tmp_path / "state",
+                    "--exit-at-end", check=False, timeout=120)
+    assert proc.returncode == 2
+    assert (f"{tmp_path / 'state'}: another twin monitor is writing this state directory; stop it "
+            "first, or give another -o") in " ".join(proc.stderr.split())
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(pytest.main([__file__, "-q"]))

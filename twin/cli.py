@@ -427,6 +427,9 @@ def monitor(
     from twin.harness.monitor import Monitor, MonitorError
 
     _writable_dir(out, "state directory")
+    if not source.is_dir():
+        _fail(f"{source}: no such directory; expected the campaign folder to watch (SOURCE/live/, "
+              "written by twin simulate --live or a DAQ following docs/monitoring.md)")
     if sum((serve, connect is not None, rrd is not None)) > 1:
         _fail("--serve, --connect and --rrd exclude each other: give one")
     try:

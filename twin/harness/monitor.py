@@ -151,6 +151,19 @@ class Monitor:
         self._checked = False
 
     # --- the log ------------------------------------------------------------------------------
+    def _lock(self) -> None:
+        """One monitor per state directory: an exclusive lock on ``STATE/.lock``, held while the
+        process lives (the kernel releases it when the process dies, even by SIGKILL)."""
+        import fcntl
+
+        self.state_dir.mkdir(parents=True, exist_ok=True)
+        self._lock_fh = open(self.state_dir / ".lock", "a+")  # noqa: SIM115 - held for the process's life
+        try:
+            fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise MonitorError(f"{self.state_dir}: another twin monitor is writing this state directory; "
+                               "stop it first, or give another -o") from None
+
     def _resume(self) -> int:
         self.state_dir.mkdir(parents=True, exist_ok=True)
         events, good = read_events(self.log)
@@ -446,6 +459,7 @@ class Monitor:
     def run(self, poll_s: float = 0.2, exit_at_end: bool = False, max_idle_s: float | None = None) -> int:
         """Resume from the log, then process units as they become complete until stopped (or,
         with ``exit_at_end``, until the source is finished). Returns the events written."""
+        self._lock()
         resumed = self._resume()
         self.check_start()
         self._write([{"event": "monitor started", "hours": None, "units": [],
