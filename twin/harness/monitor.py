@@ -207,22 +207,28 @@ class Monitor:
 
     # --- the source ---------------------------------------------------------------------------
     def complete_units(self) -> list[dict]:
-        """Manifests of the complete units not yet accounted for, in seq order."""
+        """Manifests of the complete units not yet accounted for, in seq order. The folder is
+        listed once; a name whose seq is accounted for is skipped without being read."""
         from twin.live import UNIT_FORMAT, manifest_ok
 
+        done = self.state.covered | {item[0] for v in self.pending.values() for item in v}
         out = []
-        pending = {item[0] for v in self.pending.values() for item in v}
-        for p in sorted(self.live.glob("[0-9]*.json")):
-            head = p.name.split("-", 1)[0]
-            if head.isdigit() and (int(head) in self.state.covered or int(head) in pending):
+        try:
+            entries = [e.name for e in os.scandir(self.live)]
+        except FileNotFoundError:
+            return []
+        for name in entries:
+            if not name.endswith(".json") or not name[:1].isdigit():
+                continue
+            head = name.split("-", 1)[0]
+            if head.isdigit() and int(head) in done:
                 continue  # accounted for: not even read
             try:
-                man = read_json(p, "a live unit's manifest")
+                man = read_json(self.live / name, "a live unit's manifest")
             except (ValueError, OSError):
                 continue
-            if man.get("format") != UNIT_FORMAT or man["seq"] in self.state.covered:
-                continue
-            if man["seq"] in pending:
+            if man.get("format") != UNIT_FORMAT or not {"seq", "kind", "name", "hours", "file", "bytes",
+                                                         "sha256"} <= set(man) or man["seq"] in done:
                 continue
             if manifest_ok(self.live, man):
                 out.append(man)
@@ -267,11 +273,11 @@ class Monitor:
         if errors:
             return "; ".join(errors)
         if man["kind"] == "phase1":
-            with open_measurements(path) as m:
-                sig = recording_signature(m.phase1(man["name"]))
             try:
+                with open_measurements(path) as m:
+                    sig = recording_signature(m.phase1(man["name"]))
                 self.model.check_recording(sig, f"{path}: /phase1/{man['name']}")
-            except ModelFileError as exc:
+            except (DatasetError, ModelFileError, OSError) as exc:
                 return str(exc)
         return None
 
@@ -304,11 +310,11 @@ class Monitor:
             why = self._refusal(man)
             summary = None
             if why is None:
-                with open_measurements(self.live / man["file"]) as m:
-                    try:
+                try:
+                    with open_measurements(self.live / man["file"]) as m:
                         summary = summarise_capture(m.phase1(man["name"]), str(self.live / man["file"]))
-                    except FeatureError as exc:
-                        why = str(exc)
+                except (DatasetError, FeatureError, OSError) as exc:
+                    why = str(exc)
             self.pending.setdefault(sample, []).append((seq, man, summary, why))
             if len(self.pending[sample]) >= int(man.get("captures_in_sample", 1)):
                 events += self._score_sample(sample)
