@@ -178,8 +178,8 @@ def _one_unit_source(replay, tmp_path, seqs):
 
 
 def test_half_written_capture_is_never_read(replay, tmp_path):
+    from analysis.dataset.live import sha256_of
     from twin.harness.monitor import Monitor
-    from twin.live import sha256_of
 
     src = _one_unit_source(replay, tmp_path, [])
     live = replay["live"] / "live"
@@ -205,8 +205,8 @@ def test_half_written_capture_is_never_read(replay, tmp_path):
 
 
 def test_bad_capture_is_refused_with_its_reason_and_the_monitor_goes_on(replay, tmp_path):
+    from analysis.dataset.live import sha256_of
     from twin.harness.monitor import Monitor
-    from twin.live import sha256_of
 
     src = _one_unit_source(replay, tmp_path, range(4))  # samples 0 and 1, two captures each
     bad = src / "000001-phase1-c000001.h5"
@@ -234,7 +234,7 @@ def test_bad_capture_is_refused_with_its_reason_and_the_monitor_goes_on(replay, 
 
 
 def test_model_of_another_rate_is_refused_at_start(replay, tmp_path):
-    from twin.live import sha256_of
+    from analysis.dataset.live import sha256_of
 
     src = _one_unit_source(replay, tmp_path, [0])
     f5 = src / "000000-phase1-c000000.h5"
@@ -285,6 +285,17 @@ def test_second_monitor_on_the_same_state_is_refused(replay, tmp_path):
     assert proc.returncode == 2
     assert (f"{tmp_path / 'state'}: another twin monitor is writing this state directory; stop it "
             "first, or give another -o") in " ".join(proc.stderr.split())
+
+
+def test_monitor_runs_without_the_simulator_and_rerun(replay, tmp_path):
+    """A maintenance engineer's install (`pip install .`): MuJoCo, Rerun and Dask unimportable."""
+    from tests.test_install import run_blocked
+
+    r = run_blocked("monitor", replay["live"], "--model", replay["model"], "-o", tmp_path / "state",
+                    "--exit-at-end", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert _comparable(_events(tmp_path / "state/events.jsonl")) == \
+        _comparable(_events(replay["state"] / "events.jsonl"))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -26,12 +26,12 @@ published units stay, and the simulation resumes from the stored parts.
 
 from __future__ import annotations
 
-import hashlib
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from analysis import dataset as ds
+from analysis.dataset.live import SOURCE_FORMAT, UNIT_FORMAT, UNIT_VERSION, manifest_ok, sha256_of
 from analysis.files import read_json, write_json
 from twin.campaign import Unit, _claim, assemble, phase2_item, plan, run_unit
 from twin.parts import PartStore
@@ -41,32 +41,12 @@ __all__ = ["LIVE_DIR", "UNIT_FORMAT", "live_units", "manifest_ok", "publish_unit
            "sha256_of"]
 
 LIVE_DIR = "live"
-UNIT_FORMAT = "ballscrew-twin/live-unit"
-SOURCE_FORMAT = "ballscrew-twin/live-source"
-UNIT_VERSION = 1
 
 
 def live_units(s: Scenario) -> list[Unit]:
     """The Phase I captures and Phase II sessions of the campaign in the order they are recorded."""
     order = {"phase1": 0, "phase2": 1}
     return sorted((u for u in plan(s) if u.kind in order), key=lambda u: (u.hours, order[u.kind], u.name))
-
-
-def sha256_of(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def manifest_ok(live_dir: Path, manifest: dict) -> bool:
-    """True when the manifest's data file is complete: its size and SHA-256 are the manifest's."""
-    p = Path(live_dir) / manifest["file"]
-    try:
-        return p.stat().st_size == manifest["bytes"] and sha256_of(p) == manifest["sha256"]
-    except OSError:
-        return False
 
 
 def publish_unit(s: Scenario, store: PartStore, unit: Unit, seq: int, live_dir: Path) -> dict:

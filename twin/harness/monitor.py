@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from analysis.dataset import DatasetError, open_measurements
+from analysis.dataset.live import MANIFEST_KEYS, UNIT_FORMAT, manifest_ok
 from analysis.files import read_json
 from analysis.phase1.features import FeatureError, sample_features, summarise_capture
 from analysis.phase1.model_file import ModelFileError, Phase1Model, recording_signature
@@ -209,8 +210,6 @@ class Monitor:
     def complete_units(self) -> list[dict]:
         """Manifests of the complete units not yet accounted for, in seq order. The folder is
         listed once; a name whose seq is accounted for is skipped without being read."""
-        from twin.live import UNIT_FORMAT, manifest_ok
-
         done = self.state.covered | {item[0] for v in self.pending.values() for item in v}
         out = []
         try:
@@ -227,8 +226,7 @@ class Monitor:
                 man = read_json(self.live / name, "a live unit's manifest")
             except (ValueError, OSError):
                 continue
-            if man.get("format") != UNIT_FORMAT or not {"seq", "kind", "name", "hours", "file", "bytes",
-                                                         "sha256"} <= set(man) or man["seq"] in done:
+            if man.get("format") != UNIT_FORMAT or not MANIFEST_KEYS <= set(man) or man["seq"] in done:
                 continue
             if manifest_ok(self.live, man):
                 out.append(man)
