@@ -419,6 +419,8 @@ def monitor(
     connect: str | None = typer.Option(None, "--connect", help="stream to a running Rerun viewer at "
                                        "this gRPC address (rerun+http://HOST:9876/proxy)"),
     rrd: Path | None = typer.Option(None, "--rrd", help="stream into this .rrd file instead"),
+    web_port: int = typer.Option(9090, "--web-port", help="with --serve: port of the web viewer"),
+    grpc_port: int = typer.Option(9876, "--grpc-port", help="with --serve: port of the data server"),
 ) -> None:
     """Watch SOURCE: score every new Phase I sample with the model, alarm, ask for Phase II and
     estimate the change of backlash of the sessions that follow; events go to OUT/events.jsonl
@@ -427,9 +429,9 @@ def monitor(
     from twin.harness.monitor import Monitor, MonitorError
 
     _writable_dir(out, "state directory")
-    if not source.is_dir():
-        _fail(f"{source}: no such directory; expected the campaign folder to watch (SOURCE/live/, "
-              "written by twin simulate --live or a DAQ following docs/monitoring.md)")
+    if not source.is_dir() and not source.absolute().parent.is_dir():  # SOURCE itself may come later
+        _fail(f"{source}: no such directory, nor its parent; expected the campaign folder to watch "
+              "(SOURCE/live/, written by twin simulate --live or a DAQ following docs/monitoring.md)")
     if sum((serve, connect is not None, rrd is not None)) > 1:
         _fail("--serve, --connect and --rrd exclude each other: give one")
     try:
@@ -440,7 +442,7 @@ def monitor(
             from twin.harness.view.monitor_view import MonitorView
 
             view = MonitorView(mon.model.labels, mon.model.thresholds(), serve=serve, connect=connect,
-                               save=rrd)
+                               save=rrd, web_port=web_port, grpc_port=grpc_port)
             mon.on_event = view.on_event
             if view.url:
                 console.print(f"web viewer: {view.url}")
