@@ -126,8 +126,8 @@ class MonitorState:
         elif kind in ("Phase II baseline", "Phase II estimated"):
             if self.reference is None:
                 self.reference = ev
-            d = ev["delta_backlash_um"]
-            self.backlash.append((ev["hours"], math.nan if d is None else d * 1e-6))
+            d = ev["delta_backlash_m"]  # SI, as twin backlash's trend takes it (no µm round trip)
+            self.backlash.append((ev["hours"], math.nan if d is None else d))
 
 
 def _num(v: float) -> float | None:
@@ -433,7 +433,7 @@ class Monitor:
                      "kind": "phase2", "reason": str(exc)}]
         delta = primary_m(est, self.estimator)
         ev = {"hours": hours, "units": [seq], "session": name, "file": man["file"],
-              "delta_backlash_um": _num(delta * 1e6),
+              "delta_backlash_um": _num(delta * 1e6), "delta_backlash_m": _num(delta),
               "delta_backlash_um_pitch": _num(est.delta_backlash_pitch_m * 1e6),
               "reference_session": name if self.state.reference is None else self.state.reference["session"],
               "skipped_runs": [{"run": r, "reason": w} for r, w in em.skipped]}
@@ -454,9 +454,11 @@ class Monitor:
                            "rate_um_per_kh": float(trend.rate[-1] * 1e9)}
             ev["prognosis"] = prog.to_json()
         rem = ev.get("prognosis", {}).get("remaining_hours")
+        when = ("" if rem is None else f", {rem:.0f} h to the 10 µm limit" if rem >= 0
+                else f", the trend crossed the 10 µm limit {-rem:.0f} h ago")
         self.say(f"Phase II session {name} at {hours:g} h: change of backlash "
                  f"{ev['delta_backlash_um'] if ev['delta_backlash_um'] is not None else float('nan'):.2f} µm"
-                 + (f", {rem:.0f} h to the 10 µm limit" if rem is not None else ""))
+                 + when)
         return [ev]
 
     # --- the loop ---------------------------------------------------------------------------------
