@@ -382,6 +382,19 @@ def _timeline(s: Scenario, units: list[Unit]) -> dict[str, np.ndarray]:
             "temperature_rise_K": np.array([c.temperature_rise for c in conds])}
 
 
+def phase2_item(s: Scenario, name: str, attrs: dict, data: dict, dattrs: dict) -> tuple:
+    """A stored Phase II part as the ``(session_name, session_attrs, runs)`` item of
+    :func:`analysis.dataset.assemble_measurements` (the runs with the routine's attributes)."""
+    runs = sorted({k.split("/")[0] for k in data if k.startswith("r")})
+    return (name, {"hours": attrs["hours"]},
+            [(r, {"speeds_mm_s": list(s.phase2.speeds_mm_s), "accel_mm_s2": s.phase2.accel_mm_s2,
+                  "start_mm": s.phase2.start_mm, "end_mm": s.phase2.end_mm,
+                  "dwell_s": s.phase2.dwell_s},
+              {k.split("/")[1]: data[k] for k in data if k.startswith(r + "/")},
+              {k.split("/")[1]: dattrs.get(k, {}) for k in data if k.startswith(r + "/")})
+             for r in runs])
+
+
 #: The order in which :func:`assemble` reads the parts, and so the order in which
 #: :func:`simulate_campaign` computes them (the assembly follows the simulation).
 ASSEMBLY_ORDER = ("dial", "phase1", "phase2")
@@ -408,15 +421,7 @@ def assemble(s: Scenario, out_dir: Path, units: list[Unit],
 
     def phase2_items():
         for u in by_kind["phase2"]:
-            attrs, data, dattrs = read(u)
-            runs = sorted({k.split("/")[0] for k in data if k.startswith("r")})
-            yield (u.name, {"hours": attrs["hours"]},
-                   [(r, {"speeds_mm_s": list(s.phase2.speeds_mm_s), "accel_mm_s2": s.phase2.accel_mm_s2,
-                         "start_mm": s.phase2.start_mm, "end_mm": s.phase2.end_mm,
-                         "dwell_s": s.phase2.dwell_s},
-                     {k.split("/")[1]: data[k] for k in data if k.startswith(r + "/")},
-                     {k.split("/")[1]: dattrs.get(k, {}) for k in data if k.startswith(r + "/")})
-                    for r in runs])
+            yield phase2_item(s, u.name, *read(u))
 
     dial_h, dial_b = [], []
     for u in by_kind["dial"]:

@@ -185,11 +185,28 @@ def simulate(
     set_: ScenarioOverrides = (),
     workers: Workers = None,
     scheduler: Scheduler = None,
+    live: bool = typer.Option(False, "--live", help="publish the units into OUT/live/ in time order, "
+                              "as complete files, at their scaled times (the source of twin monitor)"),
+    speedup: float = typer.Option(3600.0, "--speedup", min=1e-6, help="with --live: operating hours "
+                                  "run this many times faster than real time (3600: an hour a second)"),
 ) -> None:
     """Simulate a campaign: writes OUT/measurements.h5 and OUT/truth.h5 (resumes if killed).
     SCENARIO is a TOML file or the name of a shipped scenario (quick, demo, paper-rtf, ...)."""
     _require("simulate", "sim", *(["cluster"] if scheduler is not None else []))
     _one_executor(scheduler, workers, "units")
+    if live:
+        from twin.live import simulate_live
+
+        try:
+            s = load(scenario, set_)
+        except ScenarioError as exc:
+            _fail(str(exc))
+        _writable_dir(out, "campaign directory")
+        summary = simulate_live(s, out, speedup, on_unit=lambda i, n, m: console.print(
+            f"published {i}/{n}: {m['kind']} {m['name']} at {m['hours']:g} h", highlight=False))
+        console.print(f"{summary['published']} units published in {out / 'live'} "
+                      f"({summary['seconds']:.1f} s); wrote {out / 'measurements.h5'} and {out / 'truth.h5'}")
+        return
     summary = _run_simulation(scenario, out, set_, workers, scheduler)
     console.print(f"{summary['simulated']} units simulated ({summary['executor']}), "
                   f"{summary['skipped']} reused, {summary['seconds']:.1f} s; wrote {out / 'measurements.h5'} and "
@@ -376,8 +393,11 @@ def export_model(
 @app.command()
 def detect(
     directory: Path = typer.Argument(..., help="campaign directory (measurements.h5; truth.h5 for scoring)"),
-    reference: Path = typer.Option(..., "--reference", help="reference data set directory (Fisher selection)"),
+    reference: Path | None = typer.Option(None, "--reference", help="reference data set directory (Fisher selection)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="output directory (default: DIRECTORY/phase1)"),
+    save_model: Path | None = typer.Option(None, "--save-model", help="also write the fitted Phase I model there"),
+    model: Path | None = typer.Option(None, "--model", help="score with this model (from --save-model) "
+                                      "instead of fitting; no --reference then"),
     method: list[str] = typer.Option([], "--method", help="detector(s) to run: a registered name or "
                                      "module:Class, repeatable (default: every registered detector)"),
     consecutive: int = typer.Option(1, "--consecutive", min=1, help="alarms in a row that make a detection"),
@@ -387,15 +407,19 @@ def detect(
     from analysis.phase1.detect import run
 
     out = out or directory / "phase1"
+    if (reference is None) == (model is None) or (model is not None and save_model is not None):
+        _fail("give either --reference REF (fit; --save-model M to keep the fit) or --model M "
+              "(score with a saved model)")
     for d, what in ((directory, "recording"), (reference, "reference data set")):
-        if not (d / "measurements.h5").is_file():
+        if d is not None and not (d / "measurements.h5").is_file():
             _fail(f"{d}: no measurements.h5; expected the {what} in the dataset format "
                   "(docs/dataset-format.md)")
     _writable_dir(out)
     checked = gate_recording(directory, force, "detect")
     existed = out.is_dir() and any(out.iterdir())
     try:
-        details = run(directory, reference, out, method or None, consecutive)
+        details = run(directory, reference, out, method or None, consecutive, model=model,
+                      save_model=save_model)
     except (ValueError, FileNotFoundError) as exc:  # DatasetError, ExtractionError, DetectError
         kept = not existed and out.is_dir() and any(out.iterdir())
         _fail(f"{exc}" + (f" (what was computed before the error is in {out})" if kept else ""))
@@ -414,8 +438,58 @@ def detect(
     Console(width=max(100, Console().width)).print(table)
     record_check(out / "detection.json", checked)
     console.print(f"selected features: {', '.join(details['selected_features'])}")
-    console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}")
+    console.print(f"wrote {out / 'detection.json'} and {out / 'detection.png'}"
+                  + (f"; the model: {save_model}" if save_model else ""))
 # --- end of Phase I detection ---------------------------------------------------------------------
+
+
+@app.command()
+def monitor(
+    source: Path = typer.Argument(..., help="growing campaign folder (SOURCE/live/ from twin simulate --live)"),
+    model: Path = typer.Option(..., "--model", help="Phase I model from twin detect --save-model"),
+    out: Path = typer.Option(..., "-o", "--out", help="state directory: the event log events.jsonl"),
+    poll: float = typer.Option(0.2, "--poll", min=0.01, help="seconds between looks at SOURCE"),
+    exit_at_end: bool = typer.Option(False, "--exit-at-end", help="stop once the source says it is "
+                                     "finished and everything is processed"),
+    serve: bool = typer.Option(False, "--serve", help="stream scores, limits, alarms and backlash to a "
+                               "web viewer (Rerun) served here"),
+    connect: str | None = typer.Option(None, "--connect", help="stream to a running Rerun viewer at "
+                                       "this gRPC address (rerun+http://HOST:9876/proxy)"),
+    rrd: Path | None = typer.Option(None, "--rrd", help="stream into this .rrd file instead"),
+    web_port: int = typer.Option(9090, "--web-port", help="with --serve: port of the web viewer"),
+    grpc_port: int = typer.Option(9876, "--grpc-port", help="with --serve: port of the data server"),
+) -> None:
+    """Watch SOURCE: score every new Phase I sample with the model, alarm, ask for Phase II and
+    estimate the change of backlash of the sessions that follow; events go to OUT/events.jsonl
+    (docs/monitoring.md). Killed, it resumes from OUT with no event lost or repeated."""
+    from analysis.phase1.model_file import ModelFileError
+    from twin.harness.monitor import Monitor, MonitorError
+
+    _writable_dir(out, "state directory")
+    if not source.is_dir() and not source.absolute().parent.is_dir():  # SOURCE itself may come later
+        _fail(f"{source}: no such directory, nor its parent; expected the campaign folder to watch "
+              "(SOURCE/live/, written by twin simulate --live or a DAQ following docs/monitoring.md)")
+    if sum((serve, connect is not None, rrd is not None)) > 1:
+        _fail("--serve, --connect and --rrd exclude each other: give one")
+    try:
+        mon = Monitor(source, model, out, say=lambda s: console.print(s, markup=False, highlight=False))
+        console.print(f"monitoring {mon.live} with {model}; events -> {mon.log}", highlight=False)
+        if serve or connect or rrd:
+            _require("monitor --serve/--connect/--rrd", "view")
+            from twin.harness.view.monitor_view import MonitorView
+
+            view = MonitorView(mon.model.labels, mon.model.thresholds(), serve=serve, connect=connect,
+                               save=rrd, web_port=web_port, grpc_port=grpc_port)
+            mon.on_event = view.on_event
+            if view.url:
+                console.print(f"web viewer: {view.url}")
+        n = mon.run(poll, exit_at_end)
+    except (ModelFileError, MonitorError) as exc:
+        _fail(str(exc))
+    except KeyboardInterrupt:
+        console.print(f"stopped; resume with: twin {shlex.join(sys.argv[1:])}")
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    console.print(f"source finished: {n} events in {mon.log}")
 
 
 # --- Phase II backlash ----------------------------------------------------------------------------

@@ -54,10 +54,16 @@ def _extract_to_csv(measurements: Path, stem: Path):
     return table
 
 
-def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] | None = None,
+def run(campaign: Path, reference: Path | None, out: Path, methods: Sequence[str] | None = None,
         consecutive: int = 1, n_baseline: int = pipeline.N_BASELINE, fraction: float = 0.9,
-        random_state: int = 0) -> dict:
+        random_state: int = 0, *, model: Path | None = None, save_model: Path | None = None) -> dict:
     """Run the workflow; returns the details dict (also written as ``detection_details.json``).
+
+    ``save_model``: also write the fitted pipeline there (:mod:`analysis.phase1.model_file`).
+    ``model``: score with that persisted model instead of fitting (``reference``, ``methods``,
+    ``n_baseline``, ``fraction`` and ``consecutive`` are then the model's); the campaign's
+    baseline rows are those whose hours are the model's baseline hours (none if it was fitted
+    on another campaign).
 
     ``methods``: registered detector names or ``module:Class`` (:mod:`analysis.registry`);
     default every registered detector, in registration order.
@@ -65,6 +71,11 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] | Non
     Raises :class:`DetectError`, :class:`analysis.dataset.DatasetError` or
     :class:`analysis.phase1.pipeline.ExtractionError` (all ``ValueError``) on bad input.
     """
+    if model is not None:
+        return _run_with_model(Path(campaign), Path(model), Path(out))
+    if reference is None:
+        raise DetectError("no reference data set and no model: give --reference REF (to fit) or "
+                          "--model M (a model written by --save-model)")
     campaign, reference, out = Path(campaign), Path(reference), Path(out)
     try:
         specs = list(registry.names("detectors")) if not methods else list(methods)
@@ -108,6 +119,44 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] | Non
 
     # 3. Detectors and scoring.
     results = pipeline.run_detectors(table, selected, methods, n_baseline, random_state)
+    if save_model is not None:
+        from analysis.phase1.model_file import from_fit, recording_signature
+
+        with open_measurements(campaign / "measurements.h5") as m:
+            rec = recording_signature(m.phase1(m.phase1_captures()[0]))
+        from_fit(table, selected, results, n_baseline, consecutive, rec,
+                 {"campaign": str(campaign), "reference": str(reference),
+                  "selected_features": selection["selected"]}).save(save_model)
+    return _finish(campaign, out, table, results, n_baseline, consecutive,
+                   {"reference": str(reference), "selected_features": selection["selected"]})
+
+
+def _run_with_model(campaign: Path, model_path: Path, out: Path) -> dict:
+    """``run`` with a persisted model: features with its templates, scores with its detectors."""
+    from analysis.phase1.model_file import Phase1Model, recording_signature
+
+    model = Phase1Model.load(model_path)
+    _require(campaign / "measurements.h5", "the campaign's measurements.h5")
+    with open_measurements(campaign / "measurements.h5") as m:
+        names = m.phase1_captures()
+        if not names:
+            raise DetectError(f"{campaign / 'measurements.h5'}: /phase1 has no captures")
+        model.check_recording(recording_signature(m.phase1(names[0])),
+                              f"{campaign / 'measurements.h5'}: /phase1/{names[0]}")
+    out.mkdir(parents=True, exist_ok=True)
+    table = pipeline.extract(campaign / "measurements.h5", templates=model.templates)
+    table.write_csv(out / "features.csv")
+    results = model.score_table(table.X, table.ae)
+    nb = model.n_baseline
+    n_baseline = nb if len(table.hours) >= nb and np.array_equal(table.hours[:nb], model.baseline_hours) else 0
+    return _finish(campaign, out, table, results, n_baseline, model.consecutive,
+                   {"model": str(model_path), "reference": model.provenance.get("reference"),
+                    "selected_features": [model.feature_names[i] for i in model.selected]})
+
+
+def _finish(campaign: Path, out: Path, table, results: dict, n_baseline: int, consecutive: int,
+            extra: dict) -> dict:
+    """Score the detectors against the injected onset; write detection.json, the details, the PNG."""
     onset = None
     truth = campaign / "truth.h5"
     if truth.is_file():
@@ -118,9 +167,10 @@ def run(campaign: Path, reference: Path, out: Path, methods: Sequence[str] | Non
     detections = {m: s.detection_hours for m, s in scores.items()}
     write_json(out / "detection.json", detection_json(table.hours, results, detections))
     details = {
-        "campaign": str(campaign), "reference": str(reference), "onset_hours": onset,
+        "campaign": str(campaign), "reference": extra.get("reference"), "onset_hours": onset,
         "n_samples": len(table.hours), "n_baseline": n_baseline, "consecutive": consecutive,
-        "selected_features": selection["selected"],
+        "selected_features": extra["selected_features"],
+        **({"model": extra["model"]} if "model" in extra else {}),
         "methods": {m: {"label": results[m]["label"], **asdict(scores[m]),
                         "threshold": results[m]["threshold"],
                         "n_components": getattr(results[m]["detector"], "n_components_", None)}

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import csv
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
@@ -63,7 +63,9 @@ class FeatureTable:
 
     hours (n,) h: hours of each sample's first capture; samples (n,) sample index; X (n, 46) raw
     features in ``FEATURE_NAMES`` order (units per feature, see :mod:`features`); ae (n, m)
-    averaged torque windows (N*m); n_captures (n,); names: the 46 feature names; source: the file.
+    averaged torque windows (N*m); n_captures (n,); names: the 46 feature names; source: the file;
+    templates: the transient-torque templates the correlation features were computed against
+    ({+1, -1: (TRANSIENT_POINTS,) N*m}).
     """
 
     hours: np.ndarray
@@ -73,6 +75,7 @@ class FeatureTable:
     n_captures: np.ndarray
     names: tuple[str, ...]
     source: str
+    templates: dict[int, np.ndarray] = field(default_factory=dict)
 
     def write_csv(self, path: Path) -> None:
         """Write the raw features, one row per sample (columns hours, sample, n_captures, names)."""
@@ -84,8 +87,9 @@ class FeatureTable:
                             *(f"{v:.9g}" for v in self.X[i])])
 
 
-def _table(groups: list[list[CaptureSummary]], source: str) -> FeatureTable:
-    templates = transient_templates(groups[0])
+def _table(groups: list[list[CaptureSummary]], source: str,
+           templates: dict[int, np.ndarray] | None = None) -> FeatureTable:
+    templates = transient_templates(groups[0]) if templates is None else templates
     X = np.array([sample_features(g, templates) for g in groups])
     ae_rows = []
     for g in groups:
@@ -97,11 +101,15 @@ def _table(groups: list[list[CaptureSummary]], source: str) -> FeatureTable:
         hours=np.array([min(c.hours for c in g) for g in groups]),
         samples=np.array([g[0].sample for g in groups]),
         X=X, ae=ae, n_captures=np.array([len(g) for g in groups]),
-        names=FEATURE_NAMES, source=source)
+        names=FEATURE_NAMES, source=source, templates=templates)
 
 
-def extract(path: str | Path, progress: Callable[[int, int], None] | None = None) -> FeatureTable:
+def extract(path: str | Path, progress: Callable[[int, int], None] | None = None,
+            templates: dict[int, np.ndarray] | None = None) -> FeatureTable:
     """Feature table of the Phase I captures in ``path`` (a ``measurements.h5``).
+
+    ``templates``: the transient-torque templates of a persisted model
+    (:mod:`analysis.phase1.model_file`); default: those of the first sample of ``path``.
 
     Captures are grouped by their ``sample`` attribute; samples are ordered by hours. Raises
     :class:`ExtractionError` (message naming file, group and channel) on the first capture that
@@ -126,9 +134,9 @@ def extract(path: str | Path, progress: Callable[[int, int], None] | None = None
             if _sample_of(path, name) in (None, groups[-1][0].sample):
                 groups = groups[:-1]  # the failing capture's sample is incomplete
             if groups:
-                partial = _table(groups, str(path))
+                partial = _table(groups, str(path), templates)
         raise ExtractionError(str(exc), partial) from None
-    return _table(_group(summaries), str(path))
+    return _table(_group(summaries), str(path), templates)
 
 
 def _sample_of(path: Path, name: str | None) -> int | None:
