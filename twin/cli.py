@@ -1092,7 +1092,7 @@ def diagnose(
         _fail(f"--budget-minutes {budget_minutes:g}: expected a positive number of minutes (the time "
               "the diagnosis may take)")
     from analysis.dataset import DatasetError
-    from twin.harness.gap_runner import check_kinds, check_response_seeds, run_diagnosis
+    from twin.harness.gap_runner import check_kinds, check_response_seeds, resolve_library, run_diagnosis
 
     try:
         s = load(scenario, overrides)
@@ -1109,6 +1109,10 @@ def diagnose(
     if not (real_dir / "measurements.h5").is_file():
         _fail(f"{real_dir}: no measurements.h5; expected a recording in the dataset format "
               "(docs/dataset-format.md)")
+    try:  # an unknown candidate is refused before the recording is read
+        resolve_library(list(candidates) or None, kind_list)
+    except ValueError as exc:
+        _fail(str(exc))
     out = out or real_dir / "diagnosis"
     _writable_dir(out)
     checked = gate_recording(real_dir, force, "diagnose")

@@ -169,7 +169,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None, *,
             if stroke >= travel:
                 raise ScenarioError(
                     f"{meas['file']}: the Phase I stroke measured from the motor speed through /@axis.lead_mm "
-                    f"= {axis.lead_mm:g} mm is {stroke:g} mm, not within the travel /@axis.travel_mm = "
+                    f"= {axis.lead_mm:g} mm is {stroke:.4g} mm, not within the travel /@axis.travel_mm = "
                     f"{travel:g} mm; expected a stroke shorter than the travel (is the lead right?)")
             start = round((travel - stroke) / 2, 3)
             ph1.add("start_mm", start, MEASURED, "stroke measured; its place assumed centred in the travel")
