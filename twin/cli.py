@@ -66,11 +66,15 @@ def _writable_dir(out: Path, what: str = "output directory") -> None:
 
 def gate_recording(directory: Path, force: bool, verb: str) -> dict:
     """``twin check`` before an analysis: exit 2 listing the errors unless ``force``; print the
-    warnings (and forced errors). Returns the record the analysis writes into its JSON
-    (:func:`analysis.ingest.check.check_record`). ``twin calibrate`` calls it the same way."""
+    warnings (and forced errors); a directory without ``measurements.h5`` exits 2 first.
+    Returns the record the analysis writes into its JSON
+    (:func:`analysis.ingest.check.check_record`)."""
     from analysis.dataset import DatasetError
     from analysis.ingest.check import RecordingRefused, check_record, require_clean_recording
 
+    if not (directory / "measurements.h5").is_file():
+        _fail(f"{directory}: no measurements.h5; expected a recording in the dataset format "
+              "(docs/dataset-format.md)")
     try:
         findings = require_clean_recording(directory, force, f"twin {verb}")
     except RecordingRefused as exc:
@@ -555,9 +559,6 @@ def backlash(
         _fail(f"--process-noise {process_noise!r}: expected a number >= 0 in m²/h³ (e.g. 1e-23), 'ml' or 'auto'")
     if position_reference not in ("auto", "command", "imu"):
         _fail(f"--position-reference {position_reference!r}: expected 'auto', 'command' or 'imu'")
-    if not (directory / "measurements.h5").is_file():
-        _fail(f"{directory}: no measurements.h5; expected a recording in the dataset format "
-              "(docs/dataset-format.md)")
     checked = gate_recording(directory, force, "backlash")
     try:
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
@@ -859,9 +860,6 @@ def calibrate(
 
     if out.exists() and out.is_dir():
         _fail(f"-o {out}: is a directory; expected a scenario file path (e.g. {out / 'axis.toml'})")
-    if not (directory / "measurements.h5").is_file():
-        _fail(f"{directory}: no measurements.h5; expected a recording in the dataset format "
-              "(docs/dataset-format.md)")
     checked = gate_recording(directory, force, "calibrate")
     try:
         rec = run_calibration(directory, out, budget_minutes=budget_minutes, workers=workers,
@@ -1106,9 +1104,6 @@ def diagnose(
         kind_list = check_kinds(None if kinds is None else [k.strip() for k in kinds.split(",") if k.strip()])
     except ValueError as exc:
         _fail(f"--kinds {kinds}: {exc}")
-    if not (real_dir / "measurements.h5").is_file():
-        _fail(f"{real_dir}: no measurements.h5; expected a recording in the dataset format "
-              "(docs/dataset-format.md)")
     try:  # an unknown candidate is refused before the recording is read
         resolve_library(list(candidates) or None, kind_list)
     except ValueError as exc:

@@ -258,14 +258,13 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
 
 @dataclass
 class FitResult:
-    """Layer (c)'s outcome: the fitted ``values``, the keys it ``informed``, the ``skipped``
+    """Layer (c)'s outcome: the fitted ``values``, the ``skipped``
     ones and why, the twin ``simulations`` run, the ``seconds`` spent, the ``residual`` (in
     standard errors) and, for layer (b)'s correction, the instruments the twin's own rests give
     at each of the spread's seeds (``instruments``: {key: [value per seed]}) for the values it
     was set to."""
 
     values: list[Value]
-    informed: list[str]
     skipped: dict[str, str]
     simulations: int
     seconds: float
@@ -306,7 +305,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     with open_measurements(recording / "measurements.h5") as m:
         names = m.phase1_captures()
         if not names:
-            return FitResult([], [], {k: "no Phase I capture: no torque to fit" for k, _, _ in FITTED}, 0,
+            return FitResult([], {k: "no Phase I capture: no torque to fit" for k, _, _ in FITTED}, 0,
                              0.0, [], {}, {})
         first = min(m.phase1_header(n)[1] for n in names)
         caps = [n for n in names if m.phase1_header(n)[1] == first][:FIT_CAPTURES]
@@ -493,7 +492,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     for r in final:
         for k, v in r[2].items():
             inst.setdefault(k, []).append(float(v))
-    return FitResult(values, [keys[j] for j in free], skipped, sims[0], time.perf_counter() - t0,
+    return FitResult(values, skipped, sims[0], time.perf_counter() - t0,
                      [float(r) for r in fun], inst, first)
 
 

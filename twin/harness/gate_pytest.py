@@ -67,35 +67,32 @@ def _report(results) -> str:
                      for r in results if not r.passed)
 
 
+def _assert_checks(kind: str, method: Any, cache, checks: Sequence[str]) -> list:
+    """Run the suite's ``kind`` checks ("backlash" or "detection"; those named in ``checks``)
+    on ``method``; ``AssertionError`` naming each failed check, else the results."""
+    from twin.harness.gate import run_backlash_checks, run_detection_checks, select_checks
+
+    cache = cache if cache is not None else gate_cache()
+    backlash, detection = select_checks(cache.suite, checks)
+    selected, run = (backlash, run_backlash_checks) if kind == "backlash" else (detection, run_detection_checks)
+    if checks and not selected:
+        raise ValueError(f"checks {list(checks)}: none is a {kind} check")
+    results = run(method, cache, selected)
+    failed = [r for r in results if not r.passed]
+    if failed:
+        raise AssertionError(f"{len(failed)} of {len(results)} {kind} checks failed:\n{_report(results)}")
+    return results
+
+
 def assert_recovers_backlash(estimator: Any, *, cache=None, checks: Sequence[str] = ()) -> list:
     """Run the suite's backlash checks (or those named in ``checks``) on ``estimator`` (an
     unfitted instance, a registered name or ``module:Class``); ``AssertionError`` naming each
     failed check, else the list of :class:`twin.harness.gate.CheckResult`."""
-    from twin.harness.gate import run_backlash_checks, select_checks
-
-    cache = cache if cache is not None else gate_cache()
-    selected, _ = select_checks(cache.suite, checks)
-    if checks and not selected:
-        raise ValueError(f"checks {list(checks)}: none is a backlash check")
-    results = run_backlash_checks(estimator, cache, selected)
-    failed = [r for r in results if not r.passed]
-    if failed:
-        raise AssertionError(f"{len(failed)} of {len(results)} backlash checks failed:\n{_report(results)}")
-    return results
+    return _assert_checks("backlash", estimator, cache, checks)
 
 
 def assert_detects_preload_loss(detector: Any, *, cache=None, checks: Sequence[str] = ()) -> list:
     """Run the suite's detection checks (or those named in ``checks``) on ``detector`` (an
     unfitted instance, a registered name or ``module:Class``); ``AssertionError`` naming each
     failed check, else the list of :class:`twin.harness.gate.CheckResult`."""
-    from twin.harness.gate import run_detection_checks, select_checks
-
-    cache = cache if cache is not None else gate_cache()
-    _, selected = select_checks(cache.suite, checks)
-    if checks and not selected:
-        raise ValueError(f"checks {list(checks)}: none is a detection check")
-    results = run_detection_checks(detector, cache, selected)
-    failed = [r for r in results if not r.passed]
-    if failed:
-        raise AssertionError(f"{len(failed)} of {len(results)} detection checks failed:\n{_report(results)}")
-    return results
+    return _assert_checks("detection", detector, cache, checks)
