@@ -101,6 +101,44 @@ def test_rest_spectrum_gives_floor_and_bandwidth_of_a_butterworth_channel():
     assert butterworth_cutoff(f, psd[:, 0], dens[0], 2, fs, 250.0) == pytest.approx(300.0, rel=0.03)
 
 
+def test_suspension_mode_follows_the_trucks():
+    """The suspension modes read on the twin's nut accelerometers follow the trucks: the vertical
+    one moves as √k (the vertical stiffness halved: the frequency / √2 within 3 %), the lateral
+    one at least as much (/ 1.37–1.7: as the mode softens the motion's content below it pulls
+    the centroid down; the fit through the twin reads the same statistic, so it needs only a
+    steep, smooth response); neither moves with what it must not see (a nut 4× softer, a
+    velocity loop at half its bandwidth: < 0.5 %)."""
+    from analysis.calibration.drive import suspension_mode
+    from twin.campaign import KIND_PHASE1, condition_at, make_world, rng_for
+    from twin.scenario import from_dict, load
+    from twin.simulate import Simulator, phase1_capture
+
+    base = load("foreign-16mm").model_dump(mode="json")
+    base["phase1"]["capture_s"] = 1.0
+
+    def modes(**axis) -> tuple[float, float]:
+        d = json.loads(json.dumps(base))
+        d["axis"].update(axis)
+        s = from_dict(d)
+        sim = Simulator(make_world(s), s.phase1.timestep_s)
+        c = phase1_capture(sim, s.phase1, condition_at(s, 100.0), rng_for(0, KIND_PHASE1, 1))
+        return tuple(suspension_mode([c["acc1"], c["acc2"]], s.phase1.fs_hz, col) for col in (2, 1))
+
+    kv, kl = base["axis"]["truck_stiffness_vertical_N_per_um"], base["axis"]["truck_stiffness_lateral_N_per_um"]
+    z0, y0 = modes()
+    z_soft, _ = modes(truck_stiffness_vertical_N_per_um=kv / 2)
+    _, y_soft = modes(truck_stiffness_lateral_N_per_um=kl / 2)
+    z_nut, y_nut = modes(nut_stiffness_N_per_um=100.0)
+    z_loop, y_loop = modes(velocity_bandwidth_hz=30.0)
+    print(f"vertical mode {z0:.1f} Hz, {z_soft:.1f} Hz with the vertical stiffness halved; lateral {y0:.1f} Hz, "
+          f"{y_soft:.1f} Hz halved; a nut 4x softer {z_nut:.1f}/{y_nut:.1f} Hz, the velocity loop at half "
+          f"{z_loop:.1f}/{y_loop:.1f} Hz")
+    assert z0 / z_soft == pytest.approx(math.sqrt(2), rel=0.03)
+    assert 1.37 <= y0 / y_soft <= 1.7
+    for z, y in ((z_nut, y_nut), (z_loop, y_loop)):
+        assert z == pytest.approx(z0, rel=0.005) and y == pytest.approx(y0, rel=0.005)
+
+
 def test_torque_resolution_is_the_grid_step():
     rng = np.random.default_rng(4)
     q = 0.001
@@ -161,7 +199,8 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
     rec = json.loads((tmp / "axis.calibration.json").read_text())
     got = {v["key"]: v for v in rec["values"]}
     fitted = {"axis.carriage_mass_kg", "axis.rail_friction_N", "axis.drag_viscous_Nm_s_per_rad",
-              "axis.torque_ripple_Nm", "phase1.accel_mm_s2", "phase1.dwell_s"}
+              "axis.torque_ripple_Nm", "phase1.accel_mm_s2", "phase1.dwell_s",
+              "axis.truck_stiffness_vertical_N_per_um", "axis.truck_stiffness_lateral_N_per_um"}
     measured = {"sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_hz",
                 "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz",
                 "sensors.nut_acc_noise_ug_per_rthz", "sensors.torque_noise_Nm"}
@@ -179,7 +218,8 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
     # the TOML says where each value came from, and why a default is kept
     text = (tmp / "axis.toml").read_text()
     assert "carriage_mass_kg" in text and "# fitted: fitted jointly to the torque's inertia" in text
-    assert "nut_stiffness_N_per_um" in text and "twin default: the recording cannot inform it: no statistic" in text
+    assert "nut_stiffness_N_per_um" in text and "twin default: the recording cannot inform it: the axial mode" in text
+    assert "# fitted: fitted jointly to the vertical suspension mode of the nut accelerometers" in text
     assert "[calibration]" in text
     assert "axis.drag_viscous_Nm_s_per_rad" in cal.stdout  # the table of values, on stdout
     said = " ".join(cal.stderr.split())

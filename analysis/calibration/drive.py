@@ -15,6 +15,15 @@ The torque ripple of a permanent-magnet motor is locked to the rotor angle θ = 
 and W. L. Soong, "Pulsating torque minimization techniques for permanent magnet AC motor
 drives", IEEE Trans. Ind. Electron. 43(2), 1996): its amplitude at order k is read by
 demodulating the torque with exp(−i·k·θ) over the cruise (a lock-in amplifier).
+
+The carriage rides on the rails' trucks as a mass on springs: its vertical and lateral
+suspension modes ring at f = (1/2π)·√(k/m) (k the trucks' contact stiffness in that direction, m
+the moving mass; any text on vibration, e.g. S. S. Rao, "Mechanical Vibrations", ch. 2), and the
+nut accelerometers' z and y channels carry them well above the motion's own content. Their
+frequency is read as the centroid of the squared power spectral density over a fixed band
+(:func:`suspension_mode`): the square weights the resonance far above the broadband floor, and
+unlike the highest bin the centroid moves smoothly with k, which a least-squares fit through the
+twin needs.
 """
 
 from __future__ import annotations
@@ -105,6 +114,32 @@ def recording_statistics(m, captures: list[str], ripple_order: int) -> tuple[np.
         mean = np.nanmean(x, axis=0) if len(rows) else np.full(4, np.nan)
         sd = np.nanstd(x, axis=0, ddof=1) if len(rows) > 1 else np.full(4, np.nan)
     return mean, sd / np.sqrt(np.maximum(n, 1))
+
+
+#: The band the suspension modes are looked for in, Hz (below 0.45 of the sampling rate).
+MODE_BAND_HZ = (100.0, 2000.0)
+#: Welch segment of :func:`suspension_mode`, s.
+MODE_SEGMENT_S = 0.16
+
+
+def suspension_mode(acc: list[np.ndarray], fs: float, column: int) -> float:
+    """Frequency (Hz) of the carriage's suspension mode seen by the accelerometers ``acc`` (each
+    (n, 3) m/s², columns x axial, y lateral, z vertical) in ``column`` (1: lateral, 2:
+    vertical): the centroid Σ f·P(f)² / Σ P(f)² of the Welch PSD P (Hann segments of
+    :data:`MODE_SEGMENT_S`) averaged over the accelerometers, over :data:`MODE_BAND_HZ` capped at
+    0.45·``fs``. NaN when the band is empty or holds no power."""
+    hi = min(MODE_BAND_HZ[1], 0.45 * fs)
+    nper = int(round(MODE_SEGMENT_S * fs))
+    if not acc or hi <= MODE_BAND_HZ[0] or min(len(a) for a in acc) < nper:
+        return float("nan")
+    psd = None
+    for a in acc:
+        f, p = signal.welch(np.asarray(a, float)[:, column], fs, nperseg=nper)
+        psd = p if psd is None else psd + p
+    band = (f >= MODE_BAND_HZ[0]) & (f <= hi)
+    w = psd[band] ** 2
+    total = float(np.sum(w))
+    return float(np.sum(f[band] * w) / total) if total > 0 else float("nan")
 
 
 def imu_ripple(run, lead_m: float, order: int, max_hz: float) -> float:

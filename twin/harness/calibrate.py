@@ -8,8 +8,9 @@ b. **the sensor chain**, measured from the rests (:mod:`analysis.calibration.sen
 c. **the drive's physical parameters and the Phase I acceleration, jointly**, fitted by indirect
    inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl.
    Econometrics 8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the
-   torque's rigid-body fit J, T_c, c_v, the ripple at its order) and the routine fit's
-   acceleration are computed on the recording's first Phase I sample and on the twin simulated
+   torque's rigid-body fit J, T_c, c_v, the ripple at its order, the carriage's vertical and
+   lateral suspension modes on the nut accelerometers) and the routine fit's acceleration are
+   computed on the recording's first Phase I sample and on the twin simulated
    with the same layout and one seed (common random numbers: every evaluation draws the same
    noise), and ``scipy.optimize.least_squares`` (trust-region reflective, bounds a factor of
    10 either side of the start) moves the parameters until the two agree within the statistics'
@@ -24,8 +25,9 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
 
 Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters
 (each responds mostly to one: J to the mass, T_c to the constant drag, c_v to the viscous drag, the
-ripple amplitude to the ripple, the ramps' slope to the commanded acceleration), the problem is
-square and small (6 unknowns), and with common random numbers the residual is deterministic,
+ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, a suspension
+mode's frequency to the trucks' stiffness in its direction and the mass), the problem is
+square and small (8 unknowns), and with common random numbers the residual is deterministic,
 so a Gauss–Newton method converges in a few Jacobians where a Bayesian optimiser would need tens
 of evaluations; its Jacobian is also what the intervals need.
 
@@ -47,7 +49,7 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize
 
-from analysis.calibration.drive import imu_ripple, recording_statistics
+from analysis.calibration.drive import imu_ripple, recording_statistics, suspension_mode
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
 from analysis.files import write_json, write_text
@@ -56,7 +58,7 @@ from twin.config import get_dotted, set_dotted
 from twin.executors import default_processes
 from twin.scenario import Scenario, ScenarioError, from_dict, load
 
-CALIBRATE_VERSION = 1
+CALIBRATE_VERSION = 2
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -87,8 +89,11 @@ FITTED = (
     ("axis.torque_ripple_Nm", "ripple", "N·m"),
     ("phase1.accel_mm_s2", "accel", "mm/s²"),
     ("phase1.dwell_s", "dwell", "s"),
+    ("axis.truck_stiffness_vertical_N_per_um", "vertical_mode", "N/µm"),
+    ("axis.truck_stiffness_lateral_N_per_um", "lateral_mode", "N/µm"),
 )
-STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel", "dwell")
+STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel", "dwell", "vertical_mode",
+              "lateral_mode")
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
 NOT_INFORMED = {
@@ -96,11 +101,9 @@ NOT_INFORMED = {
                                 "lead): the fit puts all of it in the carriage mass",
     "axis.no_load_torque_Nm": "one constant drag is seen at the motor (the nut's and the rails' reflected "
                               "through the lead): the fit puts all of it in the rail friction",
-    "axis.nut_stiffness_N_per_um": "no statistic of the axial mode yet: the nut's and the bearings' springs "
-                                   "in series are not fitted",
-    "axis.bearing_stiffness_N_per_um": "no statistic of the axial mode yet (springs in series with the nut)",
-    "axis.truck_stiffness_vertical_N_per_um": "no statistic of the suspension modes yet",
-    "axis.truck_stiffness_lateral_N_per_um": "no statistic of the suspension modes yet",
+    "axis.nut_stiffness_N_per_um": "the axial mode is damped by the servo into a broad hump the loops' "
+                                   "bandwidths move as much: no statistic tells the nut's spring apart",
+    "axis.bearing_stiffness_N_per_um": "in series with the nut's spring behind the same damped axial mode",
     "axis.position_bandwidth_hz": "Phase I records no command: the loops' lag is not told from the routine's "
                                   "timing",
     "axis.velocity_bandwidth_hz": "Phase I records no command: the loops' lag is not told from the routine's "
@@ -119,6 +122,8 @@ CHANNELS = {
     "axis.carriage_mass_kg": ("speed", "torque"), "axis.rail_friction_N": ("speed", "torque"),
     "axis.drag_viscous_Nm_s_per_rad": ("speed", "torque"), "axis.torque_ripple_Nm": ("imu_acc", "position_cmd"),
     "phase1.accel_mm_s2": ("speed",), "phase1.dwell_s": ("speed",),
+    "axis.truck_stiffness_vertical_N_per_um": ("acc1", "acc2"),
+    "axis.truck_stiffness_lateral_N_per_um": ("acc1", "acc2"),
     "sensors.imu_acc_noise_ug_per_rthz": ("imu_acc",), "sensors.imu_acc_bandwidth_hz": ("imu_acc",),
     "sensors.imu_gyro_noise_urad_s_per_rthz": ("imu_gyro",), "sensors.imu_gyro_bandwidth_hz": ("imu_gyro",),
     "sensors.nut_acc_noise_ug_per_rthz": ("acc1", "acc2"), "sensors.torque_noise_Nm": ("torque",),
@@ -182,14 +187,16 @@ def _key(s: Scenario) -> str:
 
 
 def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """(values (6,), standard errors (6,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    """(values (8,), standard errors (8,)) of :data:`STAT_NAMES` over the Phase I ``captures``
     and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
     statistics of the captures, with the ripple read on the IMU of the runs when there are any
     (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
     other content at its order; in the Phase I torque a component of random phase at the same
     order hides it), and the routine fit's acceleration (mm/s²) and dwell (s) of Phase I, their
     errors from the scatter of the ramps' slopes and of the rests (the servo's lag at the start
-    and at the end of a move differ a little: both are fitted through the twin's servo)."""
+    and at the end of a move differ a little: both are fitted through the twin's servo), and the
+    vertical and lateral suspension modes (Hz, :func:`analysis.calibration.drive.suspension_mode`)
+    with their scatter over the captures."""
     order = s.axis.torque_ripple_per_rev
     mean, se = recording_statistics(m, captures, order)
     if runs:
@@ -209,7 +216,16 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
                    if a["t_stop"] is not None and b["t_start"] is not None]
     acc, acc_se = _mean_se(slopes)
     dwell, dwell_se = _mean_se(dwells)
-    return np.append(mean, [acc, dwell]), np.append(se, [acc_se, dwell_se])
+    freqs: list[list[float]] = [[], []]
+    for name in captures:
+        c = m.phase1(name)
+        for row, column in zip(freqs, (2, 1), strict=True):  # vertical, lateral
+            f = suspension_mode([c.acc1, c.acc2], float(c.fs_hz), column)
+            if np.isfinite(f):
+                row.append(f)
+    modes = [_mean_se(row) for row in freqs]
+    return (np.append(mean, [acc, dwell, *(v for v, _ in modes)]),
+            np.append(se, [acc_se, dwell_se, *(e for _, e in modes)]))
 
 
 def _mean_se(x: list[float]) -> tuple[float, float]:
@@ -262,7 +278,8 @@ class FitResult:
     ones and why, the twin ``simulations`` run, the ``seconds`` spent, the ``residual`` (in
     standard errors) and, for layer (b)'s correction, the instruments the twin's own rests give
     at each of the spread's seeds (``instruments``: {key: [value per seed]}) for the values it
-    was set to."""
+    was set to; ``estimated_s``: the whole calibration's time as estimated after the first
+    simulations (what ``--budget-minutes`` is held to; None when no fit ran)."""
 
     values: list[Value]
     skipped: dict[str, str]
@@ -271,6 +288,7 @@ class FitResult:
     residual: list[float]
     instruments: dict[str, list[float]]
     first_sensors: dict[str, float]
+    estimated_s: float | None = None
 
 
 def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
@@ -477,6 +495,9 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         stat = FITTED[i][1]
         if stat in ("accel", "dwell"):
             note = f"fitted through the twin's servo to the moves of {len(caps)} Phase I captures"
+        elif stat.endswith("_mode"):
+            note = (f"fitted jointly to the {stat.split('_')[0]} suspension mode of the nut accelerometers in "
+                    f"{len(caps)} Phase I captures at {hours:g} h")
         elif stat == "ripple" and runs:
             note = (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {len(runs)} Phase II "
                     f"runs at {session_h:g} h")
@@ -493,7 +514,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         for k, v in r[2].items():
             inst.setdefault(k, []).append(float(v))
     return FitResult(values, skipped, sims[0], time.perf_counter() - t0,
-                     [float(r) for r in fun], inst, first)
+                     [float(r) for r in fun], inst, first, total)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -601,7 +622,7 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
               "values": [v.to_json() for v in values],
               "defaults": [{"key": k, "why": w} for k, w in defaults.items()],
               "notes": notes + sens_notes, "simulations": fit.simulations,
-              "fit_seconds": fit.seconds, "residual_se": fit.residual}
+              "fit_seconds": fit.seconds, "residual_se": fit.residual, "estimated_s": fit.estimated_s}
     text, _ = scenario_text(recording, name, calibrated={v.key: (v.value, v.source, v.comment()) for v in values},
                             defaults=defaults, calibration=record)
     _load_text(text)

@@ -13,8 +13,23 @@ out in a rotation of the formats the importer reads (:data:`FORMATS`: each used)
   resolution: one sample of the rate for a dwell);
 - the physical parameters and the sensor chain: the drawn value inside the stated 90 % interval,
   over the (case, parameter) pairs the recording informs;
-- with ``diagnose``: the calibrated twin against the recording, where the right verdict is "no
-  significant gap".
+- with ``diagnose``: the calibrated twin against the recording, scored by the case's kind
+  (:data:`CASE_KINDS`, in turn, so a benchmark stopped early has every kind):
+
+  - ``null``: the foreign axis alone (its parameters off the twin's defaults are what
+    ``calibrate`` must absorb): the right verdict is "no significant gap";
+  - ``effect``: one physical effect of the library (:func:`twin.effects.candidates`) added to
+    the machine, drawn in the upper half of its prior range: it must be named first (the
+    first added candidate, or one that makes the same recording:
+    :func:`twin.harness.gap_benchmark.same_answer`), and the held-out gap must shrink on the
+    twin re-simulated with it;
+  - ``artefact``: one signal artefact (:data:`analysis.diagnosis.artefacts.ARTEFACTS`, upper half)
+    applied to the recording before it is written out as the lab's files: named first;
+  - ``several``: the axis's own mis-set parameters, an effect and an artefact at once: both named
+    (among the added candidates), and nothing named that is not there.
+
+  The effects and artefacts are drawn from a stream of their own (``[seed, 1]``): the axes are
+  those of a benchmark without them.
 
 Writes ``OUT/calibrate-benchmark.json`` (per case and the summary) and prints a table.
 """
@@ -35,7 +50,11 @@ from twin.scenario import Scenario, from_dict, load
 
 #: (Phase I format, Phase II format) of the cases in turn: every reader is used.
 FORMATS = (("tdms", "csv"), ("mat", "mat"), ("mdf", "mdf"), ("csv", "tdms"))
-BENCH_VERSION = 1
+BENCH_VERSION = 2
+#: The cases' kinds, in turn (case i is of kind CASE_KINDS[i % 4]).
+CASE_KINDS = ("null", "effect", "artefact", "several")
+#: Twin seeds the diagnosis re-simulates with its added candidates (the re-simulated shrink).
+RESIM_SEEDS = 2
 #: Routine keys scored (scenario key: tolerance as a fraction of the drawn value, or in s for
 #: the dwells: the larger of 0.1 % and one sample of the channel they are measured on).
 ROUTINE_KEYS = ("phase1.speed_mm_s", "phase1.accel_mm_s2", "phase1.dwell_s", "phase2.speeds_mm_s",
@@ -51,17 +70,24 @@ def draw_case(rng: np.random.Generator, i: int) -> Scenario:
     (log-uniform), Phase I speed up to 2400 rpm of the motor and its acceleration, two Phase II
     speeds (the slower no longer than 8 s a move), Phase I DAQ rate 5.12–25.6 kHz, IMU rate
     1–2 kHz, noise floors ×0.5–2 of the twin's, rail friction 5–40 N, viscous drag
-    1–5 × 10⁻⁴ N·m·s/rad, torque ripple 0.005–0.03 N·m (log-uniform)."""
+    1–5 × 10⁻⁴ N·m·s/rad, torque ripple 0.005–0.03 N·m, the trucks' vertical and lateral
+    stiffness × 0.6–1.6 of the twin's 300 and 200 N/µm (the guide blocks' preload classes; all
+    log-uniform)."""
     d = _base()
     lead = float(rng.choice([4.0, 5.0, 8.0, 10.0, 12.0, 16.0, 20.0]))
     stroke = float(rng.uniform(150.0, 800.0))
     travel = round(stroke + 60.0, 1)
     loguni = lambda lo, hi: float(np.exp(rng.uniform(math.log(lo), math.log(hi))))  # noqa: E731
     ax = d["axis"]
-    ax.update(travel_mm=travel, lead_mm=lead, carriage_mass_kg=round(loguni(30.0, 400.0), 2),
+    # the shaft as the owner describes it and `scenario init` writes it (the travel plus the nut
+    # and bearings when the twin's 500 mm is too short): the axis description, not fitted
+    shaft = ax["shaft_length_mm"] if ax["shaft_length_mm"] >= travel + 50.0 else round(travel + 80.0, 1)
+    ax.update(travel_mm=travel, lead_mm=lead, shaft_length_mm=shaft, carriage_mass_kg=round(loguni(30.0, 400.0), 2),
               rail_friction_N=round(float(rng.uniform(5.0, 40.0)), 3),
               drag_viscous_Nm_s_per_rad=float(f"{loguni(1e-4, 5e-4):.4g}"),
-              torque_ripple_Nm=float(f"{loguni(0.005, 0.03):.4g}"))
+              torque_ripple_Nm=float(f"{loguni(0.005, 0.03):.4g}"),
+              truck_stiffness_vertical_N_per_um=round(300.0 * loguni(0.6, 1.6), 1),
+              truck_stiffness_lateral_N_per_um=round(200.0 * loguni(0.6, 1.6), 1))
     vmax1 = min(500.0, 2400.0 / 60.0 * lead)  # motor at most 2400 rpm
     speed1 = round(float(rng.uniform(0.4, 1.0)) * vmax1, 2)
     p1_stroke = min(0.6 * stroke, 300.0)
@@ -89,6 +115,60 @@ def draw_case(rng: np.random.Generator, i: int) -> Scenario:
     d["name"], d["seed"] = f"foreign-{i:03d}", int(rng.integers(0, 2**31))
     d["description"] = f"calibrate-benchmark case {i}"
     return from_dict(d)
+
+
+def draw_additions(rng: np.random.Generator, kind: str) -> tuple[dict, dict]:
+    """What is added on top of a foreign axis of ``kind`` (:data:`CASE_KINDS`): ({effect:
+    {param: value}}, {artefact: {param: value}}), each drawn in the upper half of its prior
+    range; an artefact's kind (gain, noise, line, drift, offset, clipping) first, then its
+    target."""
+    from analysis.diagnosis.artefacts import ARTEFACTS
+    from twin.effects import candidates
+
+    effects, artefacts = {}, {}
+    if kind in ("effect", "several"):
+        lib = candidates()
+        name = str(rng.choice(sorted(lib)))
+        effects[name] = lib[name].draw(rng, "high")
+    if kind in ("artefact", "several"):
+        by_kind: dict[str, list[str]] = {}
+        for n, a in ARTEFACTS.items():
+            by_kind.setdefault(a.artefact, []).append(n)
+        names = by_kind[str(rng.choice(sorted(by_kind)))]
+        name = str(rng.choice(names))
+        artefacts[name] = ARTEFACTS[name].draw(rng, "high")
+    return effects, artefacts
+
+
+def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict) -> dict:
+    """The diagnosis of a case of ``kind`` against what was added (``effects``, ``artefacts``):
+    its verdict and figures, ``correct`` by the kind's rule (:data:`CASE_KINDS`) and
+    ``nothing_else`` (every added candidate is something that was added, or makes the same
+    recording)."""
+    from analysis.diagnosis.attribution import NO_GAP
+    from twin.harness.gap_benchmark import same_answer
+
+    added = res["added"]
+    values = {**effects, **artefacts}
+
+    def names(name: str, v: dict, a: dict) -> bool:
+        return same_answer(name, v, a["effect"], a["params"])
+
+    row = {"verdict": res["verdict"], "heldout_gap": res["heldout_gap_before"],
+           "critical": res["heldout_gap_critical"],
+           "significant": int(sum(r["significant"] for r in res.get("regions", []))),
+           "added": [a["effect"] for a in added], "fitted": {a["effect"]: a["params"] for a in added},
+           "heldout_shrink": res.get("heldout_shrink"),
+           "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated"),
+           "nothing_else": all(any(names(n, v, a) for n, v in values.items()) for a in added)}
+    if kind == "null":
+        row["correct"] = res["verdict"] == NO_GAP
+    elif kind in ("effect", "artefact"):
+        name, v = next(iter(values.items()))
+        row["correct"] = bool(added) and names(name, v, added[0])
+    else:
+        row["correct"] = all(any(names(n, v, a) for a in added) for n, v in values.items())
+    return row
 
 
 def _get(data: dict, key: str):
@@ -124,41 +204,57 @@ def score_case(truth: Scenario, calibrated: Scenario, record: dict) -> dict:
 
 
 def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds: int,
-             progress: Callable[[str], None]) -> dict:
-    """One case end to end in ``out/case-NNN``; returns its entry of the JSON."""
+             progress: Callable[[str], None], kind: str = "null", effects: dict | None = None,
+             artefacts: dict | None = None) -> dict:
+    """One case end to end in ``out/case-NNN``: the axis ``s`` with ``effects`` added to the
+    machine and ``artefacts`` to its recording; returns its entry of the JSON."""
+    from analysis.diagnosis.artefacts import apply
     from analysis.ingest import run_import
+    from analysis.ingest.check import check_record, require_clean_recording
     from twin.campaign import simulate_campaign
     from twin.harness.calibrate import calibrate
+    from twin.harness.gap_runner import with_effects
     from twin.harness.lab_export import export
+
+    effects, artefacts = dict(effects or {}), dict(artefacts or {})
 
     d = out / f"case-{i:03d}"
     shutil.rmtree(d, ignore_errors=True)
     d.mkdir(parents=True)
     f1, f2 = FORMATS[i % len(FORMATS)]
     t0 = time.perf_counter()
-    simulate_campaign(s, d / "twin", workers=1)
+    simulate_campaign(with_effects(s, effects), d / "twin", workers=1)
+    if artefacts:
+        h5 = d / "twin" / "measurements.h5"
+        apply(h5, h5.with_name("measurements.artefacts.h5"), artefacts, s.seed).replace(h5)
     spec = export(d / "twin", d / "lab", phase1_format=f1, phase2_format=f2)
     run_import(spec, output=d / "campaign")
     t_sim = time.perf_counter() - t0
-    rec = calibrate(d / "campaign", d / "axis.toml", workers=workers, progress=lambda _t: None)
+    # as the owner's `twin calibrate` does: what `twin check` flags is not fitted (errors forced)
+    check = check_record(require_clean_recording(d / "campaign", True, "twin calibrate"), True)
+    rec = calibrate(d / "campaign", d / "axis.toml", workers=workers, progress=lambda _t: None, check=check)
     cal = load(d / "axis.toml")
-    entry = {"case": i, "formats": [f1, f2], "scenario": json.loads(s.to_json()),
-             "simulate_export_import_s": t_sim, "calibrate_s": rec["seconds"], **score_case(s, cal, rec)}
+    entry = {"case": i, "kind": kind, "effects": effects, "artefacts": artefacts,
+             "formats": [f1, f2], "scenario": json.loads(s.to_json()),
+             "simulate_export_import_s": t_sim, "calibrate_s": rec["seconds"],
+             "calibrate_estimated_s": rec.get("estimated_s"), **score_case(s, cal, rec)}
     if diagnose:
         from twin.harness.gap_runner import run_diagnosis
 
         t1 = time.perf_counter()
         res = run_diagnosis(d / "campaign", cal, d / "diagnosis", seeds=seeds, workers=workers,
-                            plots=False, response_seeds=1, resim_seeds=0)
-        entry["diagnosis"] = {"verdict": res["verdict"], "heldout_gap": res["heldout_gap_before"],
-                              "critical": res["heldout_gap_critical"],
-                              "significant": int(sum(r["significant"] for r in res.get("regions", []))),
+                            plots=False, response_seeds=1, resim_seeds=RESIM_SEEDS)
+        entry["diagnosis"] = {**score_diagnosis(kind, effects, artefacts, res),
                               "seconds": time.perf_counter() - t1}
     r_ok = sum(v["within"] for v in entry["routine"].values())
     p_ok = sum(v["inside"] for v in entry["parameters"].values())
-    progress(f"case {i}: lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg, {f1}/{f2}: routine "
+    added = ", ".join([*effects, *artefacts]) or "nothing added"
+    dg = entry.get("diagnosis")
+    progress(f"case {i} ({kind}: {added}): lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg, "
+             f"{f1}/{f2}: routine "
              f"{r_ok}/{len(entry['routine'])} within tolerance, parameters {p_ok}/{len(entry['parameters'])} "
-             f"inside their interval" + (f", diagnosis: {entry['diagnosis']['verdict']}" if diagnose else ""))
+             f"inside their interval" + (f", diagnosis: {dg['verdict']}, named {', '.join(dg['added']) or 'nothing'} "
+                f"({'right' if dg['correct'] else 'wrong'})" if dg else ""))
     return entry
 
 
@@ -179,10 +275,29 @@ def summarise(cases: list[dict]) -> dict:
            "per_parameter_inside": {k: sum(v) / len(v) for k, v in per_key.items()},
            "formats_used": sorted({f for c in cases for f in c["formats"]}),
            "calibrate_s_median": float(np.median([c["calibrate_s"] for c in cases])) if cases else None}
-    diag = [c["diagnosis"] for c in cases if "diagnosis" in c]
+    ratio = [c["calibrate_s"] / c["calibrate_estimated_s"] for c in cases if c.get("calibrate_estimated_s")]
+    if ratio:  # what --budget-minutes is held to: the estimate after the first simulations
+        out["calibrate_actual_over_estimate"] = {"median": float(np.median(ratio)), "min": min(ratio),
+                                                 "max": max(ratio)}
+    diag = [c for c in cases if "diagnosis" in c]
     if diag:
-        out["null_no_gap"] = sum(d["verdict"] == "no significant gap" for d in diag) / len(diag)
-        out["diagnosed"] = len(diag)
+        frac = lambda rows, key: (sum(bool(r["diagnosis"][key]) for r in rows) / len(rows)  # noqa: E731
+                                  if rows else None)
+        by = {k: [c for c in diag if c.get("kind", "null") == k] for k in CASE_KINDS}
+        shrink = [c["diagnosis"]["heldout_shrink_resimulated"] for k in ("effect", "artefact")
+                  for c in by[k] if c["diagnosis"]["correct"]
+                  and c["diagnosis"]["heldout_shrink_resimulated"] is not None]
+        out.update({
+            "diagnosed": len(diag),
+            "per_kind_cases": {k: len(v) for k, v in by.items()},
+            "null_no_gap": frac(by["null"], "correct"),
+            "effect_named_first": frac(by["effect"], "correct"),
+            "artefact_named_first": frac(by["artefact"], "correct"),
+            "several_all_named": frac(by["several"], "correct"),
+            "several_nothing_else": frac(by["several"], "nothing_else"),
+            "nothing_else": frac(diag, "nothing_else"),
+            "median_shrink_resimulated_named": float(np.median(shrink)) if shrink else None,
+            "diagnose_s_median": float(np.median([c["diagnosis"]["seconds"] for c in diag]))})
     return out
 
 
@@ -195,10 +310,13 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     scenarios = [draw_case(rng, i) for i in range(cases)]
+    add_rng = np.random.default_rng([seed, 1])
+    additions = [draw_additions(add_rng, CASE_KINDS[i % len(CASE_KINDS)]) for i in range(cases)]
     t0 = time.perf_counter()
     done: list[dict] = []
     for i, s in enumerate(scenarios):
-        done.append(run_case(i, s, out, workers, diagnose, seeds, progress))
+        done.append(run_case(i, s, out, workers, diagnose, seeds, progress, CASE_KINDS[i % len(CASE_KINDS)],
+                             *additions[i]))
         # written after every case: a long benchmark stopped early keeps what it measured
         doc = {"version": BENCH_VERSION, "seed": seed, "workers": workers, "diagnose": diagnose,
                "cases_drawn": cases, "seconds": time.perf_counter() - t0, "summary": summarise(done),
@@ -207,4 +325,5 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     return doc
 
 
-__all__ = ["draw_case", "run_benchmark", "score_case", "summarise"]
+__all__ = ["CASE_KINDS", "draw_additions", "draw_case", "run_benchmark", "score_case", "score_diagnosis",
+           "summarise"]

@@ -1,0 +1,93 @@
+"""Time of ``twin calibrate`` on a paper-size recording (issue 30, item 4; prints figures; not a test).
+
+The calibration reads a recording's layout from the parts' attributes and fits on its first
+Phase I sample (up to 4 of its captures) and the first runs of its first Phase II session
+(``twin/harness/calibrate.py``): what it costs is set by the paper's capture length, rates and
+routine, not by the campaign's length. The benchmark therefore simulates the paper's campaign
+(``scenarios/paper-rtf.toml``: ten 10-s captures per sample at 10 kHz, sessions of 90 IMU runs
+over 450 mm at 20, 100 and 500 mm/s) cut after its first sample and session, calibrates it
+with ``--workers W``, and prints:
+
+- the calibration's wall time (the goal: at most 15 min on 2 cores), its own estimate after the
+  first simulations (what ``--budget-minutes`` is held to) and their ratio (the goal: within
+  20 %);
+- the machine: cores, load average, and MuJoCo's bare stepping rate of the model measured in the
+  same run, so the time can be compared across machines as a ratio.
+
+Run: .venv/bin/python benchmarks/bench_calibrate.py [--workers 2] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from twin import campaign as cp  # noqa: E402
+from twin.campaign import simulate_campaign  # noqa: E402
+from twin.harness.calibrate import calibrate  # noqa: E402
+from twin.scenario import from_dict, load  # noqa: E402
+from twin.simulate import Simulator, phase1_profile  # noqa: E402
+
+
+def bare_steps_per_s(s) -> float:
+    """MuJoCo's bare stepping (mujoco.rollout over a Phase I capture's controls), steps per CPU s."""
+    sim = Simulator(cp.make_world(s), s.phase1.timestep_s)
+    cond = cp.condition_at(s, 100.0)
+    cmd = phase1_profile(s.phase1, sim.fs, cp.rng_for(0, cp.KIND_PHASE1, 0))
+    s0 = np.concatenate([[0.0], sim.run(cond, cmd, passes=1).qpos[0], np.zeros(sim.model.nv)])
+    size = mujoco.mj_stateSize(sim.model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    s0 = np.concatenate([s0, np.zeros(size - s0.size)])
+    ctrl = sim.controls(cond, cmd, cmd.x)
+    data = mujoco.MjData(sim.model)
+    c0 = time.process_time()
+    rollout.rollout(sim.model, data, s0, ctrl)
+    return ctrl.shape[0] / (time.process_time() - c0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--out", type=Path, default=None, help="keep the recording and the calibration here")
+    args = ap.parse_args()
+    out = args.out or Path(tempfile.mkdtemp(prefix="bench-calibrate-"))
+    shutil.rmtree(out, ignore_errors=True)
+    s = load(REPO / "scenarios/paper-rtf.toml")
+    first = max(cp.session_hours(s)[0], cp.sample_hours(s)[0])
+    d = s.model_dump(mode="json")
+    d["campaign"].update(total_hours=first + 1.0, pauses=[])
+    s = from_dict(d)
+    first_session = first
+    bare = bare_steps_per_s(s)
+    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; bare stepping "
+          f"{bare:,.0f} steps/s (mujoco {mujoco.__version__})", flush=True)
+    t0 = time.perf_counter()
+    simulate_campaign(s, out / "campaign", workers=args.workers)
+    t_sim = time.perf_counter() - t0
+    print(f"recording: the paper's campaign to {first_session + 1:g} h simulated in {t_sim:.0f} s", flush=True)
+    t1 = time.perf_counter()
+    rec = calibrate(out / "campaign", out / "axis.toml", workers=args.workers,
+                    progress=lambda t: print(f"  {t}", flush=True))
+    wall = time.perf_counter() - t1
+    est = rec.get("estimated_s")
+    print(f"calibration: {wall / 60:.1f} min on {args.workers} workers ({rec['simulations']} twin evaluations), "
+          f"the goal 15 min; its estimate {est / 60:.1f} min, actual/estimate {wall / est:.2f} (goal within 20 %)"
+          if est else f"calibration: {wall / 60:.1f} min (no fit ran)")
+    print(json.dumps({"calibrate_s": wall, "estimated_s": est, "simulations": rec["simulations"],
+                      "bare_steps_per_s": bare, "workers": args.workers, "load_average": os.getloadavg()[0]}))
+
+
+if __name__ == "__main__":
+    main()
