@@ -101,42 +101,117 @@ def test_rest_spectrum_gives_floor_and_bandwidth_of_a_butterworth_channel():
     assert butterworth_cutoff(f, psd[:, 0], dens[0], 2, fs, 250.0) == pytest.approx(300.0, rel=0.03)
 
 
+def _foreign_capture(**axis) -> tuple[dict, float]:
+    """One 1-s Phase I capture of `foreign-16mm` (seed 0, 100 h) with ``axis`` keys changed:
+    (the capture's channels, its rate in Hz)."""
+    from twin.campaign import KIND_PHASE1, condition_at, make_world, rng_for
+    from twin.scenario import from_dict, load
+    from twin.simulate import Simulator, phase1_capture
+
+    d = load("foreign-16mm").model_dump(mode="json")
+    d["phase1"]["capture_s"] = 1.0
+    d["axis"].update(axis)
+    s = from_dict(d)
+    sim = Simulator(make_world(s), s.phase1.timestep_s)
+    return phase1_capture(sim, s.phase1, condition_at(s, 100.0), rng_for(0, KIND_PHASE1, 1)), s.phase1.fs_hz
+
+
 def test_suspension_mode_follows_the_trucks():
     """The suspension modes read on the twin's nut accelerometers follow the trucks: the vertical
     one moves as √k (the vertical stiffness halved: the frequency / √2 within 3 %), the lateral
     one at least as much (/ 1.37–1.7: as the mode softens the motion's content below it pulls
     the centroid down; the fit through the twin reads the same statistic, so it needs only a
     steep, smooth response); neither moves with what it must not see (a nut 4× softer, a
-    velocity loop at half its bandwidth: < 0.5 %)."""
+    velocity loop at half its bandwidth: < 0.5 %). The axial mode's broad hump moves with both
+    of those alike: the nut's spring is not told apart."""
+    from scipy import signal
+
     from analysis.calibration.drive import suspension_mode
-    from twin.campaign import KIND_PHASE1, condition_at, make_world, rng_for
-    from twin.scenario import from_dict, load
-    from twin.simulate import Simulator, phase1_capture
+    from twin.scenario import load
 
-    base = load("foreign-16mm").model_dump(mode="json")
-    base["phase1"]["capture_s"] = 1.0
+    def modes(**axis) -> tuple[float, float, float]:
+        """(vertical mode Hz, lateral mode Hz, the x axis's mean PSD over 100-400 Hz)."""
+        c, fs = _foreign_capture(**axis)
+        f, p = signal.welch(c["acc1"][:, 0], fs, nperseg=2048)
+        hump = float(np.mean(p[(f >= 100) & (f <= 400)]))
+        return (*(suspension_mode([c["acc1"], c["acc2"]], fs, col) for col in (2, 1)), hump)
 
-    def modes(**axis) -> tuple[float, float]:
-        d = json.loads(json.dumps(base))
-        d["axis"].update(axis)
-        s = from_dict(d)
-        sim = Simulator(make_world(s), s.phase1.timestep_s)
-        c = phase1_capture(sim, s.phase1, condition_at(s, 100.0), rng_for(0, KIND_PHASE1, 1))
-        return tuple(suspension_mode([c["acc1"], c["acc2"]], s.phase1.fs_hz, col) for col in (2, 1))
-
-    kv, kl = base["axis"]["truck_stiffness_vertical_N_per_um"], base["axis"]["truck_stiffness_lateral_N_per_um"]
-    z0, y0 = modes()
-    z_soft, _ = modes(truck_stiffness_vertical_N_per_um=kv / 2)
-    _, y_soft = modes(truck_stiffness_lateral_N_per_um=kl / 2)
-    z_nut, y_nut = modes(nut_stiffness_N_per_um=100.0)
-    z_loop, y_loop = modes(velocity_bandwidth_hz=30.0)
+    ax = load("foreign-16mm").axis
+    kv, kl = ax.truck_stiffness_vertical_N_per_um, ax.truck_stiffness_lateral_N_per_um
+    z0, y0, x0 = modes()
+    z_soft, _, _ = modes(truck_stiffness_vertical_N_per_um=kv / 2)
+    _, y_soft, _ = modes(truck_stiffness_lateral_N_per_um=kl / 2)
+    z_nut, y_nut, x_nut = modes(nut_stiffness_N_per_um=ax.nut_stiffness_N_per_um / 4)
+    z_loop, y_loop, x_loop = modes(velocity_bandwidth_hz=ax.velocity_bandwidth_hz / 2)
     print(f"vertical mode {z0:.1f} Hz, {z_soft:.1f} Hz with the vertical stiffness halved; lateral {y0:.1f} Hz, "
           f"{y_soft:.1f} Hz halved; a nut 4x softer {z_nut:.1f}/{y_nut:.1f} Hz, the velocity loop at half "
-          f"{z_loop:.1f}/{y_loop:.1f} Hz")
+          f"{z_loop:.1f}/{y_loop:.1f} Hz; the axial hump (x, 100-400 Hz) x{x_nut / x0:.2f} for the nut's 1/4, "
+          f"x{x_loop / x0:.2f} for the velocity loop's 1/2")
     assert z0 / z_soft == pytest.approx(math.sqrt(2), rel=0.03)
     assert 1.37 <= y0 / y_soft <= 1.7
     for z, y in ((z_nut, y_nut), (z_loop, y_loop)):
         assert z == pytest.approx(z0, rel=0.005) and y == pytest.approx(y0, rel=0.005)
+    # the axial mode: the nut's spring and the velocity loop both move its hump by 1.3x or more
+    # (why the nut's stiffness is not fitted)
+    assert min(abs(math.log(x_nut / x0)), abs(math.log(x_loop / x0))) > math.log(1.3)
+
+
+def test_speed_overshoot_follows_the_velocity_loop():
+    """The motor speed's overshoot at the ramps' ends falls as the velocity loop's bandwidth
+    rises (× 1.5: at least 10 %) and moves far less with the position loop (× 1.5: under a
+    quarter of that)."""
+    from analysis.calibration.drive import speed_overshoot
+    from twin.scenario import load
+
+    ax = load("foreign-16mm").axis
+
+    def over(**axis) -> float:
+        c, fs = _foreign_capture(**axis)
+        return speed_overshoot(np.asarray(c["speed"], float), fs)
+
+    o0 = over()
+    o_vel = over(velocity_bandwidth_hz=1.5 * ax.velocity_bandwidth_hz)
+    o_pos = over(position_bandwidth_hz=1.5 * ax.position_bandwidth_hz)
+    print(f"speed overshoot {100 * o0:.3f} %; velocity loop x1.5 {100 * o_vel:.3f} %; position loop x1.5 "
+          f"{100 * o_pos:.3f} %")
+    assert o_vel < 0.9 * o0
+    assert abs(o_pos - o0) < 0.25 * abs(o_vel - o0)
+
+
+def test_imu_reversal_follows_the_velocity_loop():
+    """The IMU's axial acceleration around the starts and stops of a Phase II run (the velocity
+    loop's statistic when the recording has runs) moves with the velocity loop's bandwidth (× 1.2)
+    by more than 10 times its scatter over the machine's draw (2 seeds) and 4 times more than
+    with the position loop's (× 1.5)."""
+    from types import SimpleNamespace
+
+    from analysis.calibration.drive import imu_reversal
+    from twin.campaign import KIND_PHASE2, condition_at, make_world, rng_for
+    from twin.scenario import from_dict, load
+    from twin.simulate import Simulator, phase2_measure_runs, phase2_trajectory
+
+    base = load("foreign-16mm").model_dump(mode="json")
+    base["phase2"].update(start_mm=40.0, end_mm=240.0)
+    ax = load("foreign-16mm").axis
+
+    def reversal(seed: int, **axis) -> float:
+        d = json.loads(json.dumps(base))
+        d["axis"].update(axis)
+        d["seed"] = 1616 + seed
+        s = from_dict(d)
+        sim = Simulator(make_world(s), s.phase2.timestep_s)
+        traj = phase2_trajectory(sim, s.phase2, condition_at(s, 50.0))
+        run = phase2_measure_runs(sim, traj, [rng_for(seed, KIND_PHASE2, 0)])[0]
+        return imu_reversal(SimpleNamespace(**run))
+
+    r0 = [reversal(k) for k in range(2)]
+    r_vel = reversal(0, velocity_bandwidth_hz=1.2 * ax.velocity_bandwidth_hz)
+    r_pos = reversal(0, position_bandwidth_hz=1.5 * ax.position_bandwidth_hz)
+    scatter = abs(r0[1] - r0[0])
+    print(f"IMU reversal log10 RMS {r0[0]:.4f} (seed 2: {r0[1]:.4f}); velocity loop x1.2 {r_vel:.4f}; "
+          f"position loop x1.5 {r_pos:.4f}")
+    assert abs(r_vel - r0[0]) > 10 * scatter
+    assert abs(r_pos - r0[0]) < 0.25 * abs(r_vel - r0[0])
 
 
 def test_torque_resolution_is_the_grid_step():
@@ -200,7 +275,8 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
     got = {v["key"]: v for v in rec["values"]}
     fitted = {"axis.carriage_mass_kg", "axis.rail_friction_N", "axis.drag_viscous_Nm_s_per_rad",
               "axis.torque_ripple_Nm", "phase1.accel_mm_s2", "phase1.dwell_s",
-              "axis.truck_stiffness_vertical_N_per_um", "axis.truck_stiffness_lateral_N_per_um"}
+              "axis.truck_stiffness_vertical_N_per_um", "axis.truck_stiffness_lateral_N_per_um",
+              "axis.velocity_bandwidth_hz"}
     measured = {"sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_hz",
                 "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz",
                 "sensors.nut_acc_noise_ug_per_rthz", "sensors.torque_noise_Nm"}

@@ -24,6 +24,14 @@ frequency is read as the centroid of the squared power spectral density over a f
 (:func:`suspension_mode`): the square weights the resonance far above the broadband floor, and
 unlike the highest bin the centroid moves smoothly with k, which a least-squares fit through the
 twin needs.
+
+The velocity loop's bandwidth shows in the motor speed's overshoot where a ramp ends: a
+proportional-integral loop lets the speed overshoot the new set point by an amount that falls
+as its crossover rises (G. Ellis, "Control System Design Guide", 4th ed., ch. 6: the step response
+of a PI velocity loop); :func:`speed_overshoot` reads it. Where the recording has IMU runs with
+their command, the carriage's axial acceleration around each start and stop
+(:func:`imu_reversal`) shows the same loop far more precisely: the jerk of a start excites the
+carriage on the loop-stiffened screw, and how it rings is set by the loop's crossover.
 """
 
 from __future__ import annotations
@@ -140,6 +148,58 @@ def suspension_mode(acc: list[np.ndarray], fs: float, column: int) -> float:
     w = psd[band] ** 2
     total = float(np.sum(w))
     return float(np.sum(f[band] * w) / total) if total > 0 else float("nan")
+
+
+#: The speed is low-passed (zero phase) at this frequency before its overshoot is read, Hz.
+OVERSHOOT_LOWPASS_HZ = 300.0
+
+
+def speed_overshoot(speed: np.ndarray, fs: float) -> float:
+    """The motor speed's overshoot over its cruise, as a fraction: (max |ω| − median |ω| over the
+    cruise) / median |ω| over the cruise (|ω| within 2 % of its 99th percentile), ``speed`` (n,)
+    rad/s low-passed at :data:`OVERSHOOT_LOWPASS_HZ` (zero phase), ``fs`` Hz. NaN without motion."""
+    if speed.size < 64:
+        return float("nan")
+    sos = signal.butter(2, min(OVERSHOOT_LOWPASS_HZ, 0.4 * fs), fs=fs, output="sos")
+    w = np.abs(signal.sosfiltfilt(sos, np.asarray(speed, float)))
+    plateau = float(np.percentile(w, 99))
+    if not plateau > 0:
+        return float("nan")
+    cruise = float(np.median(w[w >= 0.98 * plateau]))
+    return float((w.max() - cruise) / cruise)
+
+
+#: Half width of the window around each start and stop of :func:`imu_reversal`, s.
+REVERSAL_WINDOW_S = 0.02
+#: High-pass of the IMU's acceleration before :func:`imu_reversal`, Hz (gravity and drift out).
+REVERSAL_HIGHPASS_HZ = 2.0
+
+
+def imu_reversal(run) -> float:
+    """Log10 of the RMS (m/s²) of the IMU's axial acceleration, high-passed at
+    :data:`REVERSAL_HIGHPASS_HZ` (zero phase), within ±:data:`REVERSAL_WINDOW_S` of every start
+    and stop of the commanded motion (``position_cmd`` interpolated to the IMU's clock, moving
+    where its speed exceeds 0.1 mm/s) of a Phase II run. NaN without ``position_cmd`` or motion."""
+    pos = getattr(run, "position_cmd", None)
+    if pos is None:
+        return float("nan")
+    fs, fs_x = float(run.imu_acc_fs_hz), float(run.position_cmd_fs_hz)
+    acc = np.asarray(run.imu_acc, float)[:, 0]
+    if acc.size < 64:
+        return float("nan")
+    t = np.arange(acc.size) / fs
+    x = np.interp(t, np.arange(len(pos)) / fs_x, np.asarray(pos, float))
+    moving = np.abs(np.gradient(x, 1.0 / fs)) > 1e-4
+    edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
+    if edges.size == 0:
+        return float("nan")
+    w = max(1, int(round(REVERSAL_WINDOW_S * fs)))
+    near = np.zeros(acc.size, bool)
+    for e in edges:
+        near[max(0, e - w):e + w + 1] = True
+    sos = signal.butter(4, REVERSAL_HIGHPASS_HZ, "highpass", fs=fs, output="sos")
+    hp = signal.sosfiltfilt(sos, acc)
+    return float(np.log10(np.sqrt(np.mean(hp[near] ** 2)) + 1e-15))
 
 
 def imu_ripple(run, lead_m: float, order: int, max_hz: float) -> float:

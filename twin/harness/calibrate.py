@@ -6,30 +6,31 @@ a. **Routine and layout**, measured (:func:`analysis.ingest.routine.measure_reco
 b. **the sensor chain**, measured from the rests (:mod:`analysis.calibration.sensor_chain`: noise
    floors, bandwidths, the torque signal's noise and resolution, the IMU's gravity);
 c. **the drive's physical parameters and the Phase I acceleration, jointly**, fitted by indirect
-   inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl.
-   Econometrics 8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the
-   torque's rigid-body fit J, T_c, c_v, the ripple at its order, the carriage's vertical and
-   lateral suspension modes on the nut accelerometers) and the routine fit's acceleration are
-   computed on the recording's first Phase I sample and on the twin simulated
-   with the same layout and one seed (common random numbers: every evaluation draws the same
-   noise), and ``scipy.optimize.least_squares`` (trust-region reflective, bounds a factor of
-   10 either side of the start) moves the parameters until the two agree within the statistics'
-   standard errors. The Jacobian's columns are simulated together (one batched rollout per
-   capture). The 90 % intervals come from the Jacobian at the solution and the statistics'
-   errors (delta method: Cov = (JᵀJ)⁻¹ for residuals in units of their standard error); an
-   error is the recording's own (the scatter over its captures), the twin's, and the scatter of
-   the statistic over :data:`SPREAD_SEEDS` twin seeds at the start (the machine's random
-   geometry and ripple phase, which one recording cannot average out); the interval uses the
-   statistics' full covariance over those seeds (Cov = J⁻¹ Σ J⁻ᵀ: one regression gives J, T_c
-   and c_v, and a machine's draw moves them together).
+   inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl. Econometrics
+   8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the torque's rigid-body
+   fit J, T_c, c_v, the ripple at its order, the carriage's vertical and lateral suspension modes
+   on the nut accelerometers, the IMU's axial acceleration around the starts and stops of the Phase
+   II runs) and the routine fit's acceleration are computed on the recording's first Phase I sample
+   and on the twin simulated with the same layout and one seed (common random numbers: every
+   evaluation draws the same noise), and ``scipy.optimize.least_squares`` (trust-region reflective,
+   bounds a factor of 10 either side of the start) moves the parameters until the two agree within
+   the statistics' standard errors. The Jacobian's columns are simulated together (one batched
+   rollout per capture). The 90 % intervals come from the Jacobian at the solution and the
+   statistics' errors (delta method: Cov = (JᵀJ)⁻¹ for residuals in units of their standard error);
+   an error is the recording's own (the scatter over its captures), the twin's, and the scatter of
+   the statistic over :data:`SPREAD_SEEDS` twin seeds at the start (the machine's random geometry
+   and ripple phase, which one recording cannot average out); the interval uses the statistics'
+   full covariance over those seeds (Cov = J⁻¹ Σ J⁻ᵀ: one regression gives J, T_c and c_v, and a
+   machine's draw moves them together).
 
-Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters
-(each responds mostly to one: J to the mass, T_c to the constant drag, c_v to the viscous drag, the
-ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, a suspension
-mode's frequency to the trucks' stiffness in its direction and the mass), the problem is
-square and small (8 unknowns), and with common random numbers the residual is deterministic,
-so a Gauss–Newton method converges in a few Jacobians where a Bayesian optimiser would need tens
-of evaluations; its Jacobian is also what the intervals need.
+Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters (each
+responds mostly to one: J to the mass, T_c to the constant drag, c_v to the viscous drag, the
+ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, a suspension mode's
+frequency to the trucks' stiffness in its direction and the mass, the IMU's ringing around the
+starts and stops, or the speed's overshoot, to the velocity loop's bandwidth), the problem is
+square and small (9 unknowns), and with common random numbers the residual is deterministic, so a
+Gauss–Newton method converges in a few Jacobians where a Bayesian optimiser would need tens of
+evaluations; its Jacobian is also what the intervals need.
 
 What the recording cannot inform keeps the twin's default and says why (:data:`NOT_INFORMED`).
 """
@@ -49,7 +50,13 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize
 
-from analysis.calibration.drive import imu_ripple, recording_statistics, suspension_mode
+from analysis.calibration.drive import (
+    imu_reversal,
+    imu_ripple,
+    recording_statistics,
+    speed_overshoot,
+    suspension_mode,
+)
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
 from analysis.files import write_json, write_text
@@ -58,7 +65,7 @@ from twin.config import get_dotted, set_dotted
 from twin.executors import default_processes
 from twin.scenario import Scenario, ScenarioError, from_dict, load
 
-CALIBRATE_VERSION = 2
+CALIBRATE_VERSION = 4
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -91,9 +98,10 @@ FITTED = (
     ("phase1.dwell_s", "dwell", "s"),
     ("axis.truck_stiffness_vertical_N_per_um", "vertical_mode", "N/µm"),
     ("axis.truck_stiffness_lateral_N_per_um", "lateral_mode", "N/µm"),
+    ("axis.velocity_bandwidth_hz", "loop_response", "Hz"),
 )
 STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel", "dwell", "vertical_mode",
-              "lateral_mode")
+              "lateral_mode", "loop_response")
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
 NOT_INFORMED = {
@@ -101,13 +109,12 @@ NOT_INFORMED = {
                                 "lead): the fit puts all of it in the carriage mass",
     "axis.no_load_torque_Nm": "one constant drag is seen at the motor (the nut's and the rails' reflected "
                               "through the lead): the fit puts all of it in the rail friction",
-    "axis.nut_stiffness_N_per_um": "the axial mode is damped by the servo into a broad hump the loops' "
-                                   "bandwidths move as much: no statistic tells the nut's spring apart",
+    "axis.nut_stiffness_N_per_um": "the axial mode is damped by the servo into a broad hump the velocity loop "
+                                   "moves as much as the nut's spring: not fitted in this version",
     "axis.bearing_stiffness_N_per_um": "in series with the nut's spring behind the same damped axial mode",
-    "axis.position_bandwidth_hz": "Phase I records no command: the loops' lag is not told from the routine's "
-                                  "timing",
-    "axis.velocity_bandwidth_hz": "Phase I records no command: the loops' lag is not told from the routine's "
-                                  "timing",
+    "axis.position_bandwidth_hz": "Phase I records no command: the position loop's lag is not told from the "
+                                  "routine's timing, and it moves the speed's overshoot 20 times less than "
+                                  "the velocity loop does",
 }
 
 #: Sensor-chain keys of layer (b) that are scenario keys.
@@ -122,6 +129,7 @@ CHANNELS = {
     "axis.carriage_mass_kg": ("speed", "torque"), "axis.rail_friction_N": ("speed", "torque"),
     "axis.drag_viscous_Nm_s_per_rad": ("speed", "torque"), "axis.torque_ripple_Nm": ("imu_acc", "position_cmd"),
     "phase1.accel_mm_s2": ("speed",), "phase1.dwell_s": ("speed",),
+    "axis.velocity_bandwidth_hz": ("speed", "imu_acc", "position_cmd"),
     "axis.truck_stiffness_vertical_N_per_um": ("acc1", "acc2"),
     "axis.truck_stiffness_lateral_N_per_um": ("acc1", "acc2"),
     "sensors.imu_acc_noise_ug_per_rthz": ("imu_acc",), "sensors.imu_acc_bandwidth_hz": ("imu_acc",),
@@ -187,7 +195,7 @@ def _key(s: Scenario) -> str:
 
 
 def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """(values (8,), standard errors (8,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    """(values (9,), standard errors (9,)) of :data:`STAT_NAMES` over the Phase I ``captures``
     and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
     statistics of the captures, with the ripple read on the IMU of the runs when there are any
     (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
@@ -196,7 +204,10 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     errors from the scatter of the ramps' slopes and of the rests (the servo's lag at the start
     and at the end of a move differ a little: both are fitted through the twin's servo), and the
     vertical and lateral suspension modes (Hz, :func:`analysis.calibration.drive.suspension_mode`)
-    with their scatter over the captures."""
+    with their scatter over the captures, and the velocity loop's response: the IMU's axial
+    acceleration around the starts and stops of the runs when there are any
+    (:func:`analysis.calibration.drive.imu_reversal`), else the speed's overshoot over the
+    captures (:func:`analysis.calibration.drive.speed_overshoot`)."""
     order = s.axis.torque_ripple_per_rev
     mean, se = recording_statistics(m, captures, order)
     if runs:
@@ -216,16 +227,21 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
                    if a["t_stop"] is not None and b["t_start"] is not None]
     acc, acc_se = _mean_se(slopes)
     dwell, dwell_se = _mean_se(dwells)
-    freqs: list[list[float]] = [[], []]
+    rows: list[list[float]] = [[], [], []]  # vertical mode, lateral mode, the loop's response
     for name in captures:
         c = m.phase1(name)
-        for row, column in zip(freqs, (2, 1), strict=True):  # vertical, lateral
-            f = suspension_mode([c.acc1, c.acc2], float(c.fs_hz), column)
-            if np.isfinite(f):
-                row.append(f)
-    modes = [_mean_se(row) for row in freqs]
-    return (np.append(mean, [acc, dwell, *(v for v, _ in modes)]),
-            np.append(se, [acc_se, dwell_se, *(e for _, e in modes)]))
+        fs = float(c.fs_hz)
+        for row, x in zip(rows, (suspension_mode([c.acc1, c.acc2], fs, 2), suspension_mode([c.acc1, c.acc2], fs, 1),
+                                 np.nan if runs else speed_overshoot(np.asarray(c.speed, float), fs)), strict=True):
+            if np.isfinite(x):
+                row.append(x)
+    for a, b in runs:  # the velocity loop read on the IMU around the starts and stops (far sharper)
+        x = imu_reversal(m.phase2(a, b))
+        if np.isfinite(x):
+            rows[2].append(x)
+    extra = [_mean_se(row) for row in rows]
+    return (np.append(mean, [acc, dwell, *(v for v, _ in extra)]),
+            np.append(se, [acc_se, dwell_se, *(e for _, e in extra)]))
 
 
 def _mean_se(x: list[float]) -> tuple[float, float]:
@@ -495,6 +511,11 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         stat = FITTED[i][1]
         if stat in ("accel", "dwell"):
             note = f"fitted through the twin's servo to the moves of {len(caps)} Phase I captures"
+        elif stat == "loop_response" and runs:
+            note = (f"fitted jointly to the IMU's axial acceleration around the starts and stops of {len(runs)} "
+                    f"Phase II runs at {session_h:g} h")
+        elif stat == "loop_response":
+            note = f"fitted jointly to the motor speed's overshoot at the ramps' ends in {len(caps)} Phase I captures"
         elif stat.endswith("_mode"):
             note = (f"fitted jointly to the {stat.split('_')[0]} suspension mode of the nut accelerometers in "
                     f"{len(caps)} Phase I captures at {hours:g} h")

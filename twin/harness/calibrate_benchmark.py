@@ -71,8 +71,8 @@ def draw_case(rng: np.random.Generator, i: int) -> Scenario:
     speeds (the slower no longer than 8 s a move), Phase I DAQ rate 5.12–25.6 kHz, IMU rate
     1–2 kHz, noise floors ×0.5–2 of the twin's, rail friction 5–40 N, viscous drag
     1–5 × 10⁻⁴ N·m·s/rad, torque ripple 0.005–0.03 N·m, the trucks' vertical and lateral
-    stiffness × 0.6–1.6 of the twin's 300 and 200 N/µm (the guide blocks' preload classes; all
-    log-uniform)."""
+    stiffness × 0.6–1.6 of the twin's 300 and 200 N/µm (the guide blocks' preload classes), the
+    velocity loop's bandwidth × 0.5–1.6 of its 60 Hz (a drive's tuning; all log-uniform)."""
     d = _base()
     lead = float(rng.choice([4.0, 5.0, 8.0, 10.0, 12.0, 16.0, 20.0]))
     stroke = float(rng.uniform(150.0, 800.0))
@@ -87,7 +87,8 @@ def draw_case(rng: np.random.Generator, i: int) -> Scenario:
               drag_viscous_Nm_s_per_rad=float(f"{loguni(1e-4, 5e-4):.4g}"),
               torque_ripple_Nm=float(f"{loguni(0.005, 0.03):.4g}"),
               truck_stiffness_vertical_N_per_um=round(300.0 * loguni(0.6, 1.6), 1),
-              truck_stiffness_lateral_N_per_um=round(200.0 * loguni(0.6, 1.6), 1))
+              truck_stiffness_lateral_N_per_um=round(200.0 * loguni(0.6, 1.6), 1),
+              velocity_bandwidth_hz=round(60.0 * loguni(0.5, 1.6), 1))
     vmax1 = min(500.0, 2400.0 / 60.0 * lead)  # motor at most 2400 rpm
     speed1 = round(float(rng.uniform(0.4, 1.0)) * vmax1, 2)
     p1_stroke = min(0.6 * stroke, 300.0)
