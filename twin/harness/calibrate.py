@@ -81,6 +81,9 @@ SPREAD_SEEDS = 8
 FIT_SEEDS = 2
 #: Standard errors a parameter's statistic must move for a factor 2 of it to be fitted.
 MIN_SEEN = 3.0
+#: A fitted parameter's 90 % interval must lie within this factor either side of its value;
+#: wider, it is not told apart from the others (kept at its start, the rest fitted again).
+MAX_SPAN = 2.0
 #: Step of the finite differences in log(parameter).
 LOG_STEP = 0.03
 #: Student's t 95th percentile with SPREAD_SEEDS − 1 degrees of freedom: a two-sided 90 %
@@ -474,11 +477,16 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
 
     lo, hi = x0 - math.log(10.0), x0 + math.log(10.0)
     xs, fun, sd = x0, np.zeros(0), np.zeros(0)
-    if free.size:
-        sol = optimize.least_squares(lambda z: resid(embed(z)), x0[free], jac=lambda z: jac(embed(z), free),
+
+    def solve(start_at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the solution, all parameters; its residuals) of the parameters ``free`` from ``start_at``."""
+        sol = optimize.least_squares(lambda z: resid(embed(z)), start_at[free], jac=lambda z: jac(embed(z), free),
                                      bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
                                      xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
-        xs, fun = embed(sol.x), sol.fun
+        return embed(sol.x), sol.fun
+
+    if free.size:
+        xs, fun = solve(x0)
         # the delta method with the statistics' full covariance: one regression gives J, T_c and
         # c_v, and a machine's draw moves them together, so their errors correlate
         J = jac(xs, free) * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
@@ -495,16 +503,39 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         extra.update(first)
     final = run([xs], seeds)
     if free.size:
-        spread_vals = np.array([r[0] for r in final])[:, stat_idx][:, free]
-        ok = np.all(np.isfinite(spread_vals), axis=1)
-        cov_seed = np.cov(spread_vals[ok].T, ddof=1).reshape(free.size, free.size) if ok.sum() > 2 else 0.0
-        own = real_se[stat_idx][free] ** 2 + np.nan_to_num(sim_se[free], nan=0.0) ** 2
-        cov_stat = np.diag(np.nan_to_num(own, nan=0.0)) + cov_seed * (1 + 1 / FIT_SEEDS)
-        try:
-            jinv = np.linalg.inv(J)
-            sd = np.sqrt(np.clip(np.diag(jinv @ cov_stat @ jinv.T), 0, None))
-        except np.linalg.LinAlgError:
-            sd = np.full(free.size, np.inf)
+        spread_all = np.array([r[0] for r in final])[:, stat_idx]
+        own_all = np.nan_to_num(real_se[stat_idx] ** 2 + np.nan_to_num(sim_se, nan=0.0) ** 2, nan=0.0)
+
+        def deltas(J: np.ndarray) -> np.ndarray:
+            """The delta method's standard deviations of log p for the parameters ``free``."""
+            vals = spread_all[:, free]
+            ok = np.all(np.isfinite(vals), axis=1)
+            cov_seed = np.cov(vals[ok].T, ddof=1).reshape(free.size, free.size) if ok.sum() > 2 else 0.0
+            cov_stat = np.diag(own_all[free]) + cov_seed * (1 + 1 / FIT_SEEDS)
+            try:
+                jinv = np.linalg.inv(J)
+            except np.linalg.LinAlgError:
+                return np.full(free.size, np.inf)
+            return np.sqrt(np.clip(np.diag(jinv @ cov_stat @ jinv.T), 0, None))
+
+        sd = deltas(J)
+        # Jointly not told apart: a parameter whose 90 % interval spans more than MAX_SPAN either
+        # side (its statistic moves with another parameter as much as with it) is kept at its
+        # start, the widest first, and the others fitted again without it.
+        while free.size > 1 and not T90 * float(np.max(sd)) <= math.log(MAX_SPAN):
+            w = int(np.argmax(sd))
+            j = int(free[w])
+            others = [keys[k].split(".")[-1] for k in free if k != j]
+            skipped[keys[j]] = (f"not told apart jointly: its 90 % interval would span a factor "
+                                f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side (its statistic, the "
+                                f"recording's {FITTED[use[j]][1].replace('_', ' ')}, moves with "
+                                f"{', '.join(others)} as well): kept at {start[j]:.6g}")
+            progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
+            free = np.delete(free, w)
+            rows = free
+            xs, fun = solve(xs)
+            J = jac(xs, free) * se[free][:, None]
+            sd = deltas(J)
     values = []
     for jj, j in enumerate(free):
         k, x, i = keys[j], xs[j], use[j]
