@@ -350,7 +350,7 @@ class ImportWatcher:
         self.n_refused_now += 1
         self._append({"event": "file refused", "file": rel, "bytes": size, "mtime_ns": mtime_ns,
                       "reason": reason})
-        self.say(f"refused {src}: {reason}")
+        self.say(f"refused: {reason}")
 
     def _rate_problem(self, phase: str, src: Path, meta: dict) -> str | None:
         for ch, fs in meta["fs_hz"].items():
@@ -538,7 +538,7 @@ class ImportWatcher:
         self._lock()
         self._resume()
         self._append({"event": "watch started", "spec": str(self.spec_path.resolve()), "output": str(self.out),
-                      "imported_before": len(self.published), "refused_before": len(self.refused),
+                      "files_imported_before": len(self.published), "files_refused_before": len(self.refused),
                       "settle_s": self.settle_s})
         idle_since = self.clock()
         ended = "stopped"
