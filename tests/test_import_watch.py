@@ -283,3 +283,31 @@ def test_a_sample_cut_by_a_kill_is_completed_on_restart(lab, tmp_path):
     assert r.units == 4 and {p.name: p.read_bytes() for p in live.glob("0*")} == before
     published = [e["name"] for e in _lines(w / "campaign/import-watch.jsonl") if e["event"] == "unit published"]
     assert published == ["c000000", "c000001", "c000002", "c000003", "c000003"]
+
+
+def test_a_file_waits_for_its_line_in_a_growing_hours_table(lab, tmp_path):
+    """Hours from a table the lab fills in as it goes: a run whose session has no line yet waits
+    (neither imported nor refused) and is imported once the line is there."""
+    from analysis.ingest.watch import ImportWatcher
+
+    w = tmp_path / "export"
+    (w / "phase2").mkdir(parents=True)
+    runs = [f for f in _hours_order(lab["lab"]) if f.parent.name == "phase2"][:6]  # sessions 1 and 2
+    for f in runs:
+        shutil.copy(f, w / "phase2" / f.name)
+    spec = (lab["lab"] / "import.toml").read_text()
+    axis, phase2 = spec.split("[phase1]")[0], "[phase2]" + spec.split("[phase2]")[1]
+    phase2 = phase2.replace("(?P<hours>[0-9.]+)", "[0-9.]+").replace(
+        "[phase2.channels]", '[phase2.hours_table]\nfile = "hours.csv"\nkey = "session"\n[phase2.channels]')
+    (w / "import.toml").write_text(axis.replace(f'output = "{lab["root"] / "batch"}"', 'output = "campaign"')
+                                   + phase2 + "\n[watch]\nruns_per_session = 3\n")
+    (w / "hours.csv").write_text("session,hours\n1,100.0\n")
+    said = []
+    r = ImportWatcher(w / "import.toml", settle_s=0.0, say=said.append).run(0.01, once=True)
+    assert (r.units, r.files, r.refused) == (1, 3, 0)
+    assert sum("has no line in the hours table" in s for s in said) == 3
+    (w / "hours.csv").write_text("session,hours\n1,100.0\n2,150.0\n")
+    r = ImportWatcher(w / "import.toml", settle_s=0.0, say=said.append).run(0.01, once=True)
+    assert (r.units, r.files, r.refused) == (2, 6, 0)
+    man = json.loads((w / "campaign/live/000001-phase2-s0001.json").read_text())
+    assert man["hours"] == 150.0 and man["session_name"] == "02" and man["runs"] == 3

@@ -307,12 +307,22 @@ class ImportWatcher:
             return True  # the conversion names the problem
         return _norm_key(mt.group(t.key)) in table
 
-    def _candidates(self) -> tuple[list[tuple[str, Path, str, int, int]], int]:
+    def _name_hours(self, phase: str, src: Path) -> float | None:
+        """The operating hours a file's name states (a ``hours`` group of ``name_pattern``), or None."""
+        p = self.phases[phase]
+        mt = re.search(p.name_pattern, src.name) if p.name_pattern and "hours" in p.groups() else None
+        try:
+            return float(mt.group("hours")) if mt and mt.group("hours") else None
+        except ValueError:
+            return None
+
+    def _candidates(self) -> tuple[list[tuple[str, Path, str, int, int]], int, tuple | None]:
         """Files whose size and modification time have been unchanged for ``settle_s``:
-        [(phase, path, rel, bytes, mtime_ns)] in hours-agnostic name order, and how many other
-        files are still settling or changing."""
+        [(phase, path, rel, bytes, mtime_ns)] in name order; how many other files are still
+        settling or changing; and the earliest (hours, phase rank) that the names of those
+        files state (None if none states its hours)."""
         now = self.clock()
-        ready, unsettled = [], 0
+        ready, unsettled, holds = [], 0, []
         live = self.live.resolve()
         for phase, p in self.phases.items():
             for src in sorted(self.spec_dir.glob(p.files)):
@@ -337,12 +347,13 @@ class ImportWatcher:
                 seen = self.seen.get(rel)
                 if seen is None or seen[:2] != sig:
                     self.seen[rel] = (*sig, now)
-                    unsettled += 1
-                elif st.st_size == 0 or now - seen[2] < self.settle_s:
-                    unsettled += 1
-                else:
+                elif st.st_size > 0 and now - seen[2] >= self.settle_s:
                     ready.append((phase, src, rel, *sig))
-        return ready, unsettled
+                    continue
+                unsettled += 1
+                if (h := self._name_hours(phase, src)) is not None:
+                    holds.append((h, _RANK[phase]))
+        return ready, unsettled, min(holds, default=None)
 
     def _refuse(self, src: Path, rel: str, size: int, mtime_ns: int, reason: str) -> None:
         self.refused[rel] = (size, mtime_ns)
@@ -431,12 +442,14 @@ class ImportWatcher:
         return not settling and any(f.hours > g.max_hours for o in self.groups.values() if o is not g
                                     for f in o.files)
 
-    def _publish_ready(self, flush: bool = False, settling: bool = False) -> int:
-        """Publish the closed groups in hours order (all of them with ``flush``); returns how many."""
+    def _publish_ready(self, flush: bool = False, settling: bool = False, hold: tuple | None = None) -> int:
+        """Publish the closed groups in hours order (all of them with ``flush``); a group after
+        ``hold`` (the hours and phase rank a file still being written states in its name) waits
+        for that file. Returns how many were published."""
         n = 0
         while self.groups and not self.stop:
             g = min(self.groups.values(), key=_Group.order)
-            if not (flush or self._closed(g, settling)):
+            if not flush and (not self._closed(g, settling) or (hold is not None and g.order()[:2] > hold)):
                 break
             del self.groups[(g.phase, g.key)]
             self._publish(g)
@@ -514,7 +527,7 @@ class ImportWatcher:
     def step(self) -> tuple[int, int]:
         """One look at the folder: accept the settled files (in name order), publish the closed
         groups. Returns (files accepted or refused now, files still settling)."""
-        ready, unsettled = self._candidates()
+        ready, unsettled, hold = self._candidates()
         handled = 0
         for phase, src, rel, size, mtime_ns in ready:
             if self.stop:
@@ -526,7 +539,7 @@ class ImportWatcher:
             elif before != (self.n_refused_now, sum(len(g.files) for g in self.groups.values())):
                 handled += 1
             # else: waiting for its line in an hours table (neither settling nor handled)
-        handled += self._publish_ready(settling=unsettled > 0)
+        handled += self._publish_ready(settling=unsettled > 0, hold=hold)
         return handled, unsettled
 
     def run(self, poll_s: float = 1.0, once: bool = False, until_idle_s: float | None = None,
