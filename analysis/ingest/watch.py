@@ -1,5 +1,5 @@
 """``twin import SPEC --watch``: a laboratory's export folder, growing while the machine runs,
-imported as a live source of ``twin monitor`` (docs/import.md, "Watching an export folder").
+imported as a live source of ``twin monitor`` (docs/import.md, "twin import SPEC --watch").
 
 **When a lab file is complete.** A lab's files carry no completeness mark, so a file is taken
 when (1) it is not empty and its size and modification time have not changed over ``settle_s``
@@ -254,7 +254,11 @@ class ImportWatcher:
             last = manifests[-1]
             done = self.published_groups[("phase1", last["group"])]
             if len(done) < len(last["group_sources"]):
-                self._complete_sample(last, len(done))
+                try:
+                    self._complete_sample(last, len(done))
+                except (ImportSpecError, DatasetError, OSError, ValueError) as exc:
+                    self.say(f"warning: the rest of sample {last['sample']} (cut short by a kill) could not be "
+                             f"imported: {exc}")
 
     def _complete_sample(self, last: dict, done: int) -> None:
         phase, p = "phase1", self.phases["phase1"]
@@ -392,11 +396,12 @@ class ImportWatcher:
         try:
             meta, part, _ = convert_file(self.out, phase, p, src, table, _section(self.spec, p, table),
                                          self.axis, self.spec_dir)
-        except (ImportSpecError, DatasetError, OSError, ValueError) as exc:
-            st = _stat(src)
-            if st != (size, mtime_ns):
+        except Exception as exc:  # noqa: BLE001 - a watcher that runs for months outlives any one bad file
+            if _stat(src) != (size, mtime_ns):
                 return False
-            self._refuse(src, rel, size, mtime_ns, str(exc) if str(src) in str(exc) else f"{src}: {exc}")
+            text = str(exc) if isinstance(exc, (ImportSpecError, DatasetError, OSError, ValueError)) \
+                else f"{type(exc).__name__}: {exc}"
+            self._refuse(src, rel, size, mtime_ns, text if str(src) in text else f"{src}: {text}")
             return True
         if _stat(src) != (size, mtime_ns):
             return False
@@ -456,9 +461,17 @@ class ImportWatcher:
             n += 1
         return n
 
-    def _unit_file(self, stem: str, write: Callable[[Path], None]) -> Path:
+    def _unit_file(self, stem: str, write: Callable[[Path], None], files: list[_File]) -> Path | None:
+        """Write a unit's data file (the validating writer writes a temporary file and renames it
+        into place); None, with its files refused, if the writer refuses the data."""
         path = self.live / f"{stem}.h5"
-        write(path)  # the validating writer writes path + ".tmp" and renames it into place
+        try:
+            write(path)
+        except (DatasetError, ValueError) as exc:
+            for f in files:
+                self._refuse(f.src, f.rel, f.bytes, f.mtime_ns,
+                             f"{f.src}: the dataset's writer refuses it ({exc})")
+            return None
         return path
 
     def _manifest(self, stem: str, data: Path, **keys) -> dict:
@@ -487,7 +500,9 @@ class ImportWatcher:
                     _, arrays = load_part(f.part)
                     attrs = {"hours": f.hours, "sample": sample, "fs_hz": f.meta["fs_hz"]["speed"]}
                     data = self._unit_file(stem, lambda path, name=name, attrs=attrs, arrays=arrays:
-                                           assemble_measurements(path, axis, [(name, attrs, arrays)]))
+                                           assemble_measurements(path, axis, [(name, attrs, arrays)]), [f])
+                    if data is None:
+                        continue
                     man = self._manifest(stem, data, seq=seq, kind="phase1", name=name, hours=f.hours,
                                          sample=sample, captures_in_sample=len(files),
                                          sources=[sources[i]], group_sources=[x["file"] for x in sources],
@@ -508,7 +523,9 @@ class ImportWatcher:
                 yield f"r{k:04d}", dict(run_attrs), arrays, {ch: {"fs_hz": fs} for ch, fs in f.meta["fs_hz"].items()}
 
         data = self._unit_file(stem, lambda path: assemble_measurements(path, axis, (), [(name, {"hours": g.hours},
-                                                                                         runs())]))
+                                                                                         runs())]), files)
+        if data is None:
+            return
         label = g.key if "session" in files[0].meta["groups"] else None
         man = self._manifest(stem, data, seq=seq, kind="phase2", name=name, hours=g.hours, runs=len(files),
                              session_name=label, sources=sources, fs_hz=files[0].meta["fs_hz"], **common)
@@ -572,9 +589,11 @@ class ImportWatcher:
         if ended != "stopped":
             self._publish_ready(flush=True)
             if self.published and not self.stop:
-                summary = self.assemble()
-                write_json(self.live / "end.json", {"format": SOURCE_FORMAT, "version": UNIT_VERSION,
-                                                    "units": self.n_seq, "finished": True})
+                try:
+                    summary = self.assemble()
+                finally:  # the live units are complete even if the campaign file cannot be written
+                    write_json(self.live / "end.json", {"format": SOURCE_FORMAT, "version": UNIT_VERSION,
+                                                        "units": self.n_seq, "finished": True})
         self._append({"event": "watch stopped", "ended": ended, "units": self.n_seq,
                       "published_now": self.n_published_now, "refused_now": self.n_refused_now})
         return WatchResult(self.n_seq, len(self.published), len(self.refused), ended, summary)
