@@ -311,3 +311,30 @@ def test_a_file_waits_for_its_line_in_a_growing_hours_table(lab, tmp_path):
     assert (r.units, r.files, r.refused) == (2, 6, 0)
     man = json.loads((w / "campaign/live/000001-phase2-s0001.json").read_text())
     assert man["hours"] == 150.0 and man["session_name"] == "02" and man["runs"] == 3
+
+
+def test_nan_samples_are_refused_naming_channel_and_line_and_ctrl_c_stops_cleanly(lab, tmp_path):
+    w = tmp_path / "export"
+    (w / "phase2").mkdir(parents=True)
+    spec = (lab["lab"] / "import.toml").read_text()
+    axis, phase2 = spec.split("[phase1]")[0], "[phase2]" + spec.split("[phase2]")[1]
+    (w / "import.toml").write_text(axis.replace(f'output = "{lab["root"] / "batch"}"', 'output = "campaign"')
+                                   + phase2)
+    run = next(f for f in _hours_order(lab["lab"]) if f.parent.name == "phase2")
+    lines = run.read_text(encoding="utf-8").splitlines()
+    cells = lines[10].split(";")
+    cells[2] = "nan"  # Acc Y [g] on file line 11
+    lines[10] = ";".join(cells)
+    (w / "phase2" / run.name).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    proc = _popen("import", w / "import.toml", "--watch", "--poll", "0.05", "--settle", "0.1")
+    log = w / "campaign/import-watch.jsonl"
+    _wait_for(lambda: log.is_file() and any(e["event"] == "file refused" for e in _lines(log)), "the refusal")
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    assert "stopped; resume with: twin import" in " ".join(err.split())
+    refused = [e for e in _lines(log) if e["event"] == "file refused"]
+    assert len(refused) == 1 and refused[0]["reason"] == (
+        f"{w / 'phase2' / run.name}: channel 'Acc Y [g]', line 11: nan (1 non-finite value(s) in all); "
+        "expected finite samples")
+    assert [e["ended"] for e in _lines(log) if e["event"] == "watch stopped"] == ["stopped"]
