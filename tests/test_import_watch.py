@@ -301,6 +301,10 @@ def test_a_file_waits_for_its_line_in_a_growing_hours_table(lab, tmp_path):
         "[phase2.channels]", '[phase2.hours_table]\nfile = "hours.csv"\nkey = "session"\n[phase2.channels]')
     (w / "import.toml").write_text(axis.replace(f'output = "{lab["root"] / "batch"}"', 'output = "campaign"')
                                    + phase2 + "\n[watch]\nruns_per_session = 3\n")
+    said = []
+    r = ImportWatcher(w / "import.toml", settle_s=0.0, say=said.append).run(0.01, once=True)
+    assert (r.units, r.files, r.refused) == (0, 0, 0)  # no table yet: the files wait
+    assert any(s.startswith("waiting: ") and "hours.csv" in s for s in said)
     (w / "hours.csv").write_text("session,hours\n1,100.0\n")
     said = []
     r = ImportWatcher(w / "import.toml", settle_s=0.0, say=said.append).run(0.01, once=True)

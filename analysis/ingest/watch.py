@@ -52,7 +52,7 @@ from pathlib import Path
 
 from analysis.dataset import DatasetError, assemble_measurements
 from analysis.dataset.axis import AxisDescription
-from analysis.dataset.live import SOURCE_FORMAT, UNIT_FORMAT, UNIT_VERSION, manifest_ok, sha256_of
+from analysis.dataset.live import SOURCE_FORMAT, UNIT_FORMAT, UNIT_VERSION, sha256_of
 from analysis.dataset.schema import ROUTINE_ATTRS
 from analysis.files import read_json, write_json
 from analysis.ingest.convert import (
@@ -207,7 +207,10 @@ class ImportWatcher:
                 m = read_json(p, "a live unit's manifest")
             except (ValueError, OSError):
                 continue
-            if m.get("format") == UNIT_FORMAT and "sources" in m and manifest_ok(self.live, m):
+            # A manifest is written after its data file is in place, so the size is check enough
+            # here (the monitor checks the SHA-256; hashing every unit at each restart would not scale).
+            if m.get("format") == UNIT_FORMAT and "sources" in m and _stat(self.live / m["file"]) is not None \
+                    and _stat(self.live / m["file"])[0] == m["bytes"]:
                 out.append(m)
         return sorted(out, key=lambda m: m["seq"])
 
@@ -269,7 +272,7 @@ class ImportWatcher:
             try:
                 meta, _ = load_part(part)
             except ValueError:
-                table = self._table(phase, p)
+                table = self._table(phase, p) or {}
                 meta, part, _ = convert_file(self.out, phase, p, src, table, _section(self.spec, p, table),
                                              self.axis, self.spec_dir)
             st = src.stat()
@@ -281,8 +284,9 @@ class ImportWatcher:
         self._publish(g, skip=done)
 
     # --- looking at the folder ------------------------------------------------------------------
-    def _table(self, phase: str, p: PhaseSpec) -> dict[str, float]:
-        """The phase's hours table, read again when it changed (a table that grows with the folder)."""
+    def _table(self, phase: str, p: PhaseSpec) -> dict[str, float] | None:
+        """The phase's hours table, read again when it changed (a table that grows with the
+        folder); None while it cannot be read and none was read before (its files wait)."""
         if p.hours_table is None:
             return {}
         path = self.spec_dir / p.hours_table.file
@@ -295,9 +299,11 @@ class ImportWatcher:
             try:
                 self.tables[phase] = (mtime, _hours_table(self.spec_dir, phase, p))
             except ImportSpecError as exc:
+                if str(exc) not in self.waiting_said:
+                    self.waiting_said.add(str(exc))
+                    self.say(f"waiting: {exc}" if old is None else f"kept the hours table read before: {exc}")
                 if old is None:
-                    raise
-                self.say(f"kept the hours table read before: {exc}")
+                    return None
         return self.tables[phase][1]
 
     def _in_table(self, src: Path, p: PhaseSpec, table: dict[str, float]) -> bool:
@@ -383,11 +389,9 @@ class ImportWatcher:
         """Convert one settled file and put it into its group, or refuse it; False if it changed
         while it was read (it settles again)."""
         p = self.phases[phase]
-        try:
-            table = self._table(phase, p)
-        except ImportSpecError as exc:
-            self._refuse(src, rel, size, mtime_ns, str(exc))
-            return True
+        table = self._table(phase, p)
+        if table is None:
+            return True  # waiting for the hours table
         if not self._in_table(src, p, table):
             if rel not in self.waiting_said:
                 self.waiting_said.add(rel)
