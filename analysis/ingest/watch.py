@@ -378,6 +378,9 @@ class ImportWatcher:
             sensor = _RATED.get(ch)
             declared = self.axis.get(f"sensors.{sensor}.fs_hz") if sensor else None
             want = declared if declared is not None else self.rates[phase].get(ch)
+            if want is None:  # nothing published yet: the files accepted before
+                want = next((f.meta["fs_hz"][ch] for g in self.groups.values() if g.phase == phase
+                             for f in g.files if ch in f.meta["fs_hz"]), None)
             if want is not None and abs(fs - want) > RATE_TOLERANCE * want:
                 where = (f"the axis description's sensors.{sensor}.fs_hz" if declared is not None
                          else "the rate of the files imported before")
