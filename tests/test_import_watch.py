@@ -146,7 +146,7 @@ def watched(lab):
             stderr.append(err)
             assert watcher.returncode == 0 and "stopped; resume with" in err and "Traceback" not in err, err
         if i == 30:
-            watcher = _popen("import", w / "import.toml", "--watch", *WATCH, "--until-idle", "4")
+            watcher = _popen("import", w / "import.toml", "--watch", *WATCH, "--until-idle", "6")
         copy(i, f)
         if f.name == "S02_150h_run03.csv":  # a fourth run of session 2 at half the rate
             lines = f.read_text(encoding="utf-8").splitlines()
