@@ -739,8 +739,8 @@ def _import_watch(spec: Path, out: Path | None, poll: float, settle: float, once
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
-    console.print(f"{r.units} units from {r.files} files imported, {r.refused} refused (reasons in {w.log})",
-                  markup=False, highlight=False)
+    console.print(f"{w.live}: {r.units} units from {r.files} files ({w.n_published_now} units new); "
+                  f"{r.refused} files refused (reasons in {w.log})", markup=False, highlight=False)
     if r.summary is not None:
         console.print(f"wrote {r.summary.output / 'measurements.h5'}, {r.summary.output / 'import.json'} and "
                       f"{w.live / 'end.json'}", markup=False, highlight=False)

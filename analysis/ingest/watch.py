@@ -597,7 +597,8 @@ class ImportWatcher:
             self._publish_ready(flush=True)
             if self.published and not self.stop:
                 try:
-                    summary = self.assemble()
+                    if self.n_published_now or not (self.out / "measurements.h5").is_file():
+                        summary = self.assemble()
                 finally:  # the live units are complete even if the campaign file cannot be written
                     write_json(self.live / "end.json", {"format": SOURCE_FORMAT, "version": UNIT_VERSION,
                                                         "units": self.n_seq, "finished": True})
