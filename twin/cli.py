@@ -654,15 +654,32 @@ def gate(
 def import_(
     spec: Path = typer.Argument(..., help="import spec (TOML; docs/import.md)"),
     out: Path | None = typer.Option(None, "-o", "--out", help="campaign directory (default: the spec's output)"),
+    watch: bool = typer.Option(False, "--watch", help="watch the spec's folder as it grows and import each "
+                               "complete capture and session as a live unit for twin monitor (OUT/live/)"),
+    poll: float = typer.Option(1.0, "--poll", min=0.01, help="with --watch: seconds between looks at the folder"),
+    settle: float = typer.Option(2.0, "--settle", min=0.0, help="with --watch: seconds a file's size and "
+                                 "modification time must stay unchanged before it is read"),
+    once: bool = typer.Option(False, "--once", help="with --watch: import what is there, once every file has "
+                              "settled, then stop"),
+    until_idle: float | None = typer.Option(None, "--until-idle", min=0.0, help="with --watch: stop after this "
+                                            "many seconds with no file arriving or changing"),
 ) -> None:
     """Convert a laboratory's files (CSV, MATLAB .mat, NI TDMS, ASAM MDF) into a campaign's
     measurements.h5 as the import spec maps them: channels, units (g, mV, rpm, deg/s, mm, ...),
-    rates, hours and the axis description. Resumes: files converted before are not read again."""
+    rates, hours and the axis description. Resumes: files converted before are not read again.
+    With --watch, a DAQ's export folder is imported while it grows (docs/import.md)."""
     from analysis.dataset import DatasetError
     from analysis.ingest import ImportSpecError, run_import
 
     if out is not None:
         _writable_dir(out, "campaign directory")
+    if (once or until_idle is not None) and not watch:
+        _fail("--once and --until-idle go with --watch")
+    if once and until_idle is not None:
+        _fail("--once and --until-idle exclude each other: give one")
+    if watch:
+        _import_watch(spec, out, poll, settle, once, until_idle)
+        return
 
     t0 = time.perf_counter()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -687,6 +704,52 @@ def import_(
                   f"{time.perf_counter() - t0:.1f} s", markup=False, highlight=False)
     console.print(f"wrote {s.output / 'measurements.h5'} and {s.output / 'import.json'}; next: "
                   f"twin check {s.output}", markup=False, highlight=False)
+
+
+def _import_watch(spec: Path, out: Path | None, poll: float, settle: float, once: bool,
+                  until_idle: float | None) -> None:
+    """``twin import SPEC --watch``: analysis.ingest.watch, stopped cleanly by Ctrl-C or SIGTERM."""
+    import signal
+
+    from analysis.dataset import DatasetError
+    from analysis.ingest import ImportSpecError
+    from analysis.ingest.watch import ImportWatcher
+
+    def say(text: str) -> None:
+        console.print(text, markup=False, highlight=False, soft_wrap=True,
+                      style="yellow" if text.startswith(("refused", "warning")) else None)
+
+    try:
+        w = ImportWatcher(spec, out, settle_s=settle, say=say)
+    except (ImportSpecError, DatasetError) as exc:
+        _fail(str(exc))
+    signals = []
+
+    def stop(signum, frame) -> None:
+        signals.append(signum)
+        w.stop = True
+
+    old = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    console.print(f"watching {w.spec_dir} ({', '.join(p.files for p in w.phases.values())}) -> {w.live}; "
+                  f"a file is read once unchanged for {settle:g} s; log: {w.log}", markup=False, highlight=False)
+    try:
+        r = w.run(poll, once=once, until_idle_s=until_idle)
+    except (ImportSpecError, DatasetError) as exc:
+        _fail(str(exc))
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    console.print(f"{w.live}: {r.units} units from {r.files} files ({w.n_published_now} units new); "
+                  f"{r.refused} files refused (reasons in {w.log})", markup=False, highlight=False)
+    if r.summary is not None:
+        console.print(f"wrote {r.summary.output / 'measurements.h5'}, {r.summary.output / 'import.json'} and "
+                      f"{w.live / 'end.json'}", markup=False, highlight=False)
+        for warning in r.summary.warnings or []:
+            console.print(f"warning: {warning}", style="yellow", markup=False, highlight=False, soft_wrap=True)
+    if r.ended == "stopped":
+        console.print(f"stopped; resume with: twin {shlex.join(sys.argv[1:])}", markup=False, highlight=False)
+        if signal.SIGINT in signals:
+            raise typer.Exit(EXIT_INTERRUPTED)
 
 
 #: Rows of the file -> capture / session, run -> hours table `twin import` prints (all are in import.json).

@@ -7,6 +7,8 @@
 - :mod:`~analysis.ingest.units`: conversion of the laboratory's units to the format's SI units;
 - :mod:`~analysis.ingest.convert`: the import itself, resumable, through the validating writer
   :func:`analysis.dataset.assemble_measurements`.
+- :mod:`~analysis.ingest.watch`: ``twin import --watch``, a growing export folder imported file
+  by file as live units for ``twin monitor``.
 
 Every problem raises :class:`ImportSpecError` (a ``ValueError``) naming the file, the channel
 and the line or sample.

@@ -310,27 +310,54 @@ def run_import(spec_path: str | os.PathLike, *, output: str | os.PathLike | None
         if p is None:
             continue
         table = _hours_table(spec_dir, phase, p) if p.hours_table else {}
-        section = json.dumps([p.model_dump(), spec.axis, table], sort_keys=True, default=str)
-        jobs += [(phase, p, src, table, section) for src in _files(spec_dir, phase, p)]
+        jobs += [(phase, p, src, table, _section(spec, p, table)) for src in _files(spec_dir, phase, p)]
     parts: dict[str, list[tuple[dict, Path]]] = {"phase1": [], "phase2": []}
     converted = reused = 0
     for i, (phase, p, src, table, section) in enumerate(jobs):
-        part = _part_path(out, phase, src)
-        sig = _signature(src, section)
-        got = _load_part(part) if part.exists() else None
-        was_reused = got is not None and got[0].get("signature") == sig
-        if was_reused:
-            meta = got[0]
-            reused += 1
-        else:
-            meta, arrays = _convert(src, phase, p, axis, table, spec_dir)
-            meta["signature"] = sig
-            _save_part(part, meta, arrays)
-            converted += 1
+        meta, part, was_reused = convert_file(out, phase, p, src, table, section, axis, spec_dir)
+        reused += was_reused
+        converted += not was_reused
         parts[phase].append((meta, part))
         if progress is not None:
             progress(i + 1, len(jobs), src.name, was_reused)
+    return assemble_import(spec_path, spec, out, axis, parts, converted, reused)
 
+
+def _section(spec: ImportSpec, p: PhaseSpec, table: dict[str, float]) -> str:
+    """What of the spec a phase's parts depend on (a part converted under another is redone)."""
+    return json.dumps([p.model_dump(), spec.axis, table], sort_keys=True, default=str)
+
+
+def convert_file(out: Path, phase: str, p: PhaseSpec, src: Path, table: dict[str, float], section: str,
+                 axis: AxisDescription, spec_dir: Path) -> tuple[dict, Path, bool]:
+    """One source file as a part in ``out/.import/``: converted (:func:`_convert`), or reused when
+    the part's signature (file size, modification time, spec section) is unchanged.
+    Returns (meta, part path, reused); raises :class:`ImportSpecError` naming the file."""
+    part = _part_path(out, phase, src)
+    sig = _signature(src, section)
+    got = _load_part(part) if part.exists() else None
+    if got is not None and got[0].get("signature") == sig:
+        return got[0], part, True
+    meta, arrays = _convert(src, phase, p, axis, table, spec_dir)
+    meta["signature"] = sig
+    _save_part(part, meta, arrays)
+    return meta, part, False
+
+
+def load_part(part: Path) -> tuple[dict, dict[str, np.ndarray]]:
+    """A part's (meta, {channel: SI array}); ValueError if it is gone or damaged."""
+    got = _load_part(part)
+    if got is None:
+        raise ValueError(f"{part}: the converted part is missing or damaged; import the file again")
+    return got
+
+
+def assemble_import(spec_path: str | os.PathLike, spec: ImportSpec, out: Path, axis: AxisDescription,
+                    parts: dict[str, list[tuple[dict, Path]]], converted: int = 0,
+                    reused: int = 0) -> ImportSummary:
+    """Name the converted parts in the format's order and write ``out/measurements.h5`` and
+    ``out/import.json`` (module docstring); ``parts`` is {phase: [(meta, part path)]}."""
+    spec_dir = Path(spec_path).parent
     # Phase I: captures by (hours, file); samples from the name or one per distinct hours value
     p1 = sorted(parts["phase1"], key=lambda mp: (mp[0]["hours"], mp[0]["source"]))
     distinct = sorted({m["hours"] for m, _ in p1})

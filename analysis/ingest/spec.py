@@ -23,6 +23,9 @@ Layout::
     imu_acc = {channels = ["ax", "ay", "az"], unit = "g"}
     [dial]                              # dial-indicator readings (optional)
     file = "dial.csv"                   # columns hours, backlash_um
+    [watch]                             # twin import --watch only (optional)
+    captures_per_sample = 10            # a sample is complete with this many captures
+    runs_per_session = 90               # a session is complete with this many runs
 
 The operating hours of a phase come from exactly one of: a ``hours`` group of ``name_pattern``,
 ``hours_channel``, ``hours_table`` (:class:`Table`: per file, or per session / sample joined on
@@ -156,6 +159,16 @@ class DialSpec(_Model):
     backlash_um_column: str = "backlash_um"
 
 
+class WatchSpec(_Model):
+    """How a watched export folder (``twin import SPEC --watch``) groups its files as they come:
+    a Phase I sample is complete with ``captures_per_sample`` captures and a Phase II session
+    with ``runs_per_session`` runs. Without them a sample (session) is complete when a file of
+    later operating hours arrives, or when the watch ends (``--once``, ``--until-idle``)."""
+
+    captures_per_sample: int | None = Field(None, ge=1)
+    runs_per_session: int | None = Field(None, ge=1)
+
+
 class ImportSpec(_Model):
     """The whole spec (see the module's doc)."""
 
@@ -165,6 +178,7 @@ class ImportSpec(_Model):
     phase1: PhaseSpec | None = None
     phase2: PhaseSpec | None = None
     dial: DialSpec | None = None
+    watch: WatchSpec | None = None
 
     @model_validator(mode="after")
     def _check(self) -> ImportSpec:
