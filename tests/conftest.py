@@ -58,7 +58,8 @@ def demo_run(tmp_path_factory):
 # The files whose session fixtures take minutes (the diagnosis benchmark, the parameter
 # responses, the gate's cold cache), run first: with two test processes (`make test`, pytest-xdist's loadfile) the
 # other process works through the short files meanwhile, instead of waiting at the end.
-LONG_FILES = ("test_diagnosis.py", "test_diagnosis_parameters.py", "test_gate.py")
+LONG_FILES = ("test_diagnosis.py", "test_diagnosis_parameters.py", "test_gate.py", "test_calibrate.py",
+              "test_monitor.py", "test_import_watch.py")
 
 
 def pytest_collection_modifyitems(config, items):
