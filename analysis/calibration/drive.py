@@ -44,8 +44,8 @@ SPEED_LOWPASS_HZ = 100.0
 #: Left out at each end of a capture: the zero-phase filter's edge transients, s.
 EDGE_S = 0.05
 #: Statistics of :func:`capture_statistics`, in order, with their units.
-STATISTICS = ("inertia", "constant_drag", "viscous_drag", "ripple")
-UNITS = {"inertia": "kg·m²", "constant_drag": "N·m", "viscous_drag": "N·m·s/rad", "ripple": "N·m"}
+STATISTICS = ("inertia", "cruise_drag", "viscous_drag", "ripple")
+UNITS = {"inertia": "kg·m²", "cruise_drag": "N·m", "viscous_drag": "N·m·s/rad", "ripple": "N·m"}
 
 
 def _smoothed_speed(speed: np.ndarray, fs: float) -> np.ndarray:
@@ -101,10 +101,26 @@ def ripple_amplitude(speed: np.ndarray, torque: np.ndarray, fs: float, order: in
     return float(2.0 * np.abs(z))
 
 
+def cruise_torque(speed: np.ndarray, torque: np.ndarray, fs: float) -> float:
+    """The mean of torque·sign(ω) (N·m) over the cruise (|ω| within 2 % of its plateau, the speed
+    low-passed at :data:`SPEED_LOWPASS_HZ`): T_c + c_v·|ω| at the cruise speed, the drag the
+    motor holds at constant speed, read without the ramps (where the servo's lag biases the
+    rigid-body fit's T_c). NaN without motion. ``speed`` (n,) rad/s, ``torque`` (n,) N·m."""
+    w = _smoothed_speed(speed, fs)
+    plateau = float(np.percentile(np.abs(w), 99))
+    if not plateau > 0:
+        return float("nan")
+    cruise = np.abs(w) >= 0.98 * plateau
+    return float(np.mean(torque[cruise] * np.sign(w[cruise])))
+
+
 def capture_statistics(speed: np.ndarray, torque: np.ndarray, fs: float, ripple_order: int) -> np.ndarray:
-    """(4,) the :data:`STATISTICS` of one capture: J, T_c, c_v (:func:`rigid_body_fit`) and the
-    ripple amplitude at ``ripple_order`` (:func:`ripple_amplitude`)."""
-    return np.append(rigid_body_fit(speed, torque, fs), ripple_amplitude(speed, torque, fs, ripple_order))
+    """(4,) the :data:`STATISTICS` of one capture: J and c_v of :func:`rigid_body_fit`, the
+    cruise's drag (:func:`cruise_torque`) in place of its T_c, and the ripple amplitude at
+    ``ripple_order`` (:func:`ripple_amplitude`)."""
+    fit = rigid_body_fit(speed, torque, fs)
+    fit[1] = cruise_torque(speed, torque, fs) if np.isfinite(fit[1]) else np.nan
+    return np.append(fit, ripple_amplitude(speed, torque, fs, ripple_order))
 
 
 def recording_statistics(m, captures: list[str], ripple_order: int) -> tuple[np.ndarray, np.ndarray]:

@@ -8,23 +8,23 @@ b. **the sensor chain**, measured from the rests (:mod:`analysis.calibration.sen
 c. **the drive's physical parameters and the Phase I acceleration, jointly**, fitted by indirect
    inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl. Econometrics
    8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the torque's rigid-body
-   fit J, T_c, c_v, the ripple at its order, the carriage's vertical and lateral suspension modes
-   on the nut accelerometers, the IMU's axial acceleration around the starts and stops of the Phase
-   II runs) and the routine fit's acceleration are computed on the recording's first Phase I sample
-   and on the twin simulated with the same layout and one seed (common random numbers: every
-   evaluation draws the same noise), and ``scipy.optimize.least_squares`` (trust-region reflective,
-   bounds a factor of 10 either side of the start) moves the parameters until the two agree within
-   the statistics' standard errors. The Jacobian's columns are simulated together (one batched
-   rollout per capture). The 90 % intervals come from the Jacobian at the solution and the
-   statistics' errors (delta method: Cov = (JᵀJ)⁻¹ for residuals in units of their standard error);
-   an error is the recording's own (the scatter over its captures), the twin's, and the scatter of
-   the statistic over :data:`SPREAD_SEEDS` twin seeds at the start (the machine's random geometry
-   and ripple phase, which one recording cannot average out); the interval uses the statistics'
-   full covariance over those seeds (Cov = J⁻¹ Σ J⁻ᵀ: one regression gives J, T_c and c_v, and a
-   machine's draw moves them together).
+   fit J and c_v, the drag over the cruise, the ripple at its order, the carriage's vertical and
+   lateral suspension modes on the nut accelerometers, the IMU's axial acceleration around the
+   starts and stops of the Phase II runs) and the routine fit's acceleration are computed on the
+   recording's first Phase I sample and on the twin simulated with the same layout and one seed
+   (common random numbers: every evaluation draws the same noise), and
+   ``scipy.optimize.least_squares`` (trust-region reflective, bounds a factor of 10 either side of
+   the start) moves the parameters until the two agree within the statistics' standard errors. The
+   Jacobian's columns are simulated together (one batched rollout per capture). The 90 % intervals
+   come from the Jacobian at the solution and the statistics' errors (delta method: Cov = (JᵀJ)⁻¹
+   for residuals in units of their standard error); an error is the recording's own (the scatter
+   over its captures), the twin's, and the scatter of the statistic over :data:`SPREAD_SEEDS` twin
+   seeds at the start (the machine's random geometry and ripple phase, which one recording cannot
+   average out); the interval uses the statistics' full covariance over those seeds (Cov = J⁻¹ Σ
+   J⁻ᵀ: one regression gives J and c_v, and a machine's draw moves them together).
 
 Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters (each
-responds mostly to one: J to the mass, T_c to the constant drag, c_v to the viscous drag, the
+responds mostly to one: J to the mass, the cruise's drag to the rails' friction, c_v to the viscous drag, the
 ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, a suspension mode's
 frequency to the trucks' stiffness in its direction and the mass, the IMU's ringing around the
 starts and stops, or the speed's overshoot, to the velocity loop's bandwidth), the problem is
@@ -65,7 +65,7 @@ from twin.config import get_dotted, set_dotted
 from twin.executors import default_processes
 from twin.scenario import Scenario, ScenarioError, from_dict, load
 
-CALIBRATE_VERSION = 4
+CALIBRATE_VERSION = 5
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -94,7 +94,7 @@ Z90 = 1.6448536269514722  # the standard normal's 95th percentile: a two-sided 9
 #: The fitted parameters of layer (c): (scenario key, auxiliary statistic, unit).
 FITTED = (
     ("axis.carriage_mass_kg", "inertia", "kg"),
-    ("axis.rail_friction_N", "constant_drag", "N"),
+    ("axis.rail_friction_N", "cruise_drag", "N"),
     ("axis.drag_viscous_Nm_s_per_rad", "viscous_drag", "N·m·s/rad"),
     ("axis.torque_ripple_Nm", "ripple", "N·m"),
     ("phase1.accel_mm_s2", "accel", "mm/s²"),
@@ -103,7 +103,7 @@ FITTED = (
     ("axis.truck_stiffness_lateral_N_per_um", "lateral_mode", "N/µm"),
     ("axis.velocity_bandwidth_hz", "loop_response", "Hz"),
 )
-STAT_NAMES = ("inertia", "constant_drag", "viscous_drag", "ripple", "accel", "dwell", "vertical_mode",
+STAT_NAMES = ("inertia", "cruise_drag", "viscous_drag", "ripple", "accel", "dwell", "vertical_mode",
               "lateral_mode", "loop_response")
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
@@ -487,7 +487,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
 
     if free.size:
         xs, fun = solve(x0)
-        # the delta method with the statistics' full covariance: one regression gives J, T_c and
+        # the delta method with the statistics' full covariance: one regression gives J and
         # c_v, and a machine's draw moves them together, so their errors correlate
         J = jac(xs, free) * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
     # the machine-to-machine scatter at the solution (it grows with the ripple, the drags, the
