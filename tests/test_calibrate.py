@@ -178,14 +178,15 @@ def test_speed_overshoot_follows_the_velocity_loop():
     assert abs(o_pos - o0) < 0.25 * abs(o_vel - o0)
 
 
-def test_imu_reversal_follows_the_velocity_loop():
-    """The IMU's axial acceleration around the starts and stops of a Phase II run (the velocity
-    loop's statistic when the recording has runs) moves with the velocity loop's bandwidth (× 1.2)
-    by more than 10 times its scatter over the machine's draw (2 seeds) and 4 times more than
-    with the position loop's (× 1.5)."""
+def test_imu_statistics_follow_the_velocity_loop_and_the_lateral_trucks():
+    """On the IMU of a Phase II run: the axial acceleration around the starts and stops (the
+    velocity loop's statistic when the recording has runs) moves with the velocity loop's
+    bandwidth (× 1.2) by more than 10 times its scatter over the machine's draw (2 seeds) and 4
+    times more than with the position loop's (× 1.5); the yaw mode (the lateral trucks'
+    statistic) follows the lateral stiffness alone."""
     from types import SimpleNamespace
 
-    from analysis.calibration.drive import imu_reversal
+    from analysis.calibration.drive import imu_reversal, imu_yaw_mode
     from twin.campaign import KIND_PHASE2, condition_at, make_world, rng_for
     from twin.scenario import from_dict, load
     from twin.simulate import Simulator, phase2_measure_runs, phase2_trajectory
@@ -194,24 +195,31 @@ def test_imu_reversal_follows_the_velocity_loop():
     base["phase2"].update(start_mm=40.0, end_mm=240.0)
     ax = load("foreign-16mm").axis
 
-    def reversal(seed: int, **axis) -> float:
+    def reversal(seed: int, **axis) -> tuple[float, float]:
         d = json.loads(json.dumps(base))
         d["axis"].update(axis)
         d["seed"] = 1616 + seed
         s = from_dict(d)
         sim = Simulator(make_world(s), s.phase2.timestep_s)
         traj = phase2_trajectory(sim, s.phase2, condition_at(s, 50.0))
-        run = phase2_measure_runs(sim, traj, [rng_for(seed, KIND_PHASE2, 0)])[0]
-        return imu_reversal(SimpleNamespace(**run))
+        run = SimpleNamespace(**phase2_measure_runs(sim, traj, [rng_for(seed, KIND_PHASE2, 0)])[0])
+        return imu_reversal(run), imu_yaw_mode(run)
 
-    r0 = [reversal(k) for k in range(2)]
-    r_vel = reversal(0, velocity_bandwidth_hz=1.2 * ax.velocity_bandwidth_hz)
-    r_pos = reversal(0, position_bandwidth_hz=1.5 * ax.position_bandwidth_hz)
+    r0, y0 = zip(*(reversal(k) for k in range(2)), strict=True)
+    r_vel, y_vel = reversal(0, velocity_bandwidth_hz=1.2 * ax.velocity_bandwidth_hz)
+    r_pos, _ = reversal(0, position_bandwidth_hz=1.5 * ax.position_bandwidth_hz)
+    _, y_lat = reversal(0, truck_stiffness_lateral_N_per_um=ax.truck_stiffness_lateral_N_per_um / 2)
+    _, y_vert = reversal(0, truck_stiffness_vertical_N_per_um=ax.truck_stiffness_vertical_N_per_um / 2)
     scatter = abs(r0[1] - r0[0])
     print(f"IMU reversal log10 RMS {r0[0]:.4f} (seed 2: {r0[1]:.4f}); velocity loop x1.2 {r_vel:.4f}; "
-          f"position loop x1.5 {r_pos:.4f}")
+          f"position loop x1.5 {r_pos:.4f}; IMU yaw mode {y0[0]:.1f} Hz (seed 2: {y0[1]:.1f}), lateral trucks "
+          f"halved {y_lat:.1f} Hz, vertical halved {y_vert:.1f} Hz, velocity loop x1.2 {y_vel:.1f} Hz")
     assert abs(r_vel - r0[0]) > 10 * scatter
     assert abs(r_pos - r0[0]) < 0.25 * abs(r_vel - r0[0])
+    # the yaw mode: the lateral trucks halved move it by more than 10 times its scatter over the
+    # machine's draw; neither the vertical trucks nor the velocity loop by more than 0.5 %
+    assert abs(y_lat - y0[0]) > 10 * abs(y0[1] - y0[0])
+    assert y_vert == pytest.approx(y0[0], rel=0.005) and y_vel == pytest.approx(y0[0], rel=0.005)
 
 
 def test_torque_resolution_is_the_grid_step():

@@ -218,6 +218,29 @@ def imu_reversal(run) -> float:
     return float(np.log10(np.sqrt(np.mean(hp[near] ** 2)) + 1e-15))
 
 
+#: Lower end of the band :func:`imu_yaw_mode` looks in, Hz (below it, the motion's own content).
+YAW_BAND_LOW_HZ = 20.0
+
+
+def imu_yaw_mode(run) -> float:
+    """Frequency (Hz) of the carriage's yaw mode on its trucks' lateral springs, read on the IMU's
+    yaw rate (``imu_gyro`` column z, rad/s) of a Phase II run: the centroid Σ f·P(f)² / Σ P(f)² of
+    its Welch PSD (Hann segments of 0.25 s) over :data:`YAW_BAND_LOW_HZ` to 0.45 of the rate, as
+    :func:`suspension_mode` on the nut accelerometers. The IMU sits on the carriage, where the
+    lateral mode shows as a rotation the nut accelerometers see mixed with the vertical one. NaN
+    when the run is shorter than a segment."""
+    fs = float(run.imu_gyro_fs_hz)
+    g = np.asarray(run.imu_gyro, float)[:, 2]
+    nper = int(round(0.25 * fs))
+    if g.size < nper or 0.45 * fs <= YAW_BAND_LOW_HZ:
+        return float("nan")
+    f, p = signal.welch(g, fs, nperseg=nper)
+    band = (f >= YAW_BAND_LOW_HZ) & (f <= 0.45 * fs)
+    w = p[band] ** 2
+    total = float(np.sum(w))
+    return float(np.sum(f[band] * w) / total) if total > 0 else float("nan")
+
+
 def imu_ripple(run, lead_m: float, order: int, max_hz: float) -> float:
     """Log10 of the IMU's axial acceleration (m/s²) at ``order`` periods per motor revolution,
     averaged over the cruises of a Phase II run: the torque ripple shakes the carriage through the

@@ -53,6 +53,7 @@ from scipy import optimize
 from analysis.calibration.drive import (
     imu_reversal,
     imu_ripple,
+    imu_yaw_mode,
     recording_statistics,
     speed_overshoot,
     suspension_mode,
@@ -65,7 +66,7 @@ from twin.config import get_dotted, set_dotted
 from twin.executors import default_processes
 from twin.scenario import Scenario, ScenarioError, from_dict, load
 
-CALIBRATE_VERSION = 5
+CALIBRATE_VERSION = 6
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -134,7 +135,7 @@ CHANNELS = {
     "phase1.accel_mm_s2": ("speed",), "phase1.dwell_s": ("speed",),
     "axis.velocity_bandwidth_hz": ("speed", "imu_acc", "position_cmd"),
     "axis.truck_stiffness_vertical_N_per_um": ("acc1", "acc2"),
-    "axis.truck_stiffness_lateral_N_per_um": ("acc1", "acc2"),
+    "axis.truck_stiffness_lateral_N_per_um": ("acc1", "acc2", "imu_gyro"),
     "sensors.imu_acc_noise_ug_per_rthz": ("imu_acc",), "sensors.imu_acc_bandwidth_hz": ("imu_acc",),
     "sensors.imu_gyro_noise_urad_s_per_rthz": ("imu_gyro",), "sensors.imu_gyro_bandwidth_hz": ("imu_gyro",),
     "sensors.nut_acc_noise_ug_per_rthz": ("acc1", "acc2"), "sensors.torque_noise_Nm": ("torque",),
@@ -206,11 +207,12 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     order hides it), and the routine fit's acceleration (mm/s²) and dwell (s) of Phase I, their
     errors from the scatter of the ramps' slopes and of the rests (the servo's lag at the start
     and at the end of a move differ a little: both are fitted through the twin's servo), and the
-    vertical and lateral suspension modes (Hz, :func:`analysis.calibration.drive.suspension_mode`)
-    with their scatter over the captures, and the velocity loop's response: the IMU's axial
-    acceleration around the starts and stops of the runs when there are any
-    (:func:`analysis.calibration.drive.imu_reversal`), else the speed's overshoot over the
-    captures (:func:`analysis.calibration.drive.speed_overshoot`)."""
+    vertical suspension mode (Hz, :func:`analysis.calibration.drive.suspension_mode`) with its
+    scatter over the captures, and, on the IMU of the runs when there are any, the lateral (yaw)
+    mode (:func:`analysis.calibration.drive.imu_yaw_mode`) and the velocity loop's response (the
+    axial acceleration around the starts and stops: :func:`analysis.calibration.drive.imu_reversal`),
+    else the lateral mode on the nut accelerometers and the speed's overshoot over the captures
+    (:func:`analysis.calibration.drive.speed_overshoot`)."""
     order = s.axis.torque_ripple_per_rev
     mean, se = recording_statistics(m, captures, order)
     if runs:
@@ -234,14 +236,16 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     for name in captures:
         c = m.phase1(name)
         fs = float(c.fs_hz)
-        for row, x in zip(rows, (suspension_mode([c.acc1, c.acc2], fs, 2), suspension_mode([c.acc1, c.acc2], fs, 1),
+        for row, x in zip(rows, (suspension_mode([c.acc1, c.acc2], fs, 2),
+                                 np.nan if runs else suspension_mode([c.acc1, c.acc2], fs, 1),
                                  np.nan if runs else speed_overshoot(np.asarray(c.speed, float), fs)), strict=True):
             if np.isfinite(x):
                 row.append(x)
-    for a, b in runs:  # the velocity loop read on the IMU around the starts and stops (far sharper)
-        x = imu_reversal(m.phase2(a, b))
-        if np.isfinite(x):
-            rows[2].append(x)
+    for a, b in runs:  # on the IMU, far sharper: the yaw mode, the velocity loop around starts and stops
+        run = m.phase2(a, b)
+        for row, x in zip(rows[1:], (imu_yaw_mode(run), imu_reversal(run)), strict=True):
+            if np.isfinite(x):
+                row.append(x)
     extra = [_mean_se(row) for row in rows]
     return (np.append(mean, [acc, dwell, *(v for v, _ in extra)]),
             np.append(se, [acc_se, dwell_se, *(e for _, e in extra)]))
@@ -547,6 +551,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                     f"Phase II runs at {session_h:g} h")
         elif stat == "loop_response":
             note = f"fitted jointly to the motor speed's overshoot at the ramps' ends in {len(caps)} Phase I captures"
+        elif stat == "lateral_mode" and runs:
+            note = f"fitted jointly to the IMU's yaw mode in {len(runs)} Phase II runs at {session_h:g} h"
         elif stat.endswith("_mode"):
             note = (f"fitted jointly to the {stat.split('_')[0]} suspension mode of the nut accelerometers in "
                     f"{len(caps)} Phase I captures at {hours:g} h")
