@@ -20,9 +20,10 @@ sklearn's default 1e-4 the baseline losses collapse).
 
 Why per point: each window holds the end of the acceleration, a torque step of about 0.9 N·m that
 falls inside one 1-ms block, and its timing relative to the window's start varies by 0.1-0.3 ms
-between healthy windows (953-956 samples at 10 kHz on ``phase1-quick``). With one scalar scale
-(about 2 mN·m, the noise of the steady part) that single block dominated the loss of healthy
-samples (a sample whose steps came 0.15 ms late scored 15.6 against a baseline maximum of 3.0); per
+between healthy windows (951-956 samples at 10 kHz on ``phase1-quick`` without wear;
+``benchmarks/phase1_false_alarms.py``). With one scalar scale (about 2 mN·m, the noise of the
+steady part) that single block dominated the loss of healthy samples (a sample whose steps came
+0.14 ms later than the baseline's on average scored 15.6 against a baseline maximum of 3.0); per
 point it is divided by its own, larger, baseline spread, while a change of drag torque from
 preload loss moves every point.
 """
