@@ -3,8 +3,10 @@ formula promises, within alpha +- 0.01, where the formula is exact for that use:
 
 - T^2 F limit (new observations) on new samples: exact;
 - beta limit of the GMM Mahalanobis distance on the baseline samples themselves: exact;
-- the beta limit applied to new samples, as the paper does for GMM-MD: not exact; the actual rate
-  with 15 baseline samples is measured and compared with its analytical value.
+- the beta limit applied to new samples, as the paper does for GMM-MD (``limit="paper"``): not
+  exact; the actual rate with 15 baseline samples is measured and compared with its analytical
+  value;
+- GMM-MD's default limit for new observations (F, ``limit="new"``) on new samples: exact.
 """
 
 import numpy as np
@@ -62,7 +64,7 @@ def test_gmm_md_beta_limit_on_baseline_samples_is_exact():
     alarms = 0
     for _ in range(TRIALS):
         X = rng.standard_normal((N, P)) @ np.array([[1.0, 0.5, 0.0], [0.0, 1.0, 0.3], [0.0, 0.0, 2.0]])
-        det = GMMMD(variance=1.0, moving_average=1).fit(X)
+        det = GMMMD(variance=1.0, moving_average=1, limit="paper").fit(X)
         alarms += int(np.sum(det.decision_function(X) > det.threshold_))
     rate = alarms / (TRIALS * N)
     print(f"GMM-MD beta limit on the baseline points, N={N}, a={P}: rate {rate:.4f} over "
@@ -78,7 +80,7 @@ def test_gmm_md_beta_limit_on_new_samples_measured():
     alarms = 0
     for _ in range(TRIALS):
         X = rng.standard_normal((N + 1, P))
-        det = GMMMD(variance=1.0, moving_average=1).fit(X[:N])
+        det = GMMMD(variance=1.0, moving_average=1, limit="paper").fit(X[:N])
         alarms += int(det.decision_function(X[N:])[0] > det.threshold_)
     rate = alarms / TRIALS
     lim = limits.md2_beta_limit(N, P, ALPHA)
@@ -89,11 +91,28 @@ def test_gmm_md_beta_limit_on_new_samples_measured():
     assert rate > 3 * ALPHA
 
 
+def test_gmm_md_default_limit_on_new_samples_is_exact():
+    """GMM-MD's default limit, a(N+1)/(N-a) F_{1-alpha}(a, N-a), on new samples: alpha."""
+    rng = np.random.default_rng(14)
+    alarms = 0
+    for _ in range(TRIALS):
+        X = rng.standard_normal((N + 1, P))
+        det = GMMMD(variance=1.0, moving_average=1).fit(X[:N])
+        assert det.threshold_ == pytest.approx(limits.md2_limit_new(N, P, ALPHA))
+        alarms += int(det.decision_function(X[N:])[0] > det.threshold_)
+    rate = alarms / TRIALS
+    print(f"GMM-MD F limit on NEW points, N={N}, a={P}: rate {rate:.4f} over {TRIALS} draws (alpha {ALPHA})")
+    assert abs(rate - ALPHA) <= 0.01
+
+
 def test_limit_formulas_against_known_values():
     # a(N-1)(N+1)/(N(N-a)) F: N=15, a=3 -> 3*14*16/(15*12) * F_.99(3,12).
     f = stats.f.ppf(0.99, 3, 12)
     assert limits.t2_limit_new(15, 3) == pytest.approx(3 * 14 * 16 / (15 * 12) * f)
     assert limits.t2_limit_paper(15, 3) == pytest.approx(3 * 14 / 12 * f)
+    # MD^2 with the MLE covariance = T^2 N/(N-1): a(N+1)/(N-a) F.
+    assert limits.md2_limit_new(15, 3) == pytest.approx(3 * 16 / 12 * f)
+    assert limits.md2_limit_new(15, 3) == pytest.approx(limits.t2_limit_new(15, 3) * 15 / 14)
     assert limits.three_sigma(np.array([1.0, 2.0, 3.0])) == pytest.approx(2.0 + 3.0)
     np.testing.assert_allclose(limits.moving_average(np.arange(6.0), 4), [0, 0.5, 1, 1.5, 2.5, 3.5])
     with pytest.raises(ValueError, match="1 <= a < N"):

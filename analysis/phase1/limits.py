@@ -13,6 +13,9 @@ N: baseline samples; a: retained principal components (or dimensions); alpha: fa
   (divisor N, as ``sklearn.mixture.GaussianMixture`` fits it) of a baseline point:
   ``MD^2 / (N-1) ~ Beta(a/2, (N-a-1)/2)`` [Gnanadesikan & Kettenring 1972],
   so the limit is ``(N-1) * Beta_{1-alpha}(a/2, (N-a-1)/2)``. Exact on the baseline only.
+- :func:`md2_limit_new`: the same MD^2 of a *new* observation: MD^2 = N/(N-1) T^2, so
+  ``a (N+1) / (N-a) * F_{1-alpha}(a, N-a)`` [Tracy, Young & Mason 1992, J. Quality Technology
+  24, 88-95, with the T^2 limit above]. Exact for Gaussian data.
 - :func:`three_sigma`: mean + 3 standard deviations (N-1) of baseline scores (paper, SOM and AE).
 - :func:`moving_average`: trailing moving average over the time order of samples (paper: "moving
   window average with a sample width of 4"); the first w-1 samples average what is available.
@@ -25,6 +28,7 @@ from scipy import stats
 
 __all__ = [
     "md2_beta_limit",
+    "md2_limit_new",
     "moving_average",
     "t2_limit_new",
     "t2_limit_paper",
@@ -60,6 +64,12 @@ def md2_beta_limit(n: int, a: int, alpha: float = 0.01) -> float:
     """UCL of MD^2 (MLE covariance) for baseline points: (N-1) Beta_{1-alpha}(a/2, (N-a-1)/2)."""
     _check(n, a + 1)
     return (n - 1) * float(stats.beta.ppf(1 - alpha, a / 2, (n - a - 1) / 2))
+
+
+def md2_limit_new(n: int, a: int, alpha: float = 0.01) -> float:
+    """UCL of MD^2 (MLE covariance, divisor N) for new observations: a(N+1)/(N-a) F_{1-alpha}(a, N-a)."""
+    _check(n, a)
+    return a * (n + 1) / (n - a) * float(stats.f.ppf(1 - alpha, a, n - a))
 
 
 def three_sigma(baseline_scores: np.ndarray) -> float:
