@@ -243,14 +243,20 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         from twin.harness.gap_runner import run_diagnosis
 
         t1 = time.perf_counter()
-        res = run_diagnosis(d / "campaign", cal, d / "diagnosis", seeds=seeds, workers=workers,
-                            plots=False, response_seeds=1, resim_seeds=RESIM_SEEDS)
-        entry["diagnosis"] = {**score_diagnosis(kind, effects, artefacts, res),
-                              "seconds": time.perf_counter() - t1}
+        try:
+            res = run_diagnosis(d / "campaign", cal, d / "diagnosis", seeds=seeds, workers=workers,
+                                plots=False, response_seeds=1, resim_seeds=RESIM_SEEDS)
+        except Exception as exc:  # noqa: BLE001 - one case's failure is a figure, not the end
+            entry["diagnosis_error"] = f"{type(exc).__name__}: {exc}"
+        else:
+            entry["diagnosis"] = {**score_diagnosis(kind, effects, artefacts, res),
+                                  "seconds": time.perf_counter() - t1}
     r_ok = sum(v["within"] for v in entry["routine"].values())
     p_ok = sum(v["inside"] for v in entry["parameters"].values())
     added = ", ".join([*effects, *artefacts]) or "nothing added"
     dg = entry.get("diagnosis")
+    if "diagnosis_error" in entry:
+        progress(f"case {i}: the diagnosis failed: {entry['diagnosis_error']}")
     progress(f"case {i} ({kind}: {added}): lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg, "
              f"{f1}/{f2}: routine "
              f"{r_ok}/{len(entry['routine'])} within tolerance, parameters {p_ok}/{len(entry['parameters'])} "
@@ -280,6 +286,9 @@ def summarise(cases: list[dict]) -> dict:
     if ratio:  # what --budget-minutes is held to: the estimate after the first simulations
         out["calibrate_actual_over_estimate"] = {"median": float(np.median(ratio)), "min": min(ratio),
                                                  "max": max(ratio)}
+    failed = [c["case"] for c in cases if "diagnosis_error" in c]
+    if failed:
+        out["diagnosis_failed"] = failed
     diag = [c for c in cases if "diagnosis" in c]
     if diag:
         frac = lambda rows, key: (sum(bool(r["diagnosis"][key]) for r in rows) / len(rows)  # noqa: E731
