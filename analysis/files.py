@@ -56,6 +56,23 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], Any], *, fsync
     return path
 
 
+def exclusive_lock(path: str | os.PathLike, busy: str, error: type[Exception] = ValueError):
+    """An exclusive, non-blocking lock on ``path`` (created, its folder too), held while the
+    returned file stays open: the kernel releases it when the process dies, even by SIGKILL.
+    Raises ``error(busy)`` when another process holds it."""
+    import fcntl
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fh = open(path, "a+")  # noqa: SIM115 - held for the caller's life
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        fh.close()
+        raise error(busy) from None
+    return fh
+
+
 def write_text(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))

@@ -185,6 +185,16 @@ def speed_overshoot(speed: np.ndarray, fs: float) -> float:
     return float((w.max() - cruise) / cruise)
 
 
+def _axial_on_command(run) -> tuple[float, np.ndarray, np.ndarray]:
+    """(the IMU accelerometer's rate Hz, its axial acceleration (n,) m/s², ``position_cmd``
+    interpolated to its clock (n,) m) of a Phase II run that has a ``position_cmd``."""
+    fs, fs_x = float(run.imu_acc_fs_hz), float(run.position_cmd_fs_hz)
+    acc = np.asarray(run.imu_acc, float)[:, 0]
+    pos = np.asarray(run.position_cmd, float)
+    x = np.interp(np.arange(acc.size) / fs, np.arange(pos.size) / fs_x, pos)
+    return fs, acc, x
+
+
 #: Half width of the window around each start and stop of :func:`imu_reversal`, s.
 REVERSAL_WINDOW_S = 0.02
 #: High-pass of the IMU's acceleration before :func:`imu_reversal`, Hz (gravity and drift out).
@@ -196,15 +206,11 @@ def imu_reversal(run) -> float:
     :data:`REVERSAL_HIGHPASS_HZ` (zero phase), within ±:data:`REVERSAL_WINDOW_S` of every start
     and stop of the commanded motion (``position_cmd`` interpolated to the IMU's clock, moving
     where its speed exceeds 0.1 mm/s) of a Phase II run. NaN without ``position_cmd`` or motion."""
-    pos = getattr(run, "position_cmd", None)
-    if pos is None:
+    if getattr(run, "position_cmd", None) is None:
         return float("nan")
-    fs, fs_x = float(run.imu_acc_fs_hz), float(run.position_cmd_fs_hz)
-    acc = np.asarray(run.imu_acc, float)[:, 0]
+    fs, acc, x = _axial_on_command(run)
     if acc.size < 64:
         return float("nan")
-    t = np.arange(acc.size) / fs
-    x = np.interp(t, np.arange(len(pos)) / fs_x, np.asarray(pos, float))
     moving = np.abs(np.gradient(x, 1.0 / fs)) > 1e-4
     edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
     if edges.size == 0:
@@ -250,13 +256,9 @@ def imu_ripple(run, lead_m: float, order: int, max_hz: float) -> float:
     demodulated with exp(−i·order·θ); cruises whose frequency is above ``max_hz`` (the
     accelerometer's band) or that span fewer than 4 periods are left out. NaN when none is left
     or the run has no ``position_cmd``."""
-    pos = getattr(run, "position_cmd", None)
-    if pos is None:
+    if getattr(run, "position_cmd", None) is None:
         return float("nan")
-    fs, fs_x = float(run.imu_acc_fs_hz), float(run.position_cmd_fs_hz)
-    acc = np.asarray(run.imu_acc, float)[:, 0]
-    t = np.arange(acc.size) / fs
-    x = np.interp(t, np.arange(len(pos)) / fs_x, np.asarray(pos, float))
+    fs, acc, x = _axial_on_command(run)
     v = np.gradient(x, 1.0 / fs)
     vmax = float(np.max(np.abs(v))) if v.size else 0.0
     if not vmax > 0:

@@ -180,15 +180,11 @@ class ImportWatcher:
     # --- state -------------------------------------------------------------------------------------
     def _lock(self) -> None:
         """One watcher per output folder (an exclusive lock on ``OUT/.watch.lock``)."""
-        import fcntl
+        from analysis.files import exclusive_lock
 
-        self.out.mkdir(parents=True, exist_ok=True)
-        self._lock_fh = open(self.out / ".watch.lock", "a+")  # noqa: SIM115 - held for the process's life
-        try:
-            fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ImportSpecError(f"{self.out}: another twin import --watch is writing this campaign folder; "
-                                  "stop it first, or give another -o") from None
+        self._lock_fh = exclusive_lock(self.out / ".watch.lock", f"{self.out}: another twin import --watch is "
+                                       "writing this campaign folder; stop it first, or give another -o",
+                                       ImportSpecError)
 
     def _append(self, event: dict) -> None:
         """One line of the watch log, appended with a single write."""

@@ -215,9 +215,10 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     (:func:`analysis.calibration.drive.speed_overshoot`)."""
     order = s.axis.torque_ripple_per_rev
     mean, se = recording_statistics(m, captures, order)
+    loaded = [m.phase2(a, b) for a, b in runs]  # each run read once
     if runs:
-        rip = [imu_ripple(m.phase2(a, b), s.axis.lead_mm * 1e-3, order, 0.5 * s.sensors.imu_acc_bandwidth_hz)
-               for a, b in runs]
+        rip = [imu_ripple(run, s.axis.lead_mm * 1e-3, order, 0.5 * s.sensors.imu_acc_bandwidth_hz)
+               for run in loaded]
         rip = [r for r in rip if np.isfinite(r)]
         mean[3] = float(np.mean(rip)) if rip else float("nan")
         se[3] = float(np.std(rip, ddof=1) / math.sqrt(len(rip))) if len(rip) > 1 else float("nan")
@@ -241,8 +242,7 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
                                  np.nan if runs else speed_overshoot(np.asarray(c.speed, float), fs)), strict=True):
             if np.isfinite(x):
                 row.append(x)
-    for a, b in runs:  # on the IMU, far sharper: the yaw mode, the velocity loop around starts and stops
-        run = m.phase2(a, b)
+    for run in loaded:  # on the IMU, far sharper: the yaw mode, the velocity loop around starts and stops
         for row, x in zip(rows[1:], (imu_yaw_mode(run), imu_reversal(run)), strict=True):
             if np.isfinite(x):
                 row.append(x)

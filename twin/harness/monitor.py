@@ -155,15 +155,11 @@ class Monitor:
     def _lock(self) -> None:
         """One monitor per state directory: an exclusive lock on ``STATE/.lock``, held while the
         process lives (the kernel releases it when the process dies, even by SIGKILL)."""
-        import fcntl
+        from analysis.files import exclusive_lock
 
-        self.state_dir.mkdir(parents=True, exist_ok=True)
-        self._lock_fh = open(self.state_dir / ".lock", "a+")  # noqa: SIM115 - held for the process's life
-        try:
-            fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise MonitorError(f"{self.state_dir}: another twin monitor is writing this state directory; "
-                               "stop it first, or give another -o") from None
+        self._lock_fh = exclusive_lock(self.state_dir / ".lock", f"{self.state_dir}: another twin monitor is "
+                                       "writing this state directory; stop it first, or give another -o",
+                                       MonitorError)
 
     def _resume(self) -> int:
         self.state_dir.mkdir(parents=True, exist_ok=True)
