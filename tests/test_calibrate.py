@@ -122,16 +122,20 @@ def test_suspension_mode_follows_the_trucks():
     one at least as much (/ 1.37–1.7: as the mode softens the motion's content below it pulls
     the centroid down; the fit through the twin reads the same statistic, so it needs only a
     steep, smooth response); neither moves with what it must not see (a nut 4× softer, a
-    velocity loop at half its bandwidth: < 0.5 %). The axial mode's broad hump moves with both
+    velocity loop at half its bandwidth, a mains line at 150 Hz: < 0.5 %). The axial mode's broad hump moves with both
     of those alike: the nut's spring is not told apart."""
     from scipy import signal
 
     from analysis.calibration.drive import suspension_mode
     from twin.scenario import load
 
-    def modes(**axis) -> tuple[float, float, float]:
-        """(vertical mode Hz, lateral mode Hz, the x axis's mean PSD over 100-400 Hz)."""
+    def modes(line_m_s2: float = 0.0, **axis) -> tuple[float, float, float]:
+        """(vertical mode Hz, lateral mode Hz, the x axis's mean PSD over 100-400 Hz); with a
+        150-Hz line of ``line_m_s2`` on every column (mains pickup)."""
         c, fs = _foreign_capture(**axis)
+        t = np.arange(len(c["acc1"]))[:, None] / fs
+        for k in ("acc1", "acc2"):
+            c[k] = c[k] + line_m_s2 * np.sin(2 * np.pi * 150.0 * t + 0.3)
         f, p = signal.welch(c["acc1"][:, 0], fs, nperseg=2048)
         hump = float(np.mean(p[(f >= 100) & (f <= 400)]))
         return (*(suspension_mode([c["acc1"], c["acc2"]], fs, col) for col in (2, 1)), hump)
@@ -143,13 +147,15 @@ def test_suspension_mode_follows_the_trucks():
     _, y_soft, _ = modes(truck_stiffness_lateral_N_per_um=kl / 2)
     z_nut, y_nut, x_nut = modes(nut_stiffness_N_per_um=ax.nut_stiffness_N_per_um / 4)
     z_loop, y_loop, x_loop = modes(velocity_bandwidth_hz=ax.velocity_bandwidth_hz / 2)
+    z_line, y_line, _ = modes(line_m_s2=0.1)
     print(f"vertical mode {z0:.1f} Hz, {z_soft:.1f} Hz with the vertical stiffness halved; lateral {y0:.1f} Hz, "
           f"{y_soft:.1f} Hz halved; a nut 4x softer {z_nut:.1f}/{y_nut:.1f} Hz, the velocity loop at half "
           f"{z_loop:.1f}/{y_loop:.1f} Hz; the axial hump (x, 100-400 Hz) x{x_nut / x0:.2f} for the nut's 1/4, "
-          f"x{x_loop / x0:.2f} for the velocity loop's 1/2")
+          f"x{x_loop / x0:.2f} for the velocity loop's 1/2; with a 0.1 m/s^2 line at 150 Hz "
+          f"{z_line:.1f}/{y_line:.1f} Hz")
     assert z0 / z_soft == pytest.approx(math.sqrt(2), rel=0.03)
     assert 1.37 <= y0 / y_soft <= 1.7
-    for z, y in ((z_nut, y_nut), (z_loop, y_loop)):
+    for z, y in ((z_nut, y_nut), (z_loop, y_loop), (z_line, y_line)):
         assert z == pytest.approx(z0, rel=0.005) and y == pytest.approx(y0, rel=0.005)
     # the axial mode: the nut's spring and the velocity loop both move its hump by 1.3x or more
     # (why the nut's stiffness is not fitted)

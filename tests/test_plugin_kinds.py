@@ -70,6 +70,12 @@ HEAVY = Effect(name="carriage_mass", title="a carriage heavier than the twin's",
                              high=80.0, grid=(0.0, 40.0, 80.0), label="extra carriage mass", unit="kg"),),
                source="a twin parameter set wrong")
 
+SLOW_ACCEL = Effect(name="slow_accel", title="a Phase I acceleration far below the twin's",
+                   params=(Param("drop_mm_s2", keys=("phase1.accel_mm_s2",), mode="add", low=-3950.0,
+                                 high=-1000.0, grid=(-3950.0, -1000.0, 0.0), label="acceleration drop",
+                                 unit="mm/s^2"),),
+                   source="a candidate whose strong end leaves the capture without a constant speed")
+
 FAKE_COGGING = Effect(name="cogging", title="another cogging", params=HEAVY.params, source="-")
 '''
 
@@ -308,3 +314,24 @@ def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path):
     assert math.isclose(results["carriage_mass"]["heldout_gap_after"],
                         results[f"{MODULE}:HEAVY"]["heldout_gap_after"], rel_tol=1e-9)
 
+
+
+def test_a_candidate_the_statistics_cannot_be_computed_for_is_left_out(plugin, tmp_path):
+    """A candidate whose simulation at the strong end of its grid has no constant-speed Phase I
+    segment (the 220-mm stroke at 400 mm/s with 137 mm/s² never cruises): the diagnosis leaves
+    it out with the reason (JSON, terminal, page) and ranks the others; it does not stop."""
+    src, _ = plugin
+    bench = REPO / "scenarios/diagnose-bench.toml"
+    sets = [a for kv in DIAG for a in ("--set", kv)]
+    twin("simulate", bench, "-o", tmp_path / "real", *sets, "--set", "axis.carriage_mass_kg=180",
+         "--set", "seed=3", pythonpath=src)
+    out = tmp_path / "diag"
+    r = twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, "--candidate", f"{MODULE}:HEAVY",
+             "--candidate", f"{MODULE}:SLOW_ACCEL", "--seeds", "3", "-o", out, pythonpath=src)
+    res = json.loads((out / "diagnosis.json").read_text())
+    why = res["candidates_left_out"]["slow_accel"]
+    assert "FeatureError" in why and "no constant-speed segment of at least 0.2 s" in why
+    assert [c["effect"] for c in res["ranking"]] == ["carriage_mass"]
+    assert res["added"][0]["effect"] == "carriage_mass"
+    assert "left out: candidate slow_accel" in flat(r.stdout)
+    assert "no constant-speed segment" in (out / "report" / "index.html").read_text()

@@ -866,17 +866,22 @@ def calibrate_benchmark(
         "also diagnose each recording against its calibrated twin (the right verdict: no significant gap)")),
     seeds: TwinSeeds = 6,
     workers: Workers = None,
+    fresh: bool = typer.Option(False, "--fresh", help=(
+        "run every case again (default: a case already in OUT with the same draw, options and "
+        "versions is kept)")),
 ) -> None:
     """The round trip of `twin calibrate`, blind: foreign axes drawn from a seed, simulated, written
     out as a lab's files (CSV, TDMS, MAT, MDF in turn), imported, calibrated (and diagnosed),
-    scored against the draws. Writes OUT/calibrate-benchmark.json."""
+    scored against the draws. Writes OUT/calibrate-benchmark.json; stopped and run again, it goes
+    on from the cases already done."""
     _require("calibrate-benchmark", "sim")
     from twin.executors import default_processes
     from twin.harness.calibrate_benchmark import run_benchmark
 
     _writable_dir(out)
     doc = run_benchmark(out, cases=cases, seed=seed, workers=workers or default_processes(), diagnose=diagnose,
-                        seeds=seeds, progress=lambda t: console.print(t, markup=False, highlight=False))
+                        seeds=seeds, resume=not fresh,
+                        progress=lambda t: console.print(t, markup=False, highlight=False))
     sm = doc["summary"]
     table = Table(title=f"calibrate-benchmark: {sm['cases']} foreign axes (seed {seed})", title_justify="left")
     table.add_column("figure")
@@ -886,8 +891,19 @@ def calibrate_benchmark(
                   f"{100 * sm['parameters_inside']:.0f} % of {sm['parameter_pairs']}")
     for k, v in sm["per_parameter_inside"].items():
         table.add_row(f"  {k}", f"{100 * v:.0f} %")
-    if "null_no_gap" in sm:
-        table.add_row("diagnosis: no significant gap", f"{100 * sm['null_no_gap']:.0f} % of {sm['diagnosed']}")
+    n = sm.get("per_kind_cases", {})
+    for key, words, kind in (("null_no_gap", "nulls: no significant gap", "null"),
+                             ("effect_named_first", "one effect: named first", "effect"),
+                             ("artefact_named_first", "one artefact: named first", "artefact"),
+                             ("several_all_named", "several: effect and artefact named", "several"),
+                             ("several_nothing_else", "several: nothing else named", "several")):
+        if sm.get(key) is not None:
+            table.add_row(f"diagnosis, {words}", f"{100 * sm[key]:.0f} % of {n.get(kind, 0)}")
+    if sm.get("median_shrink_resimulated_named") is not None:
+        table.add_row("diagnosis, re-simulated shrink (named, median)",
+                      f"{100 * sm['median_shrink_resimulated_named']:.0f} %")
+    if sm.get("diagnosis_failed"):
+        table.add_row("diagnosis failed (cases)", ", ".join(map(str, sm["diagnosis_failed"])))
     table.add_row("formats", ", ".join(sm["formats_used"]))
     table.add_row("calibration, median", f"{sm['calibrate_s_median']:.0f} s")
     Console(width=max(100, Console().width)).print(table)
@@ -1089,6 +1105,8 @@ def _print_diagnosis(res: dict) -> None:
         out.print(f"  in words: {added_phrase(res, a)}", markup=False, highlight=False)
     for r in res.get("refused", []):
         out.print(f"refused: {refused_phrase(res, r)}", markup=False, highlight=False)
+    for name, why in res.get("candidates_left_out", {}).items():
+        out.print(f"left out: candidate {name}: {why}", markup=False, highlight=False)
     if res["ranking"] and not res["added"] and not res.get("refused"):
         best = res["ranking"][0]
         out.print(f"no candidate (physical effect, twin parameter or signal artefact) reduces the held-out gap "

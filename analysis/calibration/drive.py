@@ -23,7 +23,10 @@ nut accelerometers' z and y channels carry them well above the motion's own cont
 frequency is read as the centroid of the squared power spectral density over a fixed band
 (:func:`suspension_mode`): the square weights the resonance far above the broadband floor, and
 unlike the highest bin the centroid moves smoothly with k, which a least-squares fit through the
-twin needs.
+twin needs. A spectral line (mains pickup, a fixed-frequency disturbance) would pull the centroid
+towards itself: the spectrum is read with fine bins (1-s segments), where a line is a few bins
+wide and a mode tens, and a running median over :data:`LINE_WIDTH_HZ` removes the line and keeps
+the mode (Tukey's running median: J. W. Tukey, "Exploratory Data Analysis", 1977, ch. 7).
 
 The velocity loop's bandwidth shows in the motor speed's overshoot where a ramp ends: a
 proportional-integral loop lets the speed overshoot the new set point by an amount that falls
@@ -142,28 +145,43 @@ def recording_statistics(m, captures: list[str], ripple_order: int) -> tuple[np.
 
 #: The band the suspension modes are looked for in, Hz (below 0.45 of the sampling rate).
 MODE_BAND_HZ = (100.0, 2000.0)
-#: Welch segment of :func:`suspension_mode`, s.
-MODE_SEGMENT_S = 0.16
+#: Welch segment of :func:`mode_centroid`, s (at most the signal's length): bins of 1 Hz.
+MODE_SEGMENT_S = 1.0
+#: The shortest signal a mode is read from, s.
+MODE_MIN_S = 0.25
+#: Width of the running median over frequency that removes spectral lines, Hz.
+LINE_WIDTH_HZ = 9.0
+
+
+def mode_centroid(signals: list[np.ndarray], fs: float, low_hz: float, high_hz: float) -> float:
+    """Frequency (Hz) of the resonance in ``signals`` (each (n,), any unit, sampled at ``fs`` Hz):
+    the centroid Σ f·P(f)² / Σ P(f)² over ``low_hz`` to ``high_hz`` (capped at 0.45·``fs``) of
+    their summed Welch PSD P (Hann segments of :data:`MODE_SEGMENT_S`, or the shortest signal),
+    after a running median over :data:`LINE_WIDTH_HZ` that removes narrow lines. NaN when the
+    band is empty, a signal is shorter than :data:`MODE_MIN_S` or the band holds no power."""
+    from scipy import ndimage
+
+    hi = min(high_hz, 0.45 * fs)
+    if not signals or hi <= low_hz or min(len(x) for x in signals) < MODE_MIN_S * fs:
+        return float("nan")
+    nper = min(int(round(MODE_SEGMENT_S * fs)), min(len(x) for x in signals))
+    psd = None
+    for x in signals:
+        f, p = signal.welch(np.asarray(x, float), fs, nperseg=nper)
+        psd = p if psd is None else psd + p
+    bins = int(round(LINE_WIDTH_HZ * nper / fs)) | 1
+    psd = ndimage.median_filter(psd, size=bins, mode="nearest")
+    band = (f >= low_hz) & (f <= hi)
+    w = psd[band] ** 2
+    total = float(np.sum(w))
+    return float(np.sum(f[band] * w) / total) if total > 0 else float("nan")
 
 
 def suspension_mode(acc: list[np.ndarray], fs: float, column: int) -> float:
     """Frequency (Hz) of the carriage's suspension mode seen by the accelerometers ``acc`` (each
     (n, 3) m/s², columns x axial, y lateral, z vertical) in ``column`` (1: lateral, 2:
-    vertical): the centroid Σ f·P(f)² / Σ P(f)² of the Welch PSD P (Hann segments of
-    :data:`MODE_SEGMENT_S`) averaged over the accelerometers, over :data:`MODE_BAND_HZ` capped at
-    0.45·``fs``. NaN when the band is empty or holds no power."""
-    hi = min(MODE_BAND_HZ[1], 0.45 * fs)
-    nper = int(round(MODE_SEGMENT_S * fs))
-    if not acc or hi <= MODE_BAND_HZ[0] or min(len(a) for a in acc) < nper:
-        return float("nan")
-    psd = None
-    for a in acc:
-        f, p = signal.welch(np.asarray(a, float)[:, column], fs, nperseg=nper)
-        psd = p if psd is None else psd + p
-    band = (f >= MODE_BAND_HZ[0]) & (f <= hi)
-    w = psd[band] ** 2
-    total = float(np.sum(w))
-    return float(np.sum(f[band] * w) / total) if total > 0 else float("nan")
+    vertical): :func:`mode_centroid` over :data:`MODE_BAND_HZ`."""
+    return mode_centroid([np.asarray(a, float)[:, column] for a in acc], fs, *MODE_BAND_HZ)
 
 
 #: The speed is low-passed (zero phase) at this frequency before its overshoot is read, Hz.
@@ -230,21 +248,12 @@ YAW_BAND_LOW_HZ = 20.0
 
 def imu_yaw_mode(run) -> float:
     """Frequency (Hz) of the carriage's yaw mode on its trucks' lateral springs, read on the IMU's
-    yaw rate (``imu_gyro`` column z, rad/s) of a Phase II run: the centroid Σ f·P(f)² / Σ P(f)² of
-    its Welch PSD (Hann segments of 0.25 s) over :data:`YAW_BAND_LOW_HZ` to 0.45 of the rate, as
-    :func:`suspension_mode` on the nut accelerometers. The IMU sits on the carriage, where the
-    lateral mode shows as a rotation the nut accelerometers see mixed with the vertical one. NaN
-    when the run is shorter than a segment."""
+    yaw rate (``imu_gyro`` column z, rad/s) of a Phase II run: :func:`mode_centroid` from
+    :data:`YAW_BAND_LOW_HZ` to 0.45 of the rate, as :func:`suspension_mode` on the nut
+    accelerometers. The IMU sits on the carriage, where the lateral mode shows as a rotation the
+    nut accelerometers see mixed with the vertical one."""
     fs = float(run.imu_gyro_fs_hz)
-    g = np.asarray(run.imu_gyro, float)[:, 2]
-    nper = int(round(0.25 * fs))
-    if g.size < nper or 0.45 * fs <= YAW_BAND_LOW_HZ:
-        return float("nan")
-    f, p = signal.welch(g, fs, nperseg=nper)
-    band = (f >= YAW_BAND_LOW_HZ) & (f <= 0.45 * fs)
-    w = p[band] ** 2
-    total = float(np.sum(w))
-    return float(np.sum(f[band] * w) / total) if total > 0 else float("nan")
+    return mode_centroid([np.asarray(run.imu_gyro, float)[:, 2]], fs, YAW_BAND_LOW_HZ, 0.45 * fs)
 
 
 def imu_ripple(run, lead_m: float, order: int, max_hz: float) -> float:

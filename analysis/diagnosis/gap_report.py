@@ -293,7 +293,7 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
             "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
             "facts": facts, "subset": w.subset_phrase(result) or "",
             "calibration": calibration_phrase(result), "added": added, "refused": refused,
-            "ranking": ranking,
+            "ranking": ranking, "left_out": result.get("candidates_left_out", {}),
             "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}
 
 

@@ -36,6 +36,7 @@ Writes ``OUT/calibrate-benchmark.json`` (per case and the summary) and prints a 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import shutil
@@ -315,11 +316,25 @@ def summarise(cases: list[dict]) -> dict:
     return out
 
 
+def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose: bool, seeds: int) -> str:
+    """What makes a case's result: its draw, the options and the versions of the benchmark, the
+    calibration and the diagnosis's statistics (a case with the same key is not run again)."""
+    from analysis.diagnosis.signature import SIGNATURE_VERSION
+    from twin.harness.calibrate import CALIBRATE_VERSION
+
+    text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, SIGNATURE_VERSION, s.to_json(), kind, effects,
+                       artefacts, bool(diagnose), int(seeds), RESIM_SEEDS], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
 def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers: int = 2,
-                  diagnose: bool = False, seeds: int = 4,
+                  diagnose: bool = False, seeds: int = 4, resume: bool = True,
                   progress: Callable[[str], None] = lambda t: print(t, flush=True)) -> dict:
     """Draw ``cases`` foreign axes from ``seed``, take each through the round trip
-    (:func:`run_case`), write ``OUT/calibrate-benchmark.json`` and return it."""
+    (:func:`run_case`), write ``OUT/calibrate-benchmark.json`` and return it. With ``resume``, a
+    case whose ``OUT/case-NNN/entry.json`` has the same :func:`case_key` is taken from it (a
+    long benchmark can be stopped and run again; the code's other changes are not in the key:
+    ``resume=False`` after them)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -329,8 +344,16 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     t0 = time.perf_counter()
     done: list[dict] = []
     for i, s in enumerate(scenarios):
-        done.append(run_case(i, s, out, workers, diagnose, seeds, progress, CASE_KINDS[i % len(CASE_KINDS)],
-                             *additions[i]))
+        kind = CASE_KINDS[i % len(CASE_KINDS)]
+        key = case_key(s, kind, *additions[i], diagnose=diagnose, seeds=seeds)
+        kept = out / f"case-{i:03d}" / "entry.json"
+        entry = json.loads(kept.read_text()) if resume and kept.exists() else {}
+        if entry.get("key") == key:
+            progress(f"case {i} ({kind}): kept from {kept} (the same draw, options and versions)")
+        else:
+            entry = {**run_case(i, s, out, workers, diagnose, seeds, progress, kind, *additions[i]), "key": key}
+            write_json(kept, entry, nan_as_null=True)
+        done.append(entry)
         # written after every case: a long benchmark stopped early keeps what it measured
         doc = {"version": BENCH_VERSION, "seed": seed, "workers": workers, "diagnose": diagnose,
                "cases_drawn": cases, "seconds": time.perf_counter() - t0, "summary": summarise(done),
@@ -339,5 +362,5 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     return doc
 
 
-__all__ = ["CASE_KINDS", "draw_additions", "draw_case", "run_benchmark", "score_case", "score_diagnosis",
+__all__ = ["CASE_KINDS", "case_key", "draw_additions", "draw_case", "run_benchmark", "score_case", "score_diagnosis",
            "summarise"]

@@ -61,10 +61,12 @@ from analysis.diagnosis.signature import (
     SIGNATURE_VERSION,
     Region,
     Signature,
+    SignatureError,
     signature,
     update_signature,
 )
 from analysis.files import atomic_write, write_json, write_text
+from analysis.phase1.features import FeatureError
 from analysis.registry import RegistryError
 from twin.campaign import simulate_campaigns_batched
 from twin.effects import Effect, candidate, candidates
@@ -78,6 +80,8 @@ DEFAULT_SEEDS = 8
 #: first one's response is fitted, all of them give the interval (the bootstrap over the seeds,
 #: :func:`analysis.diagnosis.attribution.seed_interval`).
 DEFAULT_RESPONSE_SEEDS = 3
+#: Marks a cached simulation that could not be featurised (with the reason).
+UNFEATURISABLE = "unfeaturisable.json"
 BATCH = 6  # campaigns simulated together (batched rollouts) in one task
 SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
 
@@ -177,8 +181,15 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
             simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
         for i in todo:
             d = dirs[i]
-            write_json(d / "layout.json", layout.describe(d / "campaign" / "measurements.h5"), indent=None)
-            sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
+            try:
+                write_json(d / "layout.json", layout.describe(d / "campaign" / "measurements.h5"), indent=None)
+                sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
+            except (FeatureError, DatasetError) as exc:  # cached as such: see load_signatures
+                write_json(d / UNFEATURISABLE, {"error": f"{type(exc).__name__}: {exc}"})
+                write_text(d / "scenario.json", scenario_jsons[i])
+                if not keeps[i]:
+                    shutil.rmtree(d / "campaign", ignore_errors=True)
+                continue
             arrays = {"cal": sigs["cal"].values, "heldout": sigs["heldout"].values,
                       "regions": np.array(_regions_json(sigs["cal"].regions))}
             atomic_write(d / "signature.npz", lambda tmp, arrays=arrays: _save_npz(tmp, arrays))
@@ -188,7 +199,22 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
     return [str(d / "signature.npz") for d in dirs]
 
 
+def unfeaturisable(path: str | Path) -> str | None:
+    """Why the simulated campaign whose ``signature.npz`` would be ``path`` has no signature
+    (its statistics could not be computed, e.g. a Phase I capture without a constant-speed
+    segment), or None."""
+    f = Path(path).parent / UNFEATURISABLE
+    return json.loads(f.read_text())["error"] if f.exists() else None
+
+
 def load_signatures(path: str) -> dict[str, Signature]:
+    """The cached signatures at ``path``; :class:`SignatureError` with the reason when the
+    simulation could not be featurised (:func:`unfeaturisable`)."""
+    why = unfeaturisable(path)
+    if why is not None:
+        scen = Path(path).parent / "scenario.json"
+        raise SignatureError(f"the twin's simulation cached in {Path(path).parent} has no statistics: {why} "
+                             f"(its scenario: {scen})")
     with np.load(path) as z:
         regions = _regions_from(str(z["regions"]))
         return {p: Signature(z[p].copy(), regions) for p in PARTS}
@@ -196,17 +222,19 @@ def load_signatures(path: str) -> dict[str, Signature]:
 
 def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
                  on_progress: Callable[[int, int], None] | None = None,
-                 keep: bool | list[bool] = False, scheduler: str | None = None) -> list[dict[str, Signature]]:
+                 keep: bool | list[bool] = False, scheduler: str | None = None
+                 ) -> list[dict[str, Signature] | None]:
     """Signatures of every scenario (cached), in order, on ``workers`` processes or the Dask
-    cluster at ``scheduler`` (:func:`run_tasks`); ``keep`` (one flag, or one per scenario):
-    the simulated campaigns whose files stay in the cache (:func:`evaluate`)."""
+    cluster at ``scheduler`` (:func:`run_tasks`); None for a scenario whose simulation could
+    not be featurised (:func:`unfeaturisable` says why); ``keep`` (one flag, or one per
+    scenario): the simulated campaigns whose files stay in the cache (:func:`evaluate`)."""
     payloads = [s.to_json() for s in scenarios]
     keeps = [keep] * len(payloads) if isinstance(keep, bool) else list(keep)
     paths: list[str | None] = [None] * len(payloads)
     todo = []
     for i in range(len(payloads)):
         f = Path(cache_dir) / _key(scenarios[i]) / "signature.npz"
-        if f.exists():
+        if f.exists() or unfeaturisable(f) is not None:
             paths[i] = str(f)
         else:
             todo.append(i)
@@ -236,7 +264,8 @@ def evaluate_all(scenarios: list[Scenario], cache_dir: Path, workers: int,
         for payload, path in zip(batch, result, strict=True):
             for i in unique[payload]:
                 paths[i] = path
-    return [load_signatures(p) for p in paths]  # type: ignore[arg-type]
+    return [None if unfeaturisable(p) is not None else load_signatures(p)  # type: ignore[arg-type]
+            for p in paths]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -499,6 +528,8 @@ class TwinEnsemble:
     twin: dict[str, list[Signature]]
     candidates: list[CandidateResponse]
     effects: dict[str, Effect] = field(default_factory=dict)
+    #: Candidates left out, with the reason: a simulation of theirs could not be featurised.
+    left_out: dict[str, str] = field(default_factory=dict)
 
 
 def check_kinds(kinds: tuple[str, ...] | list[str] | None) -> tuple[str, ...]:
@@ -581,12 +612,27 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     n_bases = len(artefact_plans(artefacts, len(seeded), response_seeds)) if artefacts else 0
     keep = [i < n_bases for i in range(len(seeded) + len(cand_scen))]
     sigs = evaluate_all(seeded + cand_scen, cache, workers, on_progress, keep=keep, scheduler=scheduler)
+    for sd, sg, sc in zip(seed_list, sigs, seeded, strict=False):
+        if sg is None:
+            raise SignatureError(
+                f"scenario {nominal.name}: the twin's own simulation (seed {sd}) has no statistics: "
+                f"{unfeaturisable(cache / _key(sc) / 'signature.npz')}; expected the routine of the "
+                "recording (`twin calibrate` measures it from the recording)")
+    left_out: dict[str, str] = {}
+    for gp, idx in points:
+        bad = [i for i in idx if sigs[len(seeded) + i] is None]
+        if bad and gp.effect not in left_out:
+            why = unfeaturisable(cache / _key(cand_scen[bad[0]]) / "signature.npz")
+            left_out[gp.effect] = f"its simulation at {gp.values} has no statistics: {why}"
+    if left_out:
+        effects = {k: v for k, v in effects.items() if k not in left_out}
+        points = [(gp, idx) for gp, idx in points if gp.effect not in left_out]
     twin = {p: [s[p] for s in sigs[:len(seeded)]] for p in PARTS}
     cands = responses(effects, points, sigs[len(seeded):], sigs[:len(seeded)])
     if artefacts:
         cands += artefact_responses(artefacts, seeded, cache, workers, scheduler=scheduler,
                                     response_seeds=response_seeds)
-    return TwinEnsemble(nominal, seed_list, twin, cands, effects)
+    return TwinEnsemble(nominal, seed_list, twin, cands, effects, left_out)
 
 
 def check_layout(real_dir: Path, nominal: Scenario, cache: Path) -> None:
@@ -947,6 +993,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
               "kinds": sorted({c.kind for c in ens.candidates}),
               "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
               **result}
+    if ens.left_out:
+        result["candidates_left_out"] = ens.left_out
     if sub is not None:
         result["subset"] = sub
     write_json(out / "diagnosis.json", result, nan_as_null=True)  # kept if the report fails
