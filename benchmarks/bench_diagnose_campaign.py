@@ -9,7 +9,7 @@ subset it chooses, and simulates only the subset's layout. So:
    the capture and session names, sample indices and hours a recording of it holds, what
    :func:`analysis.diagnosis.subset.inventory` reads from its attributes);
 2. the unit costs are measured as ``twin diagnose`` measures them at its start
-   (:func:`twin.harness.gap_runner.calibrate`, kept in ``OUT/cache``);
+   (:func:`twin.harness.diagnosis.budget.measure_unit_costs`, kept in ``OUT/cache``);
 3. for each budget, the subset chosen and its estimated time on ``--workers`` workers, and the
    estimate of the chosen subset on N workers;
 4. a file of the paper's layout with one-sample arrays is written and its inventory timed
@@ -43,7 +43,8 @@ import numpy as np  # noqa: E402
 from analysis.dataset import assemble_measurements  # noqa: E402
 from analysis.diagnosis import subset  # noqa: E402
 from twin.campaign import plan, simulate_campaign  # noqa: E402
-from twin.harness.gap_runner import calibrate, subset_scenario, with_seed, workload  # noqa: E402
+from twin.harness.diagnosis.budget import measure_unit_costs, subset_scenario, workload  # noqa: E402
+from twin.harness.diagnosis.cache import with_seed  # noqa: E402
 from twin.scenario import load  # noqa: E402
 
 PAPER = REPO / "scenarios" / "paper-rtf.toml"
@@ -100,7 +101,7 @@ def main() -> None:
     inv = layout_of(paper)
     print(f"paper layout: {len(inv.samples)} samples × {inv.captures} captures, {len(inv.sessions)} "
           f"sessions × {inv.runs} runs")
-    costs, spent = calibrate(paper, inv, cache)
+    costs, spent = measure_unit_costs(paper, inv, cache)
     print(f"calibration: {spent:.1f} s (0: from the cache); unit costs (s, one worker): {costs}")
     report: dict = {"unit_costs_s": costs.__dict__, "calibration_s": spent, "budgets": []}
     for w in sorted({a.workers, 2}):

@@ -30,8 +30,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from analysis.diagnosis import attribution  # noqa: E402
-from twin.effects.parameters import PARAMETERS  # noqa: E402
-from twin.harness.gap_runner import DEFAULT_SEEDS, build_ensemble, evaluate_all, with_effects, with_seed  # noqa: E402
+from twin.harness.diagnosis.cache import DEFAULT_SEEDS, evaluate_all, with_seed  # noqa: E402
+from twin.harness.diagnosis.candidates.parameters import PARAMETERS  # noqa: E402
+from twin.harness.diagnosis.ensemble import build_ensemble  # noqa: E402
+from twin.harness.diagnosis.library import with_effects  # noqa: E402
 from twin.scenario import load  # noqa: E402
 
 LADDER = (1.1, 1.2, 1.4, 2.0)  # deviations tried on each side (factor and 1/factor)

@@ -169,7 +169,8 @@ def test_batched_campaigns_equal_campaigns_simulated_alone(tmp_path):
     import pytest
 
     from twin.campaign import simulate_campaign, simulate_campaigns_batched
-    from twin.harness.gap_runner import with_effects, with_seed
+    from twin.harness.diagnosis.cache import with_seed
+    from twin.harness.diagnosis.library import with_effects
     from twin.scenario import load
 
     nom = load(REPO / "scenarios" / "diagnose-bench.toml",

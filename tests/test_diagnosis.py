@@ -506,7 +506,7 @@ def test_benchmark_confusion_lists_every_miss(benchmark):
 
 
 def test_confusion_groups_misses_by_what_was_named():
-    from twin.harness.gap_benchmark import confusion
+    from twin.harness.diagnosis.benchmark import confusion
 
     def row(i, kind, injected, added, verdict="explained", correct=False):
         return {"id": i, "kind": kind, "injected": [injected], "added": added, "verdict": verdict,
@@ -531,7 +531,7 @@ def test_interval_coverage_counts_the_injected_value_inside_the_stated_interval(
     """Issue 15, item 5: the coverage of the stated intervals, per kind, over the continuous
     parameters of the injected candidate where it was added first (the discrete cogging order
     and wrong or missed cases do not count)."""
-    from twin.harness.gap_benchmark import interval_coverage
+    from twin.harness.diagnosis.benchmark import interval_coverage
 
     def row(i, kind, name, values, intervals, correct=True):
         return {"id": i, "kind": kind, "injected": [name], "correct": correct,

@@ -152,7 +152,7 @@ def test_apply_refuses_unknown_candidates_and_missing_channels(tmp_path):
 def test_edits_are_not_candidates_and_apply_like_artefacts(tmp_path):
     """The benchmark's out-of-everything recordings: edits no candidate models, applied by the
     artefacts' machinery from the case's seed."""
-    from twin.harness.gap_runner import candidate_names
+    from twin.harness.diagnosis.library import candidate_names
 
     assert {e.artefact for e in a.EDITS.values()} == {"spikes", "dropouts", "lowpass"}
     assert not set(a.EDITS) & set(a.ARTEFACTS)

@@ -129,8 +129,8 @@ def test_candidate_scenarios_and_artefact_plans_use_the_response_seeds():
     """A deterministic effect is simulated on the first ``response_seeds`` twin seeds, a random
     one (origins drawn per session) on all of them; an artefact is post-processed on the first
     ``response_seeds`` campaigns, an order line on all (its response is their mean)."""
-    from twin.effects import candidates
-    from twin.harness import gap_runner as gr
+    from twin.harness import diagnosis as gr
+    from twin.harness.diagnosis.candidates import candidates
     from twin.scenario import load
 
     nominal = load(REPO / "scenarios" / "diagnose-bench.toml")
@@ -153,8 +153,8 @@ def test_candidate_scenarios_and_artefact_plans_use_the_response_seeds():
 def test_responses_keep_every_seed_and_fit_the_first_or_the_mean():
     """The response fitted is the first seed's for a deterministic effect (common random numbers)
     and the mean over the seeds for a random one; every seed's change is kept for the interval."""
-    from twin.effects import candidates
-    from twin.harness import gap_runner as gr
+    from twin.harness import diagnosis as gr
+    from twin.harness.diagnosis.candidates import candidates
 
     lib = {k: v for k, v in candidates().items() if k in ("thermal_growth", "origin_variability")}
     rng = np.random.default_rng(3)

@@ -32,7 +32,7 @@ pytestmark = pytest.mark.timeout(1200)
 
 def test_every_parameter_is_a_scale_around_one_on_real_keys():
     from twin.config import get_dotted
-    from twin.effects.parameters import MIN_DEVIATION, PARAMETERS
+    from twin.harness.diagnosis.candidates.parameters import MIN_DEVIATION, PARAMETERS
     from twin.scenario import load
 
     s = load(BENCH_SCENARIO)
@@ -62,7 +62,7 @@ def test_the_benchmark_draws_mis_settings_the_diagnosis_can_see():
     inside the prior; a side the diagnosis does not see within the prior is never drawn (the
     bearings and the nut only softer, the torque signal only noisier); every other side of the
     prior is drawn."""
-    from twin.effects.parameters import MIN_DEVIATION, PARAMETERS
+    from twin.harness.diagnosis.candidates.parameters import MIN_DEVIATION, PARAMETERS
 
     rng = np.random.default_rng(1)
     for name, par in PARAMETERS.items():
@@ -86,7 +86,7 @@ def test_a_noisier_torque_signal_is_one_answer_under_either_name():
     """The twin's torque noise is white per sample, as the ``noise`` artefact's: a torque
     signal 2.3 times as noisy and noise added on it make the same recording, and the benchmark
     takes either name for the other (only above 1; not for another channel's noise)."""
-    from twin.harness.gap_benchmark import same_answer
+    from twin.harness.diagnosis.benchmark import same_answer
 
     assert same_answer("sensors.torque_noise_Nm", {"factor": 2.3}, "noise:torque", {"rms": 0.011})
     assert same_answer("noise:torque", {"rms": 0.011}, "sensors.torque_noise_Nm", {"factor": 2.3})
@@ -99,9 +99,9 @@ def test_a_noisier_torque_signal_is_one_answer_under_either_name():
 
 def test_kinds_choose_the_candidates():
     from analysis.diagnosis.artefacts import KIND_PARAMETER
-    from twin.effects import LIBRARY
-    from twin.effects.parameters import PARAMETERS
-    from twin.harness.gap_runner import DEFAULT_KINDS, candidate_names, kind_of
+    from twin.harness.diagnosis.candidates import LIBRARY
+    from twin.harness.diagnosis.candidates.parameters import PARAMETERS
+    from twin.harness.diagnosis.library import DEFAULT_KINDS, candidate_names, kind_of
 
     assert candidate_names(["parameter"]) == list(PARAMETERS)
     everything = candidate_names(["physical", "parameter", "artefact"])
@@ -113,7 +113,7 @@ def test_kinds_choose_the_candidates():
 
 
 def _result():
-    from twin.harness.gap_runner import library_json
+    from twin.harness.diagnosis.library import library_json
     from twin.scenario import load
 
     s = load(BENCH_SCENARIO)
@@ -185,8 +185,8 @@ def test_benchmark_plan_adds_parameter_cases_last():
     physical and artefact cases, which stay as they are without them (`--parameters 0`; the plan
     is drawn from its seed), before the recording edits, which keep their draws (a stream of
     their own)."""
-    from twin.effects.parameters import PARAMETERS
-    from twin.harness.gap_benchmark import plan_cases
+    from twin.harness.diagnosis.benchmark import plan_cases
+    from twin.harness.diagnosis.candidates.parameters import PARAMETERS
 
     base = plan_cases(2026, parameters_per_cell=0)
     more = plan_cases(2026)
@@ -269,7 +269,7 @@ def test_a_same_recording_alternative_is_said_so():
     benchmark's case): the words say they make the same recording, not merely that the data do
     not tell them apart; a floor fitted below 1 is no such twin (then "not told apart"), and
     another alternative keeps "not told apart"."""
-    from twin.harness.gap_runner import library_json
+    from twin.harness.diagnosis.library import library_json
     from twin.scenario import load
 
     res = {"library": library_json(["noise:torque", "sensors.torque_noise_Nm", "mains_line:torque"],

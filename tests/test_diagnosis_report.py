@@ -77,8 +77,8 @@ def test_parameters_with_units_digits_and_edge_note():
 def test_every_library_parameter_has_words_and_units():
     """One source: the effect definitions carry label, unit and digits, and the twin writes them
     into the result's library entry (which the report reads)."""
-    from twin.effects import LIBRARY as LIB
-    from twin.harness.gap_runner import library_json
+    from twin.harness.diagnosis.candidates import LIBRARY as LIB
+    from twin.harness.diagnosis.library import library_json
 
     lib = library_json(list(LIB))
     for name, eff in LIB.items():

@@ -117,7 +117,7 @@ def test_foreign_recording_small(tmp_path):
     """Two sessions (0 and 10 µm), two runs each, two Phase I samples of two 2-s captures; the
     scenario that ``scenario init`` wrote has the recording's layout (the check ``twin diagnose``
     makes before anything else: it simulates the scenario once and compares)."""
-    from twin.harness.gap_runner import check_layout
+    from twin.harness.diagnosis.ensemble import check_layout
     from twin.scenario import load
 
     out = _acceptance(tmp_path, SMALL, wrong_lead=False)

@@ -30,7 +30,7 @@ SOURCE = '''
 """A developer's degradation law and gap-diagnosis candidate."""
 import numpy as np
 
-from twin.effects.base import Effect, Param
+from twin.harness.diagnosis.candidates.base import Effect, Param
 
 
 class Sigmoid:
@@ -229,12 +229,12 @@ def test_law_by_entry_point_through_twin_simulate(plugin, tmp_path):
 
 def test_entry_points_are_listed_with_the_built_ins(plugin):
     src, ep = plugin
-    code = ("from twin.laws import names; from twin.effects import candidates; "
+    code = ("from twin.laws import names; from twin.harness.diagnosis.candidates import candidates; "
             "print(list(names())); print(list(candidates()))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                        env=dict(os.environ, PYTHONPATH=os.pathsep.join((str(REPO), src, ep))))
     laws_line, cands_line = r.stdout.strip().splitlines()
-    from twin.effects import LIBRARY
+    from twin.harness.diagnosis.candidates import LIBRARY
     from twin.laws import names
     assert eval(laws_line) == [*names(), "sigmoid"]
     assert eval(cands_line) == [*LIBRARY, "carriage_mass"]
@@ -248,8 +248,8 @@ DIAG = ["campaign.phase2=false", "phase1.capture_s=1.0"]
 
 
 def test_candidate_by_module_name_and_bad_names(plugin, tmp_path):
-    from twin.effects import candidate
-    from twin.harness.gap_runner import KINDS, candidate_names, library_json, resolve_library, with_effects
+    from twin.harness.diagnosis.candidates import candidate
+    from twin.harness.diagnosis.library import KINDS, candidate_names, library_json, resolve_library, with_effects
 
     ALL_KINDS = tuple(KINDS)  # the error names every candidate --candidate accepts (twin parameters too)
     from twin.scenario import load
@@ -270,7 +270,7 @@ def test_candidate_by_module_name_and_bad_names(plugin, tmp_path):
     with pytest.raises(registry.RegistryError) as exc:
         candidate(f"{MODULE}:Sigmoid")
     assert str(exc.value) == (f"gap-diagnosis candidate '{MODULE}:Sigmoid' is a Sigmoid; expected a "
-                              "twin.effects.base.Effect (or a class or function returning one)")
+                              "twin.harness.diagnosis.candidates.base.Effect (or a class or function returning one)")
     with pytest.raises(registry.RegistryError) as exc:
         candidate(f"{MODULE}:FAKE_COGGING")
     assert str(exc.value) == (f"gap-diagnosis candidate '{MODULE}:FAKE_COGGING' is named 'cogging', "

@@ -52,7 +52,7 @@ from analysis.diagnosis.candidate import CandidateParam
 
 KIND_EFFECT = "physical effect"
 KIND_ARTEFACT = "signal artefact"
-KIND_PARAMETER = "parameter"  # a twin parameter set wrong (twin/effects/parameters.py)
+KIND_PARAMETER = "parameter"  # a twin parameter set wrong (twin/harness/diagnosis/candidates/parameters.py)
 #: Bump when a transform or a candidate's grid changes: the harness caches artefact signatures
 #: on it (2: the mains line's phase drawn per capture or run).
 ARTEFACT_VERSION = 2

@@ -4,7 +4,7 @@ A candidate (a physical effect of the twin, a twin parameter set wrong, a signal
 fitted on a grid of values of each of its parameters and drawn from a prior range by the blind
 benchmark; :class:`CandidateParam` holds those fields and how a person reads the value. The
 signal artefacts (:mod:`analysis.diagnosis.artefacts`) use it as it is; the twin's effects extend
-it with the scenario keys a value sets (``twin.effects.base.Param``), so the diagnosis and the
+it with the scenario keys a value sets (``twin.harness.diagnosis.candidates.base.Param``), so the diagnosis and the
 report read both kinds the same way without importing the twin.
 """
 

@@ -248,7 +248,9 @@ def diagnose(
         _fail(f"--budget-minutes {budget_minutes:g}: expected a positive number of minutes (the time "
               "the diagnosis may take)")
     from analysis.dataset import DatasetError
-    from twin.harness.gap_runner import check_kinds, check_response_seeds, resolve_library, run_diagnosis
+    from twin.harness.diagnosis.ensemble import check_response_seeds
+    from twin.harness.diagnosis.library import check_kinds, resolve_library
+    from twin.harness.diagnosis.runner import run_diagnosis
 
     try:
         s = load(scenario, overrides)
@@ -319,8 +321,8 @@ def diagnose_benchmark(
     """The blind benchmark: recordings with withheld effects (or none), diagnosed against the
     nominal scenario and scored; writes OUT/benchmark.json and OUT/benchmark_cases.csv."""
     _require("diagnose-benchmark", "sim")
-    from twin.harness.gap_benchmark import plan_cases, run_benchmark
-    from twin.harness.gap_runner import check_response_seeds
+    from twin.harness.diagnosis.benchmark import plan_cases, run_benchmark
+    from twin.harness.diagnosis.ensemble import check_response_seeds
 
     try:
         check_response_seeds(response_seeds, seeds)

@@ -356,7 +356,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     estimate and the smallest budget that would do. ``sensors``: layer (b) as measured; the
     spread at the solution is simulated with their first correction set
     (:func:`corrected_sensor_values`), so its instruments give the second."""
-    from twin.harness.gap_runner import run_tasks
+    from twin.harness.diagnosis.cache import run_tasks
 
     t0 = time.perf_counter()
     with open_measurements(recording / "measurements.h5") as m:

@@ -18,10 +18,10 @@ out in a rotation of the formats the importer reads (:data:`FORMATS`: each used)
 
   - ``null``: the foreign axis alone (its parameters off the twin's defaults are what
     ``calibrate`` must absorb): the right verdict is "no significant gap";
-  - ``effect``: one physical effect of the library (:func:`twin.effects.candidates`) added to
+  - ``effect``: one physical effect of the library (:func:`twin.harness.diagnosis.candidates.candidates`) added to
     the machine, drawn in the upper half of its prior range: it must be named first (the
     first added candidate, or one that makes the same recording:
-    :func:`twin.harness.gap_benchmark.same_answer`), and the held-out gap must shrink on the
+    :func:`twin.harness.diagnosis.benchmark.same_answer`), and the held-out gap must shrink on the
     twin re-simulated with it;
   - ``artefact``: one signal artefact (:data:`analysis.diagnosis.artefacts.ARTEFACTS`, upper half)
     applied to the recording before it is written out as the lab's files: named first;
@@ -129,7 +129,7 @@ def draw_additions(rng: np.random.Generator, kind: str) -> tuple[dict, dict]:
     range; an artefact's kind (gain, noise, line, drift, offset, clipping) first, then its
     target."""
     from analysis.diagnosis.artefacts import ARTEFACTS
-    from twin.effects import candidates
+    from twin.harness.diagnosis.candidates import candidates
 
     effects, artefacts = {}, {}
     if kind in ("effect", "several"):
@@ -152,7 +152,7 @@ def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict) -> dic
     ``nothing_else`` (every added candidate is something that was added, or makes the same
     recording)."""
     from analysis.diagnosis.attribution import NO_GAP
-    from twin.harness.gap_benchmark import same_answer
+    from twin.harness.diagnosis.benchmark import same_answer
 
     added = res["added"]
     values = {**effects, **artefacts}
@@ -219,7 +219,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     from analysis.ingest.check import check_record, require_clean_recording
     from twin.campaign import simulate_campaign
     from twin.harness.calibrate import calibrate
-    from twin.harness.gap_runner import with_effects
+    from twin.harness.diagnosis.library import with_effects
     from twin.harness.lab_export import export
 
     effects, artefacts = dict(effects or {}), dict(artefacts or {})
@@ -245,7 +245,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
              "simulate_export_import_s": t_sim, "calibrate_s": rec["seconds"],
              "calibrate_estimated_s": rec.get("estimated_s"), **score_case(s, cal, rec)}
     if diagnose:
-        from twin.harness.gap_runner import run_diagnosis
+        from twin.harness.diagnosis.runner import run_diagnosis
 
         t1 = time.perf_counter()
         try:

@@ -17,7 +17,7 @@ Cases (:func:`plan_cases`, every draw from ``rng_seed``):
   targets, ``artefacts_per_cell`` cases per artefact and magnitude; the recording is the twin's
   campaign post-processed (``measurements.h5`` rewritten), the diagnosis sees only its
   signature;
-- ``parameter``: a twin parameter set wrong (:mod:`twin.effects.parameters`): the twin with one
+- ``parameter``: a twin parameter set wrong (:mod:`twin.harness.diagnosis.candidates.parameters`): the twin with one
   key's factor drawn away from 1 by at least 15 % (side and log distance within the prior
   range, "low" nearer 1, "high" farther, and beyond the least deviation the diagnosis sees on
   that side, ``TwinParameter.least_seen``), ``parameters_per_cell`` cases per candidate and
@@ -87,23 +87,14 @@ from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
 from analysis.diagnosis.wording import same_recording
 from analysis.files import write_json
-from twin.effects import candidates
-from twin.effects.parameters import PARAMETERS
 from twin.executors import default_processes
-from twin.harness.gap_runner import (
-    DEFAULT_KINDS,
-    DEFAULT_RESPONSE_SEEDS,
-    DEFAULT_SEEDS,
-    add_resimulation,
-    artefact_cached,
-    artefact_signatures,
-    build_ensemble,
-    diagnose_signatures,
-    evaluate_all,
-    resimulate,
-    with_effects,
-    with_seed,
-)
+from twin.harness.diagnosis.artefact_grid import artefact_cached, artefact_signatures
+from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS, evaluate_all, with_seed
+from twin.harness.diagnosis.candidates import candidates
+from twin.harness.diagnosis.candidates.parameters import PARAMETERS
+from twin.harness.diagnosis.ensemble import build_ensemble, diagnose_signatures
+from twin.harness.diagnosis.library import DEFAULT_KINDS, with_effects
+from twin.harness.diagnosis.resimulation import add_resimulation, resimulate
 from twin.scenario import Scenario
 
 #: Twin seeds the benchmark re-simulates each case with (fewer than the spread's K: the
@@ -338,7 +329,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     diagnosis tries (default :data:`DEFAULT_KINDS`, and "parameter" when there are parameter
     cases). Every case with candidates added is re-simulated with them for the first
     ``resim_seeds`` twin seeds (0: none; all the cases' campaigns together,
-    :func:`twin.harness.gap_runner.resimulate`) and scored with the verdict that gives."""
+    :func:`twin.harness.diagnosis.resimulation.resimulate`) and scored with the verdict that gives."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"

@@ -19,7 +19,7 @@ Parameter: rise_K, the steady temperature rise added to the scenario's. It acts 
 torque level (steady, transient) and, through the lead, on where rail features are seen.
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 EFFECT = register_effect(Effect(
     name="thermal_growth",

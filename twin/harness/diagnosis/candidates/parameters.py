@@ -79,7 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.config import get_dotted
-from twin.effects.base import Effect, Param
+from twin.harness.diagnosis.candidates.base import Effect, Param
 from twin.scenario import Scenario
 
 #: The least mis-setting the blind benchmark draws (a factor of 1.15 or 1/1.15), or the

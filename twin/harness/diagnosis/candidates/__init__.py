@@ -1,6 +1,6 @@
 """The library of unmodelled effects for the sim-to-real gap diagnosis (one module per effect,
 each with its physical parameters, prior ranges and physical source; see
-:mod:`twin.effects.base`).
+:mod:`twin.harness.diagnosis.candidates.base`).
 
 Every effect is a candidate of the kind ``gap_candidates`` of :mod:`analysis.registry`: the
 modules below register theirs on import, in the library's order (the order of the diagnosis's
@@ -11,15 +11,15 @@ entry-point group ``ballscrew_twin.gap_candidates``. :func:`candidates` gives th
 
 # The order of these imports is the order of registration, hence of the library.
 # isort: off
-from twin.effects.base import KIND, Effect, Param, register_effect
-from twin.effects import thermal_growth  # noqa: F401
-from twin.effects import ball_recirculation  # noqa: F401
-from twin.effects import origin_variability  # noqa: F401
-from twin.effects import servo_dynamics  # noqa: F401
-from twin.effects import cogging  # noqa: F401
-from twin.effects import stribeck_friction  # noqa: F401
-from twin.effects import imu_misalignment  # noqa: F401
-from twin.effects import base_resonance  # noqa: F401
+from twin.harness.diagnosis.candidates.base import KIND, Effect, Param, register_effect
+from twin.harness.diagnosis.candidates import thermal_growth  # noqa: F401
+from twin.harness.diagnosis.candidates import ball_recirculation  # noqa: F401
+from twin.harness.diagnosis.candidates import origin_variability  # noqa: F401
+from twin.harness.diagnosis.candidates import servo_dynamics  # noqa: F401
+from twin.harness.diagnosis.candidates import cogging  # noqa: F401
+from twin.harness.diagnosis.candidates import stribeck_friction  # noqa: F401
+from twin.harness.diagnosis.candidates import imu_misalignment  # noqa: F401
+from twin.harness.diagnosis.candidates import base_resonance  # noqa: F401
 # isort: on
 
 from analysis import registry
@@ -34,7 +34,7 @@ def _effect(obj, spec: str) -> Effect:
     if not isinstance(obj, Effect):
         raise registry.RegistryError(
             f"gap-diagnosis candidate {spec!r} is a {type(obj).__name__}; expected a "
-            "twin.effects.base.Effect (or a class or function returning one)")
+            "twin.harness.diagnosis.candidates.base.Effect (or a class or function returning one)")
     return obj
 
 

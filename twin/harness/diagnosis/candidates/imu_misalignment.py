@@ -13,7 +13,7 @@ scale_ppm, a common scale error of the three accelerometer axes
 accelerometer (gravity) and the amplitude of its signal in the transients.
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 _SCALE = tuple(f"sensors.imu_acc_scale_error[{i}]" for i in range(3))
 

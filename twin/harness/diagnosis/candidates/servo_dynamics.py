@@ -13,7 +13,7 @@ loops (``axis.position_bandwidth_hz``, ``axis.velocity_bandwidth_hz``). It acts 
 speed and torque in the transients and at low frequencies.
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 EFFECT = register_effect(Effect(
     name="servo_dynamics",

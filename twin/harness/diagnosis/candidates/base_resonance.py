@@ -12,7 +12,7 @@ resonance moving between bands does not interpolate) and modal_mass_kg
 the band of the resonance, mostly in the transients and reversals.
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 EFFECT = register_effect(Effect(
     name="base_resonance",

@@ -12,7 +12,7 @@ Parameters: excess_N = F_s − F_c (``effects.stribeck_excess_N``) and velocity_
 reversals and in the transients, and on the IMU at the motion starts.
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 EFFECT = register_effect(Effect(
     name="stribeck_friction",

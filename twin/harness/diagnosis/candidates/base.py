@@ -7,7 +7,7 @@ returns the scenario with the effect added (``add``: the value is added to the s
 
 The effects are the twin's candidates of the gap diagnosis, found by name in
 :mod:`analysis.registry` under the kind ``gap_candidates`` (defined here, entry-point group
-``ballscrew_twin.gap_candidates``): the built-ins of :mod:`twin.effects` register with
+``ballscrew_twin.gap_candidates``): the built-ins of :mod:`twin.harness.diagnosis.candidates` register with
 :func:`register_effect`, an installed package names an :class:`Effect` object in an entry point,
 and ``module:NAME`` (an :class:`Effect`, or a class or function that returns one when called
 without arguments) works wherever a candidate is named. An effect's name is its ``name``.
@@ -28,7 +28,7 @@ from twin.config import get_dotted, set_dotted
 from twin.scenario import Scenario, from_dict
 
 KIND = "gap_candidates"
-registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.effects",), "gap-diagnosis candidate")
+registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.harness.diagnosis.candidates",), "gap-diagnosis candidate")
 
 
 @dataclass(frozen=True)

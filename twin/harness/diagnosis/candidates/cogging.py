@@ -13,7 +13,7 @@ slot/pole combinations). It acts on Phase I torque/speed/acc at N_c·f_rot (f_ro
 400 mm/s with a 10 mm lead).
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 #: cogging orders N_c = LCM(slots, poles) of common slot/pole combinations: 4/2, 3/2, 6/4, 9/6, 12/8
 COMMON_ORDERS = (4.0, 6.0, 12.0, 18.0, 24.0)

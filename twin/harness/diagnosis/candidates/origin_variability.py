@@ -12,7 +12,7 @@ scenario's ``phase2.origin_offset_max_mm``. It acts on the shift of the E_XX pro
 sessions (``lag`` statistics) and the dwell positions.
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 EFFECT = register_effect(Effect(
     name="origin_variability",

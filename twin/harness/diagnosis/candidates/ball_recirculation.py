@@ -14,7 +14,7 @@ Parameter: impulse_N, the peak axial force of the impacts (twin key
 ball-pass period). It acts on the nut accelerometers (and torque) at the ball-pass harmonics.
 """
 
-from twin.effects.base import Effect, Param, register_effect
+from twin.harness.diagnosis.candidates.base import Effect, Param, register_effect
 
 EFFECT = register_effect(Effect(
     name="ball_recirculation",

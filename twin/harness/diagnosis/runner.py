@@ -1,0 +1,130 @@
+"""Sim-to-real gap diagnosis: simulate what the diagnosis needs and hand the signatures to
+:mod:`analysis.diagnosis`.
+
+For a recording and the scenario meant to describe it, :func:`run_diagnosis`
+
+1. simulates the scenario once (the first seed of the spread) and refuses a recording whose
+   layout differs (captures per sample, sessions, runs, channels, sampling rates:
+   :mod:`analysis.diagnosis.layout`);
+2. simulates the scenario with ``seeds`` seeds (the twin's spread);
+3. simulates each candidate effect of the library, and each twin parameter
+   (:mod:`twin.harness.diagnosis.candidates.parameters`, with ``kinds`` including "parameter"), on its parameter grid
+   with the first of those seeds (common random numbers: its response is the difference to that seed's nominal run;
+   an effect with random draws of its own, like the origin of each session, with every seed,
+   its response averaged);
+4. computes the signature (both parts) of every simulation and of the recording, and runs
+   :func:`analysis.diagnosis.attribution.diagnose`;
+5. when candidates were added, simulates the twin again with them at their fitted values for
+   the seeds of the spread (signal artefacts post-processed on those campaigns) and measures
+   the held-out gap on it: the re-simulated shrink the verdict follows (:func:`resimulate`,
+   :func:`analysis.diagnosis.attribution.resimulated`);
+6. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
+
+Every simulation is a campaign of the scenario, cached by the hash of its scenario under
+``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
+the blind benchmark, reuses them. Campaigns are simulated in batches of up to ``BATCH`` with
+batched rollouts (:func:`twin.campaign.simulate_campaigns_batched`: the grid values of a
+candidate, or the seeds of the spread, share one ``mujoco.rollout`` call per capture and
+session), the batches in parallel on ``workers`` processes, each with one BLAS thread; each
+campaign's files are those it gives simulated alone, so results depend neither on the batching
+nor on the number of workers.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from analysis.diagnosis import attribution
+from analysis.diagnosis.gap_report import write_diagnosis_report
+from analysis.diagnosis.signature import PARTS, signature
+from analysis.files import write_json
+from twin.executors import parallel_slots
+from twin.harness.diagnosis.budget import prepare_subset
+from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
+from twin.harness.diagnosis.candidates.parameters import PARAMETERS
+from twin.harness.diagnosis.ensemble import build_ensemble, check_layout, check_response_seeds, diagnose_signatures
+from twin.harness.diagnosis.library import check_kinds, library_json, resolve_library
+from twin.harness.diagnosis.resimulation import add_resimulation, resimulate
+from twin.scenario import Scenario
+
+
+def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> dict | None:
+    """``diagnosis.json``'s ``calibration``: what ``twin calibrate`` measured and fitted for the
+    scenario (its ``[calibration]`` table) and whether the fitted parameters are candidates
+    here; None for a scenario that was not calibrated. The twin parameters are candidates only
+    with ``--kinds parameter`` (or named with ``--candidate``): then a calibrated one's factor
+    1 is its calibrated value and its grid the same factors around it, so the diagnosis can still
+    say it was fitted wrong (its interval is in the entry); by default what is left after the
+    calibration is looked for among the unmodelled effects and the acquisition's artefacts."""
+    cal = nominal.calibration
+    if not cal:
+        return None
+    values = [{"key": k, **v} for k, v in cal.items() if isinstance(v, dict)]
+    names = set(library or []) | (set(PARAMETERS) if library is None and "parameter" in check_kinds(kinds) else set())
+    fitted = [v["key"] for v in values if v.get("source") == "fitted"]
+    again = sorted(n for n in names if n in PARAMETERS and set(PARAMETERS[n].factor.keys) & set(fitted))
+    words = (f"The calibrated parameters {', '.join(again)} stay candidates (factor 1 = the calibrated value)."
+             if again else "The calibrated parameters are not candidates here (--kinds without 'parameter', or "
+             "--candidate naming none of them): what remains is looked for among the unmodelled effects and "
+             "the acquisition's artefacts.")
+    return {"recording": cal.get("recording"), "version": cal.get("version"), "values": values,
+            "defaults": list(cal.get("defaults", [])), "candidates_again": again, "candidates": words}
+
+
+def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,
+                  workers: int | None = None, alpha: float = 0.01, cache: Path | None = None,
+                  library: list[str] | None = None, plots: bool = True,
+                  on_progress: Callable[[int, int], None] | None = None,
+                  kinds: tuple[str, ...] | list[str] | None = None,
+                  scheduler: str | None = None, resim_seeds: int | None = None,
+                  on_resim_progress: Callable[[int, int], None] | None = None,
+                  budget_minutes: float | None = None,
+                  response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> dict:
+    """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
+    (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
+    twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
+    0: none) and the verdict follows the re-simulated shrink (:func:`resimulate`). With
+    ``budget_minutes`` the diagnosis is that of a subset of the recording sized to that time
+    (:func:`prepare_subset`; ``subset`` in the result), else of the whole recording.
+    ``response_seeds``: the twin seeds each candidate's response is computed with
+    (:func:`build_ensemble`)."""
+    check_response_seeds(response_seeds, seeds)
+    t0 = time.perf_counter()
+    calibration = calibration_entry(nominal, kinds, library)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = Path(cache) if cache else out / "cache"
+    resolve_library(library, kinds)  # an unknown candidate or kind stops before anything is simulated
+    recording, sub = str(real_dir), None
+    if budget_minutes is not None:
+        real_dir, nominal, sub = prepare_subset(
+            real_dir, nominal, out, cache, budget_minutes, seeds=seeds, library=library, kinds=kinds,
+            resim_seeds=resim_seeds, workers=parallel_slots(workers, scheduler), response_seeds=response_seeds)
+    check_layout(real_dir, nominal, cache)
+    real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
+    ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler,
+                         response_seeds)
+    result, t_heldout = diagnose_signatures(real, ens, library, alpha)
+    resim = None
+    if result["added"] and result["verdict"] != attribution.NO_GAP and resim_seeds != 0:
+        resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_resim_progress)[0]
+    result = add_resimulation(result, real, ens, resim, alpha)
+    result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
+              "response_seeds": response_seeds, "calibration": calibration,
+              "kinds": sorted({c.kind for c in ens.candidates}),
+              "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
+              **result}
+    if ens.left_out:
+        result["candidates_left_out"] = ens.left_out
+    if sub is not None:
+        result["subset"] = sub
+    write_json(out / "diagnosis.json", result, nan_as_null=True)  # kept if the report fails
+    if plots:
+        write_diagnosis_report(out / "report", result, real["heldout"].regions, t_heldout)
+    if sub is not None:
+        sub["actual_minutes"] = (time.perf_counter() - t0) / 60.0  # the report included
+        write_json(out / "diagnosis.json", result, nan_as_null=True)
+    return result
+
