@@ -2,7 +2,7 @@
 
 The calibration reads a recording's layout from the parts' attributes and fits on its first
 Phase I sample (up to 4 of its captures) and the first runs of its first Phase II session
-(``twin/harness/calibrate.py``): what it costs is set by the paper's capture length, rates and
+(``twin/harness/calibration/``): what it costs is set by the paper's capture length, rates and
 routine, not by the campaign's length. The benchmark therefore simulates the paper's campaign
 (``scenarios/paper-rtf.toml``: ten 10-s captures per sample at 10 kHz, sessions of 90 IMU runs
 over 450 mm at 20, 100 and 500 mm/s) cut after its first sample and session, calibrates it
@@ -42,7 +42,7 @@ sys.path.insert(0, str(REPO))
 
 from twin import campaign as cp  # noqa: E402
 from twin.campaign import simulate_campaign  # noqa: E402
-from twin.harness.calibrate import calibrate  # noqa: E402
+from twin.harness.calibration import calibrate  # noqa: E402
 from twin.scenario import from_dict, load  # noqa: E402
 from twin.simulate import Simulator, phase1_profile  # noqa: E402
 

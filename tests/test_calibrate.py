@@ -378,7 +378,7 @@ def test_calibrate_benchmark_meets_its_targets(tmp_path):
 def test_a_flagged_channel_keeps_its_defaults():
     """Nothing is fitted to a channel `twin check` flags: a clipped torque keeps the drive's
     parameters fitted on it and the torque's noise at the twin's defaults, named."""
-    from twin.harness.calibrate import flagged_keys
+    from twin.harness.calibration import flagged_keys
 
     check = {"errors": [], "warnings": [{"level": "warning", "where": "/phase1/c000003/torque",
                                          "what": "clipping: 12 samples at the maximum 2.5"}]}

@@ -6,5 +6,5 @@
   instruments from the spectra of the dwells (the axis at rest).
 
 Both read a recording only (``measurements.h5``); the simulator side
-(``twin/harness/calibrate.py``) compares the same statistics on the twin.
+(``twin/harness/calibration/``) compares the same statistics on the twin.
 """

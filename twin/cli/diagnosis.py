@@ -51,7 +51,7 @@ def calibrate_benchmark(
     on from the cases already done."""
     _require("calibrate-benchmark", "sim")
     from twin.executors import default_processes
-    from twin.harness.calibrate_benchmark import run_benchmark
+    from twin.harness.calibration.benchmark import run_benchmark
 
     _writable_dir(out)
     doc = run_benchmark(out, cases=cases, seed=seed, workers=workers or default_processes(), diagnose=diagnose,
@@ -110,8 +110,8 @@ def calibrate(
     if budget_minutes is not None and not (math.isfinite(budget_minutes) and budget_minutes > 0):
         _fail(f"--budget-minutes {budget_minutes:g}: expected a positive number of minutes")
     from analysis.dataset import DatasetError
-    from twin.harness.calibrate import CalibrationError
-    from twin.harness.calibrate import calibrate as run_calibration
+    from twin.harness.calibration import CalibrationError
+    from twin.harness.calibration import calibrate as run_calibration
 
     if out.exists() and out.is_dir():
         _fail(f"-o {out}: is a directory; expected a scenario file path (e.g. {out / 'axis.toml'})")

@@ -7,7 +7,7 @@ mass, routines, sensor rates, noise floors, frictions and ripple drawn within th
 (:func:`draw_case`), several off the twin's defaults at once. Its campaign is a nominal machine
 (no preload loss, no backlash growth) of the layout of ``scenarios/foreign-16mm.toml``, written
 out in a rotation of the formats the importer reads (:data:`FORMATS`: each used), imported
-(``twin import``) and calibrated (:func:`twin.harness.calibrate.calibrate`). Scored:
+(``twin import``) and calibrated (:func:`twin.harness.calibration.calibrate`). Scored:
 
 - the routine: every measured routine value within 0.1 % of the drawn one (or the channel's
   resolution: one sample of the rate for a dwell);
@@ -218,7 +218,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     from analysis.ingest import run_import
     from analysis.ingest.check import check_record, require_clean_recording
     from twin.campaign import simulate_campaign
-    from twin.harness.calibrate import calibrate
+    from twin.harness.calibration import calibrate
     from twin.harness.diagnosis.library import with_effects
     from twin.harness.lab_export import export
 
@@ -320,7 +320,7 @@ def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose
     """What makes a case's result: its draw, the options and the versions of the benchmark, the
     calibration and the diagnosis's statistics (a case with the same key is not run again)."""
     from analysis.diagnosis.signature import SIGNATURE_VERSION
-    from twin.harness.calibrate import CALIBRATE_VERSION
+    from twin.harness.calibration import CALIBRATE_VERSION
 
     text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, SIGNATURE_VERSION, s.to_json(), kind, effects,
                        artefacts, bool(diagnose), int(seeds), RESIM_SEEDS], sort_keys=True, default=str)

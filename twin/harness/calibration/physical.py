@@ -1,0 +1,379 @@
+"""Layer (c): the drive's physical parameters and the Phase I acceleration fitted jointly through
+the twin (indirect inference with ``scipy.optimize.least_squares``; the package's docstring
+says how and why), each with its 90 % interval.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize
+
+from analysis.calibration.sensor_chain import Measured
+from analysis.dataset import open_measurements
+from twin.config import get_dotted, set_dotted
+from twin.harness.calibration.sensors import corrected_sensor_values
+from twin.harness.calibration.twin_statistics import _statistics, evaluate
+from twin.harness.calibration.values import (
+    FIT_CAPTURES,
+    FIT_RUNS,
+    FIT_SEEDS,
+    FITTED,
+    LOG_STEP,
+    MAX_JACOBIANS,
+    MAX_SPAN,
+    MIN_SEEN,
+    PRIOR_FACTOR,
+    SPREAD_SEEDS,
+    T90,
+    Z90,
+    CalibrationError,
+    Value,
+    _OutOfTime,
+    _progress,
+)
+from twin.scenario import Scenario, from_dict
+
+# ---------------------------------------------------------------------------------------------
+# Layer (c): the joint fit
+
+
+@dataclass
+class FitResult:
+    """Layer (c)'s outcome: the fitted ``values``, the ``skipped``
+    ones and why, the twin ``simulations`` run, the ``seconds`` spent, the ``residual`` (in
+    standard errors) and, for layer (b)'s correction, the instruments the twin's own rests give
+    at each of the spread's seeds (``instruments``: {key: [value per seed]}) for the values it
+    was set to; ``estimated_s``: the whole calibration's longest time as estimated after the
+    first simulations (None when no fit ran); ``stopped``: why the fit stopped before it
+    converged (``--budget-minutes``' deadline), or None."""
+
+    values: list[Value]
+    skipped: dict[str, str]
+    simulations: int
+    seconds: float
+    residual: list[float]
+    instruments: dict[str, list[float]]
+    first_sensors: dict[str, float]
+    estimated_s: float | None = None
+    stopped: str | None = None
+
+
+def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
+                  n_runs: int) -> dict:
+    """The scenario data of the fit's twin: one Phase I sample of ``n_captures`` at the
+    recording's hours and, with ``session_hours``, one Phase II session of ``n_runs`` runs (the
+    ripple's statistic), no pause, the scenario's seed (common random numbers)."""
+    data = base.model_dump(mode="json")
+    last = max(float(sample_hours), float(session_hours or 0.0))
+    data["campaign"].update(phase2=session_hours is not None, scale=1.0, pauses=[], warmup_hours=0.0,
+                            total_hours=max(last + 1.0, 1.0))
+    data["phase1"].update(sample_hours=[float(sample_hours)], captures_per_sample=int(n_captures))
+    if session_hours is not None:
+        data["phase2"].update(session_hours=[float(session_hours)], runs_per_session=int(n_runs))
+        data["dial_indicator"]["every_n_sessions"] = 100  # no dial test in the fit
+    return data
+
+
+def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float | None,
+                 workers: int, scheduler: str | None = None,
+                 progress: Callable[[str], None] = _progress, spent_s: float = 0.0,
+                 sensors: dict[str, Measured] | None = None) -> FitResult:
+    """Layer (c) of the module docstring on ``recording`` against ``base`` (layers a and b
+    applied). Raises :class:`CalibrationError` when ``budget_s`` (the whole calibration's, of
+    which ``spent_s`` is spent) cannot hold: after timing the twin's first simulations, with the
+    estimate and the smallest budget that would do. ``sensors``: layer (b) as measured; the
+    spread at the solution is simulated with their first correction set
+    (:func:`corrected_sensor_values`), so its instruments give the second."""
+    from twin.harness.diagnosis.cache import run_tasks
+
+    t0 = time.perf_counter()
+    with open_measurements(recording / "measurements.h5") as m:
+        names = m.phase1_captures()
+        if not names:
+            return FitResult([], {k: "no Phase I capture: no torque to fit" for k, _, _ in FITTED}, 0,
+                             0.0, [], {}, {})
+        first = min(m.phase1_header(n)[1] for n in names)
+        caps = [n for n in names if m.phase1_header(n)[1] == first][:FIT_CAPTURES]
+        hours = float(m.phase1(caps[0]).hours)
+        sessions = m.phase2_sessions()
+        runs = [(sessions[0], r) for r in m.phase2_runs(sessions[0])[:FIT_RUNS]] if sessions else []
+        if runs and getattr(m.phase2(*runs[0]), "position_cmd", None) is None:
+            runs = []  # the motor angle needs the command: the ripple is read on the torque
+        session_h = m.session_hours(sessions[0]) if runs else None
+        real, real_se = _statistics(m, caps, runs, base)
+    skipped: dict[str, str] = {}
+    use = []
+    for i, (key, stat, _) in enumerate(FITTED):
+        if not np.isfinite(real[i]):
+            skipped[key] = (
+                "the ripple's order is above half the IMU accelerometer's bandwidth at every Phase II speed, or "
+                "no cruise spans 4 of its periods" if stat == "ripple" and runs else
+                f"the recording's {stat.replace('_', ' ')} cannot be measured (no ramp, or no cruise of 4 "
+                "ripple periods, in its first Phase I sample)")
+        else:
+            use.append(i)
+    data0 = _fit_scenario(base, hours, len(caps), session_h, len(runs))
+    keys = [FITTED[i][0] for i in use]
+    start = np.array([float(get_dotted(data0, k)) for k in keys])
+    if np.any(start <= 0):
+        bad = [k for k, v in zip(keys, start, strict=True) if v <= 0]
+        for k in bad:
+            skipped[k] = "its starting value is 0: a factor cannot move it"
+        use = [i for i in use if FITTED[i][0] not in bad]
+        keys = [FITTED[i][0] for i in use]
+        start = np.array([float(get_dotted(data0, k)) for k in keys])
+    stat_idx = np.array(use, dtype=int)
+    cache.mkdir(parents=True, exist_ok=True)
+    sims = [0]
+
+    extra: dict[str, float] = {}  # set at every evaluation (the sensors' first correction, at the end)
+
+    def scenario_at(logp: np.ndarray, seed: int | None = None) -> str:
+        data = json.loads(json.dumps(data0))
+        for k, v in extra.items():
+            set_dotted(data, k, float(v), source="calibrate")
+        for k, lp in zip(keys, logp, strict=True):
+            set_dotted(data, k, float(np.exp(lp)), source="calibrate")
+        if seed is not None:
+            data["seed"] = int(seed)
+        return from_dict(data).to_json()
+
+    def run(points: list[np.ndarray], seeds: list[int]) -> list[list[list[float]]]:
+        """Statistics of each point with each seed (point-major)."""
+        payloads = [scenario_at(p, sd) for p in points for sd in seeds]
+        n = len(payloads)
+        size = max(1, -(-n // max(1, workers)))
+        batches = [payloads[k:k + size] for k in range(0, n, size)]
+        results = run_tasks(evaluate, [(b, str(cache)) for b in batches], workers, scheduler)
+        sims[0] += n
+        return [r for res in results for r in res]
+
+    def averaged(points: list[np.ndarray]) -> list[np.ndarray]:
+        """The statistics of each point averaged over the FIT_SEEDS seeds."""
+        rows = run(points, seeds[:FIT_SEEDS])
+        return [np.nanmean([rows[i * FIT_SEEDS + k][0] for k in range(FIT_SEEDS)], axis=0)[stat_idx]
+                for i in range(len(points))]
+
+    x0 = np.log(start)
+    t_first = time.perf_counter()
+    seeds = [int(data0["seed"])] + [(int(data0["seed"]) + 7919 * (i + 1)) % 2**32 for i in range(SPREAD_SEEDS - 1)]
+    spread = run([x0], seeds)
+    first_eval = spread[0]
+    unit_s = (time.perf_counter() - t_first) / max(1.0, len(seeds) / max(1, workers))
+
+    def cost_s(n_points: int, n_seeds: int = FIT_SEEDS) -> float:
+        """Time of ``n_points`` evaluations of ``n_seeds`` seeds each on the workers."""
+        return unit_s * math.ceil(n_points * n_seeds / max(1, workers))
+
+    # at most: the first Jacobian, MAX_JACOBIANS more, the spread at the solution; at least
+    # (what a fit with intervals needs): the first Jacobian, one step and its Jacobian, the spread
+    reserve_s = cost_s(1, SPREAD_SEEDS) + 2.0  # the spread at the solution, the files
+    full = cost_s((MAX_JACOBIANS + 1) * (len(keys) + 1)) + reserve_s
+    least = cost_s(3 * (len(keys) + 1)) + reserve_s
+    elapsed = spent_s + (time.perf_counter() - t0)
+    total = elapsed + full
+    deadline = None if budget_s is None else t0 + budget_s - spent_s
+    progress(f"layer c: {len(keys)} parameters jointly; one twin evaluation {unit_s:.1f} s: the calibration "
+             f"takes at most {total / 60:.1f} min" + ("" if budget_s is None or total <= budget_s else
+                                                       f"; the fit stops at the budget ({budget_s / 60:g} min)"))
+    if budget_s is not None and elapsed + least > budget_s:
+        raise CalibrationError(
+            f"{recording}: the calibration needs at least {(elapsed + least) / 60:.1f} min on {workers} worker(s) "
+            f"(about {total / 60:.1f} min to converge: one evaluation of the twin takes {unit_s:.1f} s); "
+            f"--budget-minutes {budget_s / 60:g} is too small: give at least "
+            f"{math.ceil((elapsed + least) / 60 * 1.1 * 10) / 10:g} ({math.ceil(total / 60 * 10) / 10:g} to converge)")
+    sim_se = np.array(first_eval[1])[stat_idx] / math.sqrt(FIT_SEEDS)
+    seed_sd = np.nanstd(np.array([r[0] for r in spread])[:, stat_idx], axis=0, ddof=1)
+    # the recording is one machine (one draw: its seed scatter counts whole), the twin's
+    # average of FIT_SEEDS draws
+    se = np.sqrt(real_se[stat_idx] ** 2 + np.nan_to_num(sim_se, nan=0.0) ** 2
+                 + np.nan_to_num(seed_sd) ** 2 * (1 + 1 / FIT_SEEDS))
+    # a statistic whose error cannot be estimated (one capture): 1 % of its value
+    se = np.where(np.isfinite(se) & (se > 0), se, 0.01 * np.abs(real[stat_idx]))
+    target = real[stat_idx]
+    memo: dict[bytes, np.ndarray] = {
+        x0.tobytes(): np.nanmean([r[0] for r in spread[:FIT_SEEDS]], axis=0)[stat_idx]}
+
+    def values_at(points: list[np.ndarray]) -> list[np.ndarray]:
+        todo = [p for p in points if p.tobytes() not in memo]
+        if todo:
+            for p, r in zip(todo, averaged(todo), strict=True):
+                memo[p.tobytes()] = r
+        return [memo[p.tobytes()] for p in points]
+
+    rows = np.arange(len(keys))  # the statistics in the fit (one per parameter)
+
+    def resid(x: np.ndarray) -> np.ndarray:
+        return np.nan_to_num((values_at([x])[0] - target) / se, nan=1e6)[rows]
+
+    def jac(x: np.ndarray, cols: np.ndarray, final: bool = False) -> np.ndarray:
+        """d(residual)/d(log p) of the parameters ``cols`` at ``x`` (all parameters); unless
+        ``final`` (the intervals'), :class:`_OutOfTime` when it and the fit's end would pass
+        the budget's deadline."""
+        if deadline is not None and not final and (
+                time.perf_counter() + cost_s(len(cols) + 1) * 2 + reserve_s > deadline):
+            raise _OutOfTime
+        pts = [x.copy() for _ in cols]
+        for p, j in zip(pts, cols, strict=True):
+            p[j] += LOG_STEP
+        f0 = resid(x)
+        vals = values_at(pts)
+        at = ", ".join(f"{k.split('.')[-1]}={np.exp(v):.4g}" for k, v in zip(keys, x, strict=True))
+        progress(f"layer c: Jacobian at {at} ({sims[0]} evaluations so far)")
+        return np.column_stack([(np.nan_to_num((c - target) / se, nan=1e6)[rows] - f0) / LOG_STEP for c in vals])
+
+    # A parameter whose statistic moves by less than MIN_SEEN standard errors for a factor 2 of
+    # it is not informed by this recording (e.g. the rails' friction behind a screw of 5 mm
+    # lead): kept at its start, its statistic out of the fit.
+    all_cols = np.arange(len(keys))
+    j0 = jac(x0, all_cols, final=True)
+    seen = np.abs(np.diag(j0)) * math.log(2.0) >= MIN_SEEN
+    for j in np.flatnonzero(~seen):
+        skipped[keys[j]] = (f"the recording's {FITTED[use[j]][1].replace('_', ' ')} moves by "
+                            f"{abs(j0[j, j]) * math.log(2.0):.2g} standard errors for a factor 2 of it (under "
+                            f"{MIN_SEEN:g}): not informed, kept at {start[j]:.6g}")
+    free = np.flatnonzero(seen)
+    rows = free
+
+    def embed(z: np.ndarray) -> np.ndarray:
+        x = x0.copy()
+        x[free] = z
+        return x
+
+    lo, hi = x0 - math.log(10.0), x0 + math.log(10.0)
+    xs, fun, sd = x0, np.zeros(0), np.zeros(0)
+
+    stopped: list[str] = []
+
+    def solve(start_at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the solution, all parameters; its residuals) of the parameters ``free`` from
+        ``start_at``; at the budget's deadline, the best point evaluated so far."""
+        tried: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+        def f(z: np.ndarray) -> np.ndarray:
+            r = resid(embed(z))
+            tried.append((float(r @ r), z.copy(), r))
+            return r
+
+        try:
+            sol = optimize.least_squares(f, start_at[free], jac=lambda z: jac(embed(z), free),
+                                         bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
+                                         xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
+        except _OutOfTime:
+            _, z, r = min(tried, key=lambda t: t[0]) if tried else (0.0, start_at[free], resid(start_at)[free])
+            stopped.append(f"the fit stopped at the budget's deadline after {sims[0]} evaluations (not "
+                           f"converged: the best point so far, residual {float(np.sqrt(r @ r)):.2f} standard "
+                           "errors); a larger --budget-minutes lets it converge")
+            progress(f"layer c: {stopped[-1]}")
+            return embed(z), r
+        return embed(sol.x), sol.fun
+
+    if free.size:
+        xs, fun = solve(x0)
+        # the delta method with the statistics' full covariance: one regression gives J and
+        # c_v, and a machine's draw moves them together, so their errors correlate
+        J = jac(xs, free, final=True) * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
+    # the machine-to-machine scatter at the solution (it grows with the ripple, the drags, the
+    # noise): the spread's seeds again, with layer (b)'s first correction set
+    first: dict[str, float] = {}
+    if sensors:
+        inst0: dict[str, list[float]] = {}
+        for r in spread:
+            for k, v in r[2].items():
+                inst0.setdefault(k, []).append(float(v))
+        first = {v.key: v.value for v in corrected_sensor_values(
+            sensors, {k: float(f"{m.value:.6g}") for k, m in sensors.items()}, inst0)}
+        extra.update(first)
+    final = run([xs], seeds)
+    if free.size:
+        spread_all = np.array([r[0] for r in final])[:, stat_idx]
+        own_all = np.nan_to_num(real_se[stat_idx] ** 2 + np.nan_to_num(sim_se, nan=0.0) ** 2, nan=0.0)
+
+        def deltas(J: np.ndarray) -> np.ndarray:
+            """The delta method's standard deviations of log p for the parameters ``free``."""
+            vals = spread_all[:, free]
+            ok = np.all(np.isfinite(vals), axis=1)
+            cov_seed = np.cov(vals[ok].T, ddof=1).reshape(free.size, free.size) if ok.sum() > 2 else 0.0
+            cov_stat = np.diag(own_all[free]) + cov_seed * (1 + 1 / FIT_SEEDS)
+            try:
+                jinv = np.linalg.inv(J)
+            except np.linalg.LinAlgError:
+                return np.full(free.size, np.inf)
+            return np.sqrt(np.clip(np.diag(jinv @ cov_stat @ jinv.T), 0, None))
+
+        sd = deltas(J)
+        # Jointly not told apart: a parameter whose 90 % interval spans more than MAX_SPAN either
+        # side (its statistic moves with another parameter as much as with it) is kept at its
+        # start, the widest first, and the others fitted again without it.
+        while free.size > 1 and not T90 * float(np.max(sd)) <= math.log(MAX_SPAN):
+            w = int(np.argmax(sd))
+            j = int(free[w])
+            others = [keys[k].split(".")[-1] for k in free if k != j]
+            skipped[keys[j]] = (f"not told apart jointly: its 90 % interval would span a factor "
+                                f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side (its statistic, the "
+                                f"recording's {FITTED[use[j]][1].replace('_', ' ')}, moves with "
+                                f"{', '.join(others)} as well): kept at {start[j]:.6g}")
+            progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
+            free = np.delete(free, w)
+            rows = free
+            xs, fun = solve(xs)
+            J = jac(xs, free, final=True) * se[free][:, None]
+            sd = deltas(J)
+    # The parameters kept at their start are uncertain by their prior span (PRIOR_FACTOR): the
+    # fitted ones move with them by −J_ff⁻¹·J_fk (the linearised fit; J_fk from the first
+    # Jacobian), which the delta method adds in quadrature (the intervals are marginal, not
+    # conditional on the kept values).
+    kept = np.array([j for j in range(len(keys)) if j not in set(free.tolist())], dtype=int)
+    widened = ""
+    if free.size and kept.size:
+        prior_var = np.array([(math.log(PRIOR_FACTOR[keys[j]]) / Z90) ** 2 for j in kept])
+        j_fk = j0[np.ix_(free, kept)] * se[free][:, None]
+        try:
+            a = -np.linalg.solve(J, j_fk)
+        except np.linalg.LinAlgError:
+            a = np.full((free.size, kept.size), np.inf)
+        sd = np.sqrt(sd ** 2 + (a ** 2) @ prior_var)
+        widened = ("; the interval includes the span of " + ", ".join(keys[j].split(".")[-1] for j in kept)
+                   + ", kept at the twin's default")
+    values = []
+    for jj, j in enumerate(free):
+        k, x, i = keys[j], xs[j], use[j]
+        stat = FITTED[i][1]
+        if stat in ("accel", "dwell"):
+            note = f"fitted through the twin's servo to the moves of {len(caps)} Phase I captures"
+        elif stat == "loop_response" and runs:
+            note = (f"fitted jointly to the IMU's axial acceleration around the starts and stops of {len(runs)} "
+                    f"Phase II runs at {session_h:g} h")
+        elif stat == "loop_response":
+            note = f"fitted jointly to the motor speed's overshoot at the ramps' ends in {len(caps)} Phase I captures"
+        elif stat == "lateral_mode" and runs:
+            note = f"fitted jointly to the IMU's yaw mode in {len(runs)} Phase II runs at {session_h:g} h"
+        elif stat.endswith("_mode"):
+            note = (f"fitted jointly to the {stat.split('_')[0]} suspension mode of the nut accelerometers in "
+                    f"{len(caps)} Phase I captures at {hours:g} h")
+        elif stat == "ripple" and runs:
+            note = (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {len(runs)} Phase II "
+                    f"runs at {session_h:g} h")
+        else:
+            note = (f"fitted jointly to the torque's {stat.replace('_', ' ')} of {len(caps)} Phase I captures "
+                    f"at {hours:g} h")
+        w = T90 * sd[jj]
+        low, high = (float(np.exp(x - w)), float(np.exp(x + w))) if np.isfinite(w) else (None, None)
+        values.append(Value(k, float(np.exp(x)), "fitted", low, high, note + widened))
+    progress(f"layer c: done in {sims[0]} evaluations, {time.perf_counter() - t0:.1f} s; residual "
+             f"{', '.join(f'{r:+.2f}' for r in fun)} standard errors")
+    inst: dict[str, list[float]] = {}
+    for r in final:
+        for k, v in r[2].items():
+            inst.setdefault(k, []).append(float(v))
+    return FitResult(values, skipped, sims[0], time.perf_counter() - t0,
+                     [float(r) for r in fun], inst, first, total, stopped[0] if stopped else None)
+
+

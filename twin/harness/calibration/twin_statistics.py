@@ -1,0 +1,130 @@
+"""The twin's statistics for a parameter vector: the recording's auxiliary statistics computed on
+the twin simulated with the recording's layout (cached by scenario), and on the recording.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from analysis.calibration.drive import (
+    imu_reversal,
+    imu_ripple,
+    imu_yaw_mode,
+    recording_statistics,
+    speed_overshoot,
+    suspension_mode,
+)
+from analysis.calibration.sensor_chain import measure_instruments
+from analysis.dataset import open_measurements
+from analysis.files import write_json
+from analysis.ingest.routine import MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
+from twin.harness.calibration.values import CALIBRATE_VERSION
+from twin.scenario import Scenario, from_dict
+
+# ---------------------------------------------------------------------------------------------
+# The twin's statistics for a parameter vector (cached by scenario)
+
+
+def _key(s: Scenario) -> str:
+    return hashlib.sha256(f"{CALIBRATE_VERSION}:{s.to_json()}".encode()).hexdigest()[:20]
+
+
+def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    """(values (9,), standard errors (9,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
+    statistics of the captures, with the ripple read on the IMU of the runs when there are any
+    (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
+    other content at its order; in the Phase I torque a component of random phase at the same
+    order hides it), and the routine fit's acceleration (mm/s²) and dwell (s) of Phase I, their
+    errors from the scatter of the ramps' slopes and of the rests (the servo's lag at the start
+    and at the end of a move differ a little: both are fitted through the twin's servo), and the
+    vertical suspension mode (Hz, :func:`analysis.calibration.drive.suspension_mode`) with its
+    scatter over the captures, and, on the IMU of the runs when there are any, the lateral (yaw)
+    mode (:func:`analysis.calibration.drive.imu_yaw_mode`) and the velocity loop's response (the
+    axial acceleration around the starts and stops: :func:`analysis.calibration.drive.imu_reversal`),
+    else the lateral mode on the nut accelerometers and the speed's overshoot over the captures
+    (:func:`analysis.calibration.drive.speed_overshoot`)."""
+    order = s.axis.torque_ripple_per_rev
+    mean, se = recording_statistics(m, captures, order)
+    loaded = [m.phase2(a, b) for a, b in runs]  # each run read once
+    if runs:
+        rip = [imu_ripple(run, s.axis.lead_mm * 1e-3, order, 0.5 * s.sensors.imu_acc_bandwidth_hz)
+               for run in loaded]
+        rip = [r for r in rip if np.isfinite(r)]
+        mean[3] = float(np.mean(rip)) if rip else float("nan")
+        se[3] = float(np.std(rip, ddof=1) / math.sqrt(len(rip))) if len(rip) > 1 else float("nan")
+    slopes, dwells = [], []
+    for name in captures:
+        c = m.phase1(name)
+        moves = fit_moves(np.asarray(c.speed) * s.axis.lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
+                          SPEED_SMOOTH_S)
+        for mv in moves:
+            slopes += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
+        dwells += [b["t_start"] - a["t_stop"] for a, b in zip(moves, moves[1:], strict=False)
+                   if a["t_stop"] is not None and b["t_start"] is not None]
+    acc, acc_se = _mean_se(slopes)
+    dwell, dwell_se = _mean_se(dwells)
+    rows: list[list[float]] = [[], [], []]  # vertical mode, lateral mode, the loop's response
+    for name in captures:
+        c = m.phase1(name)
+        fs = float(c.fs_hz)
+        for row, x in zip(rows, (suspension_mode([c.acc1, c.acc2], fs, 2),
+                                 np.nan if runs else suspension_mode([c.acc1, c.acc2], fs, 1),
+                                 np.nan if runs else speed_overshoot(np.asarray(c.speed, float), fs)), strict=True):
+            if np.isfinite(x):
+                row.append(x)
+    for run in loaded:  # on the IMU, far sharper: the yaw mode, the velocity loop around starts and stops
+        for row, x in zip(rows[1:], (imu_yaw_mode(run), imu_reversal(run)), strict=True):
+            if np.isfinite(x):
+                row.append(x)
+    extra = [_mean_se(row) for row in rows]
+    return (np.append(mean, [acc, dwell, *(v for v, _ in extra)]),
+            np.append(se, [acc_se, dwell_se, *(e for _, e in extra)]))
+
+
+def _mean_se(x: list[float]) -> tuple[float, float]:
+    """(mean, standard error of the mean) of ``x``; NaN where it has too few values."""
+    mean = float(np.mean(x)) if x else float("nan")
+    return mean, float(np.std(x, ddof=1) / math.sqrt(len(x))) if len(x) > 1 else float("nan")
+
+
+def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
+    """Simulate the scenarios (JSON) not yet cached, batched (one rollout per capture for all),
+    and return [values, errors] of :data:`STAT_NAMES` for each (kept in ``cache_dir``)."""
+    from threadpoolctl import threadpool_limits
+
+    from twin.campaign import simulate_campaigns_batched
+
+    ss = [from_dict(json.loads(p)) for p in payloads]
+    files = [Path(cache_dir) / f"{_key(s)}.json" for s in ss]
+    todo = [i for i, f in enumerate(files) if not f.exists()]
+    if todo:
+        dirs = [Path(cache_dir) / f"tmp-{_key(ss[i])}" for i in todo]
+        for d in dirs:
+            shutil.rmtree(d, ignore_errors=True)
+        with threadpool_limits(1):
+            simulate_campaigns_batched([ss[i] for i in todo], dirs)
+        for i, d in zip(todo, dirs, strict=True):
+            s = ss[i]
+            with open_measurements(d / "measurements.h5") as m:
+                runs = [(a, b) for a in m.phase2_sessions() for b in m.phase2_runs(a)]
+                v, e = _statistics(m, m.phase1_captures(), runs, s)
+                inst = measure_instruments(m, m.phase1_captures(), runs, s.sensors.imu_acc_bandwidth_hz,
+                                           s.sensors.imu_gyro_bandwidth_hz)
+            write_json(files[i], {"values": v.tolist(), "errors": e.tolist(),
+                                  "instruments": {k: x.value for k, x in inst.items()}}, nan_as_null=True)
+            shutil.rmtree(d, ignore_errors=True)
+    out = []
+    for f in files:
+        doc = json.loads(f.read_text())
+        out.append([[np.nan if x is None else x for x in doc["values"]],
+                    [np.nan if x is None else x for x in doc["errors"]], doc.get("instruments", {})])
+    return out
+
+
