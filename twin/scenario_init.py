@@ -84,6 +84,10 @@ def _calibration_table(record: dict) -> str:
         src = json.dumps(v["source"])
         lines.append(f"{json.dumps(v['key'])} = {{ value = {_fmt(v['value'])}, source = {src}{iv} }}")
     lines.append("defaults = [" + ", ".join(json.dumps(d["key"]) for d in record["defaults"]) + "]")
+    cov = record.get("covariance")
+    if cov:  # the calibrated values' joint covariance in log space (twin diagnose draws from it)
+        rows = ", ".join("[" + ", ".join(f"{x:.6g}" for x in row) + "]" for row in cov["log"])
+        lines.append(f"covariance = {{ keys = {json.dumps(cov['keys'])}, log = [{rows}] }}")
     return "\n".join(lines)
 
 

@@ -52,7 +52,9 @@ class FitResult:
     at each of the spread's seeds (``instruments``: {key: [value per seed]}) for the values it
     was set to; ``estimated_s``: the whole calibration's longest time as estimated after the
     first simulations (None when no fit ran); ``stopped``: why the fit stopped before it
-    converged (``--budget-minutes``' deadline), or None."""
+    converged (``--budget-minutes``' deadline), or None; ``covariance``: {``keys``, ``log``: the
+    joint covariance of their log values}, the fitted parameters' and those kept at the default
+    (their prior span), or None."""
 
     values: list[Value]
     skipped: dict[str, str]
@@ -63,6 +65,7 @@ class FitResult:
     first_sensors: dict[str, float]
     estimated_s: float | None = None
     stopped: str | None = None
+    covariance: dict | None = None
 
 
 def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
@@ -297,7 +300,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         own_all = np.nan_to_num(real_se[stat_idx] ** 2 + np.nan_to_num(sim_se, nan=0.0) ** 2, nan=0.0)
 
         def deltas(J: np.ndarray) -> np.ndarray:
-            """The delta method's standard deviations of log p for the parameters ``free``."""
+            """The delta method's covariance of log p for the parameters ``free`` (inf when J
+            is singular)."""
             vals = spread_all[:, free]
             ok = np.all(np.isfinite(vals), axis=1)
             cov_seed = np.cov(vals[ok].T, ddof=1).reshape(free.size, free.size) if ok.sum() > 2 else 0.0
@@ -305,10 +309,11 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             try:
                 jinv = np.linalg.inv(J)
             except np.linalg.LinAlgError:
-                return np.full(free.size, np.inf)
-            return np.sqrt(np.clip(np.diag(jinv @ cov_stat @ jinv.T), 0, None))
+                return np.full((free.size, free.size), np.inf)
+            return jinv @ cov_stat @ jinv.T
 
-        sd = deltas(J)
+        cov = deltas(J)
+        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
         # Jointly not told apart: a parameter whose 90 % interval spans more than MAX_SPAN either
         # side (its statistic moves with another parameter as much as with it) is kept at its
         # start, the widest first, and the others fitted again without it.
@@ -325,23 +330,31 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             rows = free
             xs, fun = solve(xs)
             J = jac(xs, free, final=True) * se[free][:, None]
-            sd = deltas(J)
+            cov = deltas(J)
+            sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     # The parameters kept at their start are uncertain by their prior span (PRIOR_FACTOR): the
     # fitted ones move with them by −J_ff⁻¹·J_fk (the linearised fit; J_fk from the first
     # Jacobian), which the delta method adds in quadrature (the intervals are marginal, not
     # conditional on the kept values).
     kept = np.array([j for j in range(len(keys)) if j not in set(free.tolist())], dtype=int)
     widened = ""
+    # The joint distribution of log p over the fitted and the kept parameters (the fitted ones'
+    # part scaled so a Gaussian's 90 % range is the stated interval): what `twin diagnose` draws
+    # its twin seeds' parameters from (:mod:`twin.harness.calibration.uncertainty`).
+    joint = cov * (T90 / Z90) ** 2 if free.size else np.zeros((0, 0))
     if free.size and kept.size:
-        prior_var = np.array([(math.log(PRIOR_FACTOR[keys[j]]) / Z90) ** 2 for j in kept])
+        prior = np.diag([(math.log(PRIOR_FACTOR[keys[j]]) / Z90) ** 2 for j in kept])
         j_fk = j0[np.ix_(free, kept)] * se[free][:, None]
         try:
             a = -np.linalg.solve(J, j_fk)
         except np.linalg.LinAlgError:
             a = np.full((free.size, kept.size), np.inf)
-        sd = np.sqrt(sd ** 2 + (a ** 2) @ prior_var)
+        sd = np.sqrt(sd ** 2 + (a ** 2) @ np.diag(prior))
+        joint = np.block([[joint + a @ prior @ a.T, a @ prior], [(a @ prior).T, prior]])
         widened = ("; the interval includes the span of " + ", ".join(keys[j].split(".")[-1] for j in kept)
                    + ", kept at the twin's default")
+    order = [keys[j] for j in (*free, *kept)] if free.size else []
+    covariance = ({"keys": order, "log": joint.tolist()} if order and np.all(np.isfinite(joint)) else None)
     values = []
     for jj, j in enumerate(free):
         k, x, i = keys[j], xs[j], use[j]
@@ -374,6 +387,6 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         for k, v in r[2].items():
             inst.setdefault(k, []).append(float(v))
     return FitResult(values, skipped, sims[0], time.perf_counter() - t0,
-                     [float(r) for r in fun], inst, first, total, stopped[0] if stopped else None)
+                     [float(r) for r in fun], inst, first, total, stopped[0] if stopped else None, covariance)
 
 

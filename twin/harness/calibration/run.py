@@ -13,6 +13,7 @@ from twin.config import set_dotted
 from twin.executors import default_processes
 from twin.harness.calibration.physical import fit_physical
 from twin.harness.calibration.sensors import corrected_sensor_values, sensor_values
+from twin.harness.calibration.uncertainty import joint_covariance
 from twin.harness.calibration.values import CALIBRATE_VERSION, NOT_INFORMED, CalibrationError, _progress, flagged_keys
 from twin.scenario import Scenario, ScenarioError, from_dict, load
 
@@ -61,7 +62,9 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     flagged = flagged_keys(check)
     values = [v for v in values if v.key not in flagged]
     defaults.update(flagged)
+    covariance = joint_covariance(fit.covariance, [v for v in sens if v.key not in flagged], set(flagged))
     record = {"version": CALIBRATE_VERSION, "recording": str(recording.resolve()), "check": check,
+              "covariance": covariance,
               "values": [v.to_json() for v in values],
               "defaults": [{"key": k, "why": w} for k, w in defaults.items()],
               "notes": notes + sens_notes + ([fit.stopped] if fit.stopped else []), "simulations": fit.simulations,

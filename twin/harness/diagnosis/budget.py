@@ -39,6 +39,7 @@ def subset_scenario(nominal: Scenario, sub: subset.Subset) -> Scenario:
         data["phase1"].update(sample_hours=[h for _, h in sub.samples], captures_per_sample=sub.captures)
     if sub.sessions:
         data["phase2"].update(session_hours=[h for _, h in sub.sessions], runs_per_session=sub.runs)
+    data["calibration"] = dict(nominal.calibration)  # what the twin seeds draw from (not in the JSON)
     return from_dict(data)
 
 

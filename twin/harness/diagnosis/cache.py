@@ -61,9 +61,14 @@ def twin_seeds(s: Scenario, k: int) -> list[int]:
 
 
 def with_seed(s: Scenario, seed: int) -> Scenario:
+    """``s`` with ``seed``; for a calibrated scenario, its calibrated values drawn from the
+    calibration's joint distribution with that seed (:func:`twin.harness.calibration.uncertainty.draw_calibrated`:
+    the twin's spread then holds the calibration's uncertainty)."""
+    from twin.harness.calibration.uncertainty import draw_calibrated
+
     data = s.model_dump(mode="json")
     data["seed"] = int(seed)
-    return from_dict(data)
+    return from_dict(draw_calibrated(data, s.calibration, seed))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -61,7 +61,7 @@ def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> di
     cal = nominal.calibration
     if not cal:
         return None
-    values = [{"key": k, **v} for k, v in cal.items() if isinstance(v, dict)]
+    values = [{"key": k, **v} for k, v in cal.items() if isinstance(v, dict) and k != "covariance"]
     names = set(library or []) | (set(PARAMETERS) if library is None and "parameter" in check_kinds(kinds) else set())
     fitted = [v["key"] for v in values if v.get("source") == "fitted"]
     again = sorted(n for n in names if n in PARAMETERS and set(PARAMETERS[n].factor.keys) & set(fitted))
@@ -69,8 +69,15 @@ def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> di
              if again else "The calibrated parameters are not candidates here (--kinds without 'parameter', or "
              "--candidate naming none of them): what remains is looked for among the unmodelled effects and "
              "the acquisition's artefacts.")
+    cov = cal.get("covariance") or {}
+    if cov:
+        words += (f" The twin's spread holds the calibration's uncertainty: each twin seed draws the "
+                  f"{len(cov['keys'])} calibrated values with an uncertainty (those kept at the default with "
+                  "their prior span) from their joint distribution, so a statistic a calibrated value moves "
+                  "within its interval is not a gap.")
     return {"recording": cal.get("recording"), "version": cal.get("version"), "values": values,
-            "defaults": list(cal.get("defaults", [])), "candidates_again": again, "candidates": words}
+            "defaults": list(cal.get("defaults", [])), "candidates_again": again, "candidates": words,
+            "drawn": list(cov.get("keys", []))}
 
 
 def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,

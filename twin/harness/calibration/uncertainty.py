@@ -1,0 +1,75 @@
+"""The calibration's uncertainty, carried into the twin: the joint distribution of the calibrated
+values in log space, and a draw of them for each of the twin's seeds.
+
+``twin calibrate`` writes ``covariance`` into the scenario's ``[calibration]`` table: ``keys``
+(scenario keys) and ``log`` (the covariance of their natural logarithms): the fitted parameters'
+delta-method covariance (scaled so a Gaussian's 90 % range is the stated interval), the
+parameters kept at the twin's default with their prior span and the fitted ones' dependence on
+them (:mod:`twin.harness.calibration.physical`), and the sensor chain's measured values,
+independent of the rest, from their intervals. ``twin diagnose`` simulates each twin seed with
+the calibrated values drawn from that distribution (:func:`draw_calibrated`): the seed-to-seed
+spread the gap is judged against then holds the calibration's uncertainty beside the machine's
+random geometry, and a statistic that a calibrated value moves within its interval is not
+called a gap (a multivariate normal in log space: the values stay positive; J. E. Gentle,
+"Random Number Generation and Monte Carlo Methods", 2003, the Cholesky method).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from twin.config import get_dotted, set_dotted
+from twin.harness.calibration.values import Z90, Value
+
+#: Stream of the draws, beside the twin seed's own streams.
+DRAW_STREAM = 0xCA1B
+
+
+def joint_covariance(fitted: dict | None, sensors: list[Value], excluded: set[str]) -> dict | None:
+    """The ``covariance`` entry of the calibration record: the fitted and kept parameters'
+    (``fitted``: {keys, log}) without the ``excluded`` keys (a channel ``twin check`` flags),
+    and each measured sensor value with an interval as independent, its log standard deviation
+    log(high/low)/(2·Z90). None when there is nothing with an uncertainty."""
+    keys: list[str] = []
+    blocks: list[np.ndarray] = []
+    if fitted:
+        keep = [i for i, k in enumerate(fitted["keys"]) if k not in excluded]
+        keys += [fitted["keys"][i] for i in keep]
+        blocks.append(np.asarray(fitted["log"], float)[np.ix_(keep, keep)])
+    sens = [v for v in sensors if v.low and v.high and v.high > v.low and v.key not in excluded]
+    keys += [v.key for v in sens]
+    if sens:
+        blocks.append(np.diag([(math.log(v.high / v.low) / (2 * Z90)) ** 2 for v in sens]))
+    if not keys:
+        return None
+    n = len(keys)
+    cov = np.zeros((n, n))
+    at = 0
+    for b in blocks:
+        cov[at:at + len(b), at:at + len(b)] = b
+        at += len(b)
+    return {"keys": keys, "log": cov.tolist()}
+
+
+def draw_calibrated(data: dict, calibration: dict | None, seed: int) -> dict:
+    """Scenario ``data`` (a scenario's JSON dict, changed in place and returned) with every key
+    of ``calibration``'s ``covariance`` (the scenario's ``[calibration]`` table) drawn from the
+    joint log-normal centred on the scenario's value, from the stream [``seed``,
+    :data:`DRAW_STREAM`]; unchanged without a covariance."""
+    cov = (calibration or {}).get("covariance")
+    if not cov:
+        return data
+    keys = list(cov["keys"])
+    c = np.asarray(cov["log"], float)
+    # a covariance that rounding left slightly indefinite: its eigenvalues clipped at 0
+    w, v = np.linalg.eigh((c + c.T) / 2)
+    root = v * np.sqrt(np.clip(w, 0.0, None))
+    z = root @ np.random.default_rng([int(seed) % 2**32, DRAW_STREAM]).standard_normal(len(keys))
+    for key, dz in zip(keys, z, strict=True):
+        set_dotted(data, key, float(get_dotted(data, key)) * math.exp(float(dz)), source="calibration draw")
+    return data
+
+
+__all__ = ["DRAW_STREAM", "draw_calibrated", "joint_covariance"]
