@@ -29,6 +29,9 @@ MEASURED_RAMP = (0.4, 0.8)
 #: The same for a commanded position's increments, which are exact: every increment inside the
 #: ramp (the first and last, which may straddle a corner of the profile, left out).
 COMMAND_RAMP = (0.0, 1.0)
+#: A stretch above the moving threshold that travels less than this fraction of the longest
+#: move's distance is the servo settling, not a move.
+SETTLE_FRACTION = 0.01
 #: Significant digits of the measured routine values (a fit, not a rounding to 3 digits).
 DIGITS = 7
 
@@ -85,6 +88,11 @@ def fit_moves(v: np.ndarray, fs_hz: float, ramp: tuple[float, float] = MEASURED_
     lo, hi = ramp
     moves = []
     segs = [(a, b) for a, b in _segments(moving) if b - a >= 8]
+    # a servo settling after a stop (a heavy carriage, a soft loop) can cross the threshold for a
+    # few samples: a "move" of a fraction of a millimetre, which is no move of the routine
+    if segs:
+        travel = [float(np.sum(np.abs(v[a:b]))) / fs_hz for a, b in segs]
+        segs = [sg for sg, d in zip(segs, travel, strict=True) if d >= SETTLE_FRACTION * max(travel)]
     for j, (a, b) in enumerate(segs):
         # the distance is integrated out to the middle of the rests on either side (the tails
         # below the moving threshold belong to the move)
