@@ -393,22 +393,23 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     s0s = list(settled[:, -1, :])
     for s0 in s0s:
         s0[0] = 0.0  # time
+    phys = slice(1, 1 + nq + nv)  # qpos and qvel in MuJoCo's full physics state
     for _ in range(max(passes, 1)):
-        ctrl = np.stack([sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)])
+        ctrls = [sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)]
+        ctrl = ctrls[0][None] if len(ctrls) == 1 else np.stack(ctrls)
         after, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
         # Rollout row k is the state after step k; prepend the initial state so that row k
         # is the state at t_k, the one step k (its rails, its sensors) sees.
-        state = np.concatenate([np.stack(s0s)[:, None, :], after[:, :-1, :]], axis=1)
-        x_rails = [st[:, 1 + sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
+        state = np.concatenate([np.stack(s0s)[:, None, phys], after[:, :-1, phys]], axis=1)
+        x_rails = [st[:, sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
     # The accelerometers read the acceleration of step k that the integrator applies,
     # (v_{k+1} − v_k)/dt, not MuJoCo's explicit qacc (see accelerometer_implicit_correction).
-    vel = slice(1 + nq, 1 + nq + nv)
     for j, model in enumerate(models):
         cols, gain = accelerometer_implicit_correction(model, s0s[j], ctrl[j, 0])
-        applied = (after[j, :, vel] - state[j, :, vel]) / first.timestep
+        applied = (after[j, :, 1 + nq:1 + nq + nv] - state[j, :, nq:]) / first.timestep
         sens[j][:, cols] += applied @ gain.T
     t = np.arange(cmd.t.size) * first.timestep
-    return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
+    return [Trajectory(t=t, qpos=st[:, :nq], qvel=st[:, nq:], sens=se,
                        cmd=cmd, theta_cmd=xc / sim.world.axis.screw.radius_per_rad, index=sim.index)
             for st, se, xc, (sim, _) in zip(state, sens, x_cmd, items, strict=True)]
 
@@ -479,7 +480,6 @@ def phase1_measure(sim: Simulator, cfg, traj: Trajectory, rng: np.random.Generat
 
 
 PHASE2_LEAD_IN = 2.0  # s of standstill before the first move (bias estimation needs it)
-_RUNS_PER_GROUP = 8  # runs whose float64 sensor samples phase2_measure_runs holds at once
 
 
 def phase2_moves(cfg) -> list[Move]:
@@ -533,17 +533,17 @@ def phase2_measure_runs(sim: Simulator, traj: Trajectory, rngs: list[np.random.G
     rate = traj.angular_velocity_imu
     n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
     pos = traj.cmd.position_at(w.position_cmd_fs, n_cmd, position_cmd_lead_s)
-    out = []
-    # Groups of runs, so that only one group's float64 samples are held at a time.
-    for start in range(0, len(rngs), _RUNS_PER_GROUP):
-        group = rngs[start:start + _RUNS_PER_GROUP]
-        _, accs = ins.measure_imu_accelerometer_runs([force] * len(group), fs, w.imu_acc, group)
-        _, gyros = ins.measure_gyroscope_runs([rate] * len(group), fs, w.imu_gyro, group)
-        out += [{"imu_acc": acc.astype(np.float32), "imu_acc_fs_hz": float(w.imu_acc.fs_hz),
-                 "imu_gyro": gyro.astype(np.float32), "imu_gyro_fs_hz": float(w.imu_gyro.fs_hz),
-                 "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
-                for acc, gyro in zip(accs, gyros, strict=True)]
-    return out
+    # All runs in one call per instrument: the motion's part once, the noise in blocks of runs,
+    # each run's samples cast to float32 as its block is done. Run j's generator draws its
+    # accelerometer noise, then its gyroscope noise, as run by run.
+    _, accs = ins.measure_imu_accelerometer_runs([force] * len(rngs), fs, w.imu_acc, rngs,
+                                                 dtype=np.float32)
+    _, gyros = ins.measure_gyroscope_runs([rate] * len(rngs), fs, w.imu_gyro, rngs,
+                                          dtype=np.float32)
+    return [{"imu_acc": acc, "imu_acc_fs_hz": float(w.imu_acc.fs_hz),
+             "imu_gyro": gyro, "imu_gyro_fs_hz": float(w.imu_gyro.fs_hz),
+             "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
+            for acc, gyro in zip(accs, gyros, strict=True)]
 
 
 def stroke_travels(world: World, traj: Trajectory, rest_fraction: float = 0.5) -> dict[str, np.ndarray]:
