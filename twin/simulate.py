@@ -11,15 +11,19 @@
 
 Rail waviness follows the carriage's TRUE position. The carriage's travel depends on the rail
 forces only weakly (through the pitch of the carriage, since the nut sits below its centre of
-mass), so a first rollout with the rails looked up at the commanded position gives the true
-travel x(t), and a second rollout with the rails looked up at that x(t) is the fixed point: at
-steady speed a third pass changes x by far less than a nm, and passes 1 and 2 differ by a
-fraction of a nm rms (asserted in ``tests/test_twin_physics.py``; figures in docs/validation.md).
-Phase II, where the micrometre shift between the forward and reverse traces is the measured
-quantity, does both passes unless the scenario's ``phase2.rail_passes`` asks for one. Phase I
-does one pass with the rails at the commanded position plus the known backlash lag: the
-residual error in the rail input is (slope of the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm,
-far below anything the nut accelerometers see.
+mass), so a first rollout with the rails looked up at the commanded position shifted by the
+known backlash lag gives the true travel x(t), and a second rollout with the rails looked up at
+that x(t) is the fixed point: at steady speed a third pass changes x by far less than a nm, and
+passes 1 and 2 differ by a fraction of a nm rms (asserted in ``tests/test_twin_physics.py``;
+figures in docs/validation.md). The residual error of the first pass's rail input is (slope of
+the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm at steady speed. Phase I does
+that one pass. Phase II does both unless the scenario's ``phase2.rail_passes`` asks for one:
+where the carriage coasts across the clearance at a stop, the first pass looks the rails up on
+the wrong flank, and where the carriage comes to rest in the clearance can move by a
+micrometre (a preloaded nut with a wide clearance, ``scenarios/backlash-steps.toml``); on the
+paper's routine and wear law the passes differ by less than 0.1 µm of carriage position, and
+``scenarios/paper-rtf.toml`` does one (``benchmarks/bench_rail_passes.py``;
+``tests/test_campaign.py::test_one_rail_pass_keeps_the_paper_figures``).
 """
 
 from __future__ import annotations
@@ -297,13 +301,14 @@ class Simulator:
         ctrl[:, ix.runout] = ax.screw.radial_stiffness * geo.runout(theta, w.screw)
         return ctrl
 
-    def run(self, cond: Condition, cmd: Profile, passes: int = 2) -> Trajectory:
+    def run(self, cond: Condition, cmd: Profile, passes: int = 2,
+            contact_guess: bool = False) -> Trajectory:
         """Roll the model out under ``cmd`` in condition ``cond``.
 
         ``passes`` = 2 looks the rails up at the true carriage position of a first pass (see the
         module docstring); 1 looks them up at the commanded position shifted by the backlash lag.
         """
-        return self.run_batch([cond], cmd, passes)[0]
+        return self.run_batch([cond], cmd, passes, contact_guess=contact_guess)[0]
 
     def rest_pose(self, x: float) -> np.ndarray:
         """Resting pose of the carriage on the rails at rail position ``x`` m: joint coordinates
@@ -316,10 +321,10 @@ class Simulator:
         return np.array([t_y - w.axis.carriage.com_height * e_ax, t_z, e_ax, e_bx, e_cx])
 
     def run_batch(self, conds: list[Condition], cmd: Profile, passes: int = 2,
-                  nthread: int | None = None) -> list[Trajectory]:
+                  nthread: int | None = None, contact_guess: bool = False) -> list[Trajectory]:
         """Roll out several conditions under one command in one ``mujoco.rollout`` call
         (:func:`run_many` with this simulator for every condition)."""
-        return run_many([(self, c) for c in conds], cmd, passes, nthread)
+        return run_many([(self, c) for c in conds], cmd, passes, nthread, contact_guess)
 
     def structure(self) -> tuple:
         """What must agree for models to share one ``mujoco.rollout`` call."""
@@ -327,8 +332,42 @@ class Simulator:
         return (m.nq, m.nv, m.nu, m.na, m.nsensordata, self.timestep)
 
 
+def held_sign(values: np.ndarray, before: float) -> np.ndarray:
+    """(n,) sign of ``values`` (n,), the last nonzero sign held through zeros, ``before`` until
+    the first nonzero value."""
+    sign = np.sign(values)
+    held = np.maximum.accumulate(np.where(sign != 0, np.arange(sign.size), -1))
+    return np.where(held >= 0, sign[np.maximum(held, 0)], before)
+
+
+def flank_contact_position(sim: Simulator, cond: Condition, cmd: Profile, x_cmd: np.ndarray,
+                           before: float) -> np.ndarray:
+    """First guess of the carriage's true position (n,) m at the command ``cmd`` (rail
+    coordinate of the command ``x_cmd`` (n,) m), for the rails' lookup of a first rollout pass:
+    the carriage rides on the flank of the ball nut that pushes it, compressed by that push,
+
+        x = (1 + s)·x_c + ε(θ) − σ·b/2 − F/K,   F = m·a + F_f·sign(v),
+
+    s the lead stretch, ε the cyclic lead error and ball pass of the nut's flank
+    (:meth:`Simulator.flank_motion`), b the clearance, F the force the nut must exert on the
+    carriage of mass m to give it the commanded acceleration a against the rails' Coulomb
+    friction F_f, K the nut's axial stiffness, σ the sign of F held while F = 0 (at rest the
+    carriage stays on the flank it came to; ``before``: the flank before the first push). At a
+    stop that decelerates harder than the friction does, the carriage crosses to the other flank
+    (instantly here; in the rollout within a few ms). Quasi-static: the servo's following error
+    and the axial mode's ringing are the residual (a second pass looks the rails up at the
+    rolled-out position instead)."""
+    ax = sim.world.axis
+    r = ax.screw.radius_per_rad
+    push = ax.carriage.mass * cmd.a + ax.carriage.rail_friction * np.sign(cmd.v)
+    k = stiffness_of(ax, cond.mech)["axial"]
+    eps = sim.flank_motion(x_cmd / r)[0]
+    return ((1.0 + sim.lead_stretch(cond)) * x_cmd + eps
+            - 0.5 * cond.mech.backlash * held_sign(push, before) - push / k)
+
+
 def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int = 2,
-             nthread: int | None = None) -> list[Trajectory]:
+             nthread: int | None = None, contact_guess: bool = False) -> list[Trajectory]:
     """Roll out several (simulator, condition) pairs under one command in one
     ``mujoco.rollout`` call.
 
@@ -377,7 +416,8 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
         flank0 = sim.flank_motion(np.array([theta0, theta0]))[0][0]
         models.append(model)
         s0s.append(initial_state(model, x0 + flank0 - zn * pose[3], theta0, flank0, pose))
-        x_rails.append(stretch * xc - 0.5 * cond.mech.backlash * direction)
+        x_rails.append(flank_contact_position(sim, cond, cmd, xc, direction[0]) if contact_guess
+                       else stretch * xc - 0.5 * cond.mech.backlash * direction)
     nthread = nthread or min(len(items), os.cpu_count() or 1)
     datas = [first.data] + [mujoco.MjData(first.model) for _ in range(nthread - 1)]
     nq, nv = first.model.nq, first.model.nv
@@ -506,7 +546,7 @@ def phase2_command(sim: Simulator, cfg) -> Profile:
 def phase2_trajectory(sim: Simulator, cfg, cond: Condition) -> Trajectory:
     """The deterministic motion of one Phase II run (``cfg.rail_passes`` passes, 2 by default;
     see the module docstring)."""
-    return sim.run(cond, phase2_command(sim, cfg), passes=cfg.rail_passes)
+    return sim.run(cond, phase2_command(sim, cfg), passes=cfg.rail_passes, contact_guess=True)
 
 
 def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -> dict:
