@@ -17,12 +17,15 @@ that x(t) is the fixed point: at steady speed a third pass changes x by far less
 passes 1 and 2 differ by a fraction of a nm rms (asserted in ``tests/test_twin_physics.py``;
 figures in docs/validation.md). The residual error of the first pass's rail input is (slope of
 the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm at steady speed. Phase I does
-that one pass. Phase II does both unless the scenario's ``phase2.rail_passes`` asks for one:
-where the carriage coasts across the clearance at a stop, the first pass looks the rails up on
-the wrong flank, and where the carriage comes to rest in the clearance can move by a
-micrometre (a preloaded nut with a wide clearance, ``scenarios/backlash-steps.toml``); on the
-paper's routine and wear law the passes differ by less than 0.1 µm of carriage position, and
-``scenarios/paper-rtf.toml`` does one (``benchmarks/bench_rail_passes.py``;
+that one pass. Phase II does both unless the scenario's ``phase2.rail_passes`` asks for one,
+which then looks the rails up where the nut's flank contact puts the carriage
+(:func:`flank_contact_position`: the flank that pushes, its compression, the lead error). The
+lag alone misses the compression, which Phase II measures as part of the lost motion, and the
+flank the carriage coasts to at a stop; where it comes to rest in the clearance can still move
+by a micrometre with one pass (a preloaded nut with a wide clearance,
+``scenarios/backlash-steps.toml``). On the paper's routine and wear law the travels move by
+less than 0.1 µm and the backlash estimates by a few hundredths of a µm, and
+``scenarios/paper-rtf.toml`` does one pass (``benchmarks/bench_rail_passes.py``;
 ``tests/test_campaign.py::test_one_rail_pass_keeps_the_paper_figures``).
 """
 
@@ -545,8 +548,11 @@ def phase2_command(sim: Simulator, cfg) -> Profile:
 
 def phase2_trajectory(sim: Simulator, cfg, cond: Condition) -> Trajectory:
     """The deterministic motion of one Phase II run (``cfg.rail_passes`` passes, 2 by default;
-    see the module docstring)."""
-    return sim.run(cond, phase2_command(sim, cfg), passes=cfg.rail_passes, contact_guess=True)
+    see the module docstring): one pass looks the rails up at
+    :func:`flank_contact_position`, the first of two at the command shifted by the clearance's
+    lag (as Phase I does), so that two passes give what they always gave."""
+    return sim.run(cond, phase2_command(sim, cfg), passes=cfg.rail_passes,
+                   contact_guess=cfg.rail_passes == 1)
 
 
 def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -> dict:
