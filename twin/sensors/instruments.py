@@ -389,8 +389,13 @@ def _daq_quantise(
         return np.asarray(values, dtype=float)
     lsb = 2.0 * daq_range / 2.0**bits
     half = 2.0 ** (bits - 1)
-    codes = np.clip(np.round(np.asarray(values) * sensitivity / lsb), -half, half - 1)
-    return codes * lsb / sensitivity
+    # In one buffer, operation by operation as codes = clip(round(v·S/lsb)), codes·lsb/S.
+    out = np.multiply(values, sensitivity, dtype=float)
+    np.divide(out, lsb, out=out)
+    np.round(out, out=out)
+    np.clip(out, -half, half - 1, out=out)
+    np.multiply(out, lsb, out=out)
+    return np.divide(out, sensitivity, out=out)
 
 
 def _output_count(n_in: int, fs_in: float, fs_out: float) -> int:
