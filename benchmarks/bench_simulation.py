@@ -113,7 +113,7 @@ def measure(runs: int, repeat: int) -> dict:
     meas1, _, _ = clock(lambda: phase1_measure(sim1, s.phase1, traj1,
                                                cp.rng_for(0, cp.KIND_PHASE1, 0)), max(repeat, 3))
     n1 = cmd1.t.size
-    f.update(bare_steps_per_s=1.0 / step1, phase1_s=roll1 + meas1, phase1_sensors_s=meas1,
+    f.update(bare_steps_per_s=1.0 / step1, phase1_s=roll1 + meas1, phase1_sensors_s=meas1, phase1_steps=n1,
              phase1_simulated_s=n1 * s.phase1.timestep_s, phase1=(roll1 + meas1) / (step1 * n1),
              phase1_rollout=roll1 / (step1 * n1))
     # --- Phase II: one session, and the bare stepping of its steps (one pass) -----------------
