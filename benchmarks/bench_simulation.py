@@ -5,7 +5,7 @@ Absolute times differ by 1.5-2x from one machine to the next (and with the load 
 one); the ratios to the bare stepping of the same model on the same machine in the same run do
 not, so they are the figures that count, and every absolute time is printed with the machine's
 bare rate beside it. All times are CPU time of this process (``time.process_time``), the best of
-``--repeat`` calls.
+``--repeat`` calls, with the C allocator keeping freed memory as the campaign's workers do.
 
 - MuJoCo's bare stepping of the model: ``mujoco.rollout`` over the precomputed controls of the
   unit's own command (no sensor models, no Python per step), per step, for Phase I's capture and
@@ -51,6 +51,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from twin import campaign as cp  # noqa: E402
+from twin.executors import keep_freed_memory  # noqa: E402
 from twin.scenario import load  # noqa: E402
 from twin.simulate import (  # noqa: E402
     Simulator,
@@ -211,6 +212,7 @@ def main() -> None:
                     help="store the measured ratios as the baseline FILE (JSON)")
     args = ap.parse_args()
     repeat = args.repeat if args.repeat > 1 or args.check is None else 2
+    keep_freed_memory()  # as the campaign's worker processes do (twin/executors.py)
     where = machine()
     print(f"machine: {where}; mujoco {mujoco.__version__}, numpy {np.__version__}; "
           f"CPU time of one process, best of {repeat}")
