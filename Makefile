@@ -34,7 +34,7 @@ bench: $(STAMP)
 # The regression guard of the simulation's speed (not part of `make test`; CI may run it): the
 # ratios to MuJoCo's bare stepping measured in the same run against benchmarks/baseline.json,
 # exit 1 if any is more than 20 % above it. A new baseline:
-#   .venv/bin/python benchmarks/bench_simulation.py --no-quick --repeat 2 --write-baseline benchmarks/baseline.json
+#   .venv/bin/python benchmarks/bench_simulation.py --no-quick --repeat 3 --write-baseline benchmarks/baseline.json
 bench-check: $(STAMP)
 	$(PY) benchmarks/bench_simulation.py --no-quick --check benchmarks/baseline.json
 

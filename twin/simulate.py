@@ -439,11 +439,19 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     phys = slice(1, 1 + nq + nv)  # qpos and qvel in MuJoCo's full physics state
     for _ in range(max(passes, 1)):
         ctrls = [sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)]
-        ctrl = ctrls[0][None] if len(ctrls) == 1 else np.stack(ctrls)
-        after, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
-        # Rollout row k is the state after step k; prepend the initial state so that row k
+        # Rollout row k is the state after step k; with the initial state before it, row k
         # is the state at t_k, the one step k (its rails, its sensors) sees.
-        state = np.concatenate([np.stack(s0s)[:, None, phys], after[:, :-1, phys]], axis=1)
+        if len(items) == 1:  # the rollout writes after the initial state: no copy
+            ctrl = ctrls[0][None]
+            full = np.empty((1, cmd.t.size + 1, s0s[0].size))
+            full[0, 0] = s0s[0]
+            sens = np.empty((1, cmd.t.size, first.model.nsensordata))
+            rollout.rollout(models, datas, full[:, 0], ctrl, state=full[:, 1:], sensordata=sens)
+            after, state = full[:, 1:], full[:, :-1, phys]
+        else:
+            ctrl = np.stack(ctrls)
+            after, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+            state = np.concatenate([np.stack(s0s)[:, None, phys], after[:, :-1, phys]], axis=1)
         x_rails = [st[:, sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
     # The accelerometers read the acceleration of step k that the integrator applies,
     # (v_{k+1} − v_k)/dt, not MuJoCo's explicit qacc (see accelerometer_implicit_correction).
