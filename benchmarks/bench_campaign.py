@@ -126,8 +126,7 @@ def against_units(phase1_cpu: float, phase2_cpu: float) -> None:
 
     f = measure(90, 2)
     c = f["campaign_counts"]
-    est1 = c["phase1"] * f["phase1_s"]
-    est2 = c["phase2"] * f["phase2_s"] + c["dial"] * f["dial_s"]
+    est1, est2 = f["campaign_phase1_s"], f["campaign_phase2_s"]
     bare = (c["phase1"] * f["phase1_steps"] / f["bare_steps_per_s"]
             + c["phase2"] * f["phase2_steps"] / f["phase2_bare_steps_per_s"])
     rate = f"bare {f['bare_steps_per_s']:,.0f} steps/s"

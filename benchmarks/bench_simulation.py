@@ -14,6 +14,8 @@ bare rate beside it. All times are CPU time of this process (``time.process_time
   pipeline (one 90-run session: the motion in the scenario's ``phase2.rail_passes`` passes, then
   the IMU models of every run), each as a ratio to the bare stepping of the steps it simulates;
 - one dial-indicator unit, in bare steps;
+- what a campaign adds per unit: writing its part (and a session's truth) and assembling it into
+  ``measurements.h5`` and ``truth.h5``;
 - the paper's full campaign (``scenarios/paper-rtf.toml``) projected from these unit costs, as
   a ratio to the bare stepping of all its steps and in minutes on 2 cores and on N Dask workers;
 - the quick campaign on all cores (wall time; not in the baseline), and the peak memory.
@@ -53,6 +55,7 @@ sys.path.insert(0, str(REPO))
 
 from twin import campaign as cp  # noqa: E402
 from twin.executors import keep_freed_memory  # noqa: E402
+from twin.parts import PartStore  # noqa: E402
 from twin.scenario import load  # noqa: E402
 from twin.simulate import (  # noqa: E402
     Simulator,
@@ -152,20 +155,41 @@ def measure(runs: int, repeat: int) -> dict:
     dial, _, _ = clock(lambda: dial_indicator(sim2, s.dial_indicator, cp.condition_at(s, 5000.0),
                                               cp.rng_for(s.seed, cp.KIND_DIAL, 0)), repeat)
     f.update(dial_s=dial, dial_bare_steps=dial / step2 / 1000.0)
+    # --- What a campaign adds per unit: its part (HDF5; Phase II: also the session's truth) and
+    # its assembly into measurements.h5 and truth.h5 -------------------------------------------
+    u1, u2 = cp.Unit("phase1", "c000000", 0, 100.0, 0), cp.Unit("phase2", "s0000", 0, 5000.0)
+    sig1 = phase1_measure(sim1, s.phase1, traj1, cp.rng_for(0, cp.KIND_PHASE1, 0))
+    with tempfile.TemporaryDirectory() as tmp:
+        store = PartStore(tmp)
+        part1, _, _ = clock(lambda: cp._store_phase1(store, u1, sig1), 3 * repeat)
+        part2, _, _ = clock(lambda: cp._store_phase2(s, sim2, store, u2, cond2, traj2))
+        part2 -= f["phase2_imu_s"]  # _store_phase2 measures the scenario's runs again
+        # Less the assembly's own cost (the files, the truth timeline), once per campaign.
+        asm0, _, _ = clock(lambda: cp.assemble(s, Path(tmp), []), repeat)
+        asm1, _, _ = clock(lambda: cp.assemble(s, Path(tmp), [u1]), repeat)
+        asm2, _, _ = clock(lambda: cp.assemble(s, Path(tmp), [u2]), repeat)
+        asm1, asm2 = max(asm1 - asm0, 0.0), max(asm2 - asm0, 0.0)
+    f.update(phase1_storage_s=part1 + asm1, phase2_storage_s=part2 + asm2, assembly_s=asm0,
+             phase2_storage=(part2 + asm2) / (step2 * n2))
     # --- The paper's campaign, projected ------------------------------------------------------
     units = cp.plan(s)
     count = {k: sum(u.kind == k for u in units) for k in ("phase1", "phase2", "dial")}
-    total = count["phase1"] * f["phase1_s"] + count["phase2"] * session + count["dial"] * dial
+    unit1, unit2 = f["phase1_s"] + f["phase1_storage_s"], session + f["phase2_storage_s"]
+    total = count["phase1"] * unit1 + count["phase2"] * unit2 + count["dial"] * dial + asm0
     bare = count["phase1"] * n1 * step1 + count["phase2"] * n2 * step2
     f.update(campaign_counts=count, campaign_s=total, campaign=total / bare,
-             campaign_longest_s=max(session, dial, f["phase1_s"]),
-             campaign_sensors=(count["phase1"] * meas1 + count["phase2"] * f["phase2_imu_s"]) / total)
+             campaign_phase1_s=count["phase1"] * unit1 + asm0,
+             campaign_phase2_s=count["phase2"] * unit2 + count["dial"] * dial,
+             campaign_longest_s=max(unit2, dial, unit1),
+             campaign_sensors=(count["phase1"] * meas1 + count["phase2"] * f["phase2_imu_s"]) / total,
+             campaign_storage=(count["phase1"] * f["phase1_storage_s"]
+                               + count["phase2"] * f["phase2_storage_s"]) / total)
     return f
 
 
 #: The ratios the baseline holds and the check compares.
-RATIOS = ("phase1", "phase1_rollout", "phase2", "phase2_motion", "phase2_imu", "dial_bare_steps",
-          "campaign")
+RATIOS = ("phase1", "phase1_rollout", "phase2", "phase2_motion", "phase2_imu", "phase2_storage",
+          "dial_bare_steps", "campaign")
 
 
 def report(f: dict) -> None:
@@ -183,10 +207,14 @@ def report(f: dict) -> None:
           f"CPU ({f['phase2_bare_steps_per_s']:,.0f} bare steps/s)")
     print(f"dial-indicator unit: {f['dial_bare_steps']:.0f} thousand bare steps; {f['dial_s']:.2f} s "
           f"CPU ({rate})")
+    print(f"a campaign's storage per unit (its part, and its assembly into measurements.h5 and "
+          f"truth.h5): Phase I capture {f['phase1_storage_s'] * 1e3:.0f} ms, Phase II session "
+          f"{f['phase2_storage_s']:.2f} s = {f['phase2_storage']:.2f}x its bare stepping ({rate})")
     c = f["campaign_counts"]
     print(f"paper campaign ({c['phase1']} captures, {c['phase2']} sessions, {c['dial']} dial "
           f"units), projected: {f['campaign']:.2f}x the bare stepping of all its steps, sensor "
-          f"models {f['campaign_sensors']:.0%}; {f['campaign_s'] / 60:.1f} min CPU ({rate})")
+          f"models {f['campaign_sensors']:.0%}, storage {f['campaign_storage']:.0%}; "
+          f"{f['campaign_s'] / 60:.1f} min CPU ({rate})")
     print("  projected wall time: " + ", ".join(
         f"{n} {'cores' if n == 2 else 'Dask workers'} "
         f"{max(f['campaign_s'] / n, f['campaign_longest_s']) / 60:.1f} min"
