@@ -265,7 +265,7 @@ def main() -> None:
     if args.write_baseline:
         args.write_baseline.write_text(json.dumps({
             "machine": where, "bare_steps_per_s": round(f["bare_steps_per_s"]),
-            "command": "benchmarks/bench_simulation.py --write-baseline " + str(args.write_baseline),
+            "command": " ".join(["benchmarks/bench_simulation.py", *sys.argv[1:]]),
             "ratios": {k: round(f[k], 4) for k in RATIOS}}, indent=2) + "\n")
         print(f"baseline written to {args.write_baseline}")
     if args.check:
