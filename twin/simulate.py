@@ -393,13 +393,8 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     x_cmd = [cmd.x + c.origin_offset for _, c in items]
     # Direction of the last motion at every instant: the flank the carriage rests on.
     moving = np.flatnonzero(cmd.v)
-    direction = np.sign(cmd.v)
-    if moving.size:
-        held = np.maximum.accumulate(np.where(direction != 0, np.arange(direction.size), -1))
-        before = cmd.rest_direction or np.sign(cmd.v[moving[0]])
-        direction = np.where(held >= 0, direction[np.maximum(held, 0)], before)
-    else:
-        direction = np.full_like(cmd.v, cmd.rest_direction or 1.0)
+    direction = held_sign(cmd.v, cmd.rest_direction
+                          or (np.sign(cmd.v[moving[0]]) if moving.size else 1.0))
     models, s0s, x_rails, used = [], [], [], set()
     for (sim, cond), xc in zip(items, x_cmd, strict=True):
         model = sim.model if id(sim) not in used else copy.deepcopy(sim.model)
