@@ -255,8 +255,8 @@ class Phase2Config(_Section):
     session_hours: list[float] = Field(
         default_factory=list, description="explicit session hours; overrides the interval")
     rail_passes: int = Field(2, ge=1, le=3, description=(
-        "rollout passes of a session: 1 looks the rails up at the command shifted by the known "
-        "backlash lag, 2 at the first pass's true position (the fixed point to below a nm) at "
+        "rollout passes of a session: 1 looks the rails up where the nut's flank contact puts "
+        "the carriage, 2 at the first pass's true position (the fixed point to below a nm) at "
         "twice the rollout's cost; where the carriage rests in the clearance after a stop can "
         "move by a micrometre with one pass, by less than 0.1 µm on the paper's routine "
         "(docs/validation.md, 'Simulation speed')"))
