@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-slow lint bench venv clean
+.PHONY: demo test test-slow lint bench bench-check venv clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -30,6 +30,13 @@ test-slow: $(STAMP)
 
 bench: $(STAMP)
 	for b in benchmarks/bench_*.py; do $(PY) $$b || exit 1; done
+
+# The regression guard of the simulation's speed (not part of `make test`; CI may run it): the
+# ratios to MuJoCo's bare stepping measured in the same run against benchmarks/baseline.json,
+# exit 1 if any is more than 20 % above it. A new baseline:
+#   .venv/bin/python benchmarks/bench_simulation.py --no-quick --repeat 3 --write-baseline benchmarks/baseline.json
+bench-check: $(STAMP)
+	$(PY) benchmarks/bench_simulation.py --no-quick --check benchmarks/baseline.json
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -11,7 +11,10 @@ much again in resumable parts before they are assembled (about 100 GB of free di
 
 With ``--sessions N`` (for a disk that cannot hold the campaign and its parts at once), Phase I
 is simulated alone and Phase II alone for its first N sessions, ``twin backlash`` runs on those,
-and the whole campaign is projected from them (Phase I + Phase II × sessions / N).
+and the whole campaign is projected from them (Phase I + Phase II × sessions / N). Beside it, in
+the same run, ``benchmarks/bench_simulation.py``'s projection from one unit of each kind (and
+MuJoCo's bare stepping on this machine): the two CPU totals, and the measured one as a ratio to
+the bare stepping of the campaign's steps.
 
 Run: .venv/bin/python benchmarks/bench_campaign.py [--scale 0.1] [--out DIR] [--scheduler ADDR]
      [--sessions N]
@@ -110,6 +113,29 @@ def by_parts(work: Path, scale: list[str], where: list[str], n: int, show) -> No
           f"{(a[0] + b[0] * k) / 60:.1f} min wall (Phase I {a[0] / 60:.1f} + Phase II {b[0] * k / 60:.1f}), "
           f"twin backlash {c[0] * k / 60:.1f} min wall")
     shutil.rmtree(p2)
+    if scale[1] == "campaign.scale=1" or scale[1] == "campaign.scale=1.0":
+        against_units(a[1], b[1] * k)
+
+
+def against_units(phase1_cpu: float, phase2_cpu: float) -> None:
+    """The measured CPU of the paper's campaign at full scale (Phase I alone, Phase II
+    projected from its first sessions) against bench_simulation's projection from one unit of
+    each kind, measured now on this machine."""
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    from bench_simulation import measure
+
+    f = measure(90, 2)
+    c = f["campaign_counts"]
+    est1, est2 = f["campaign_phase1_s"], f["campaign_phase2_s"]
+    bare = (c["phase1"] * f["phase1_steps"] / f["bare_steps_per_s"]
+            + c["phase2"] * f["phase2_steps"] / f["phase2_bare_steps_per_s"])
+    rate = f"bare {f['bare_steps_per_s']:,.0f} steps/s"
+    print(f"  measured CPU {(phase1_cpu + phase2_cpu) / 60:.1f} min = "
+          f"{(phase1_cpu + phase2_cpu) / bare:.2f}x the bare stepping of its steps (Phase I "
+          f"{phase1_cpu / 60:.1f}, Phase II and dial {phase2_cpu / 60:.1f} min); "
+          f"bench_simulation projects {(est1 + est2) / 60:.1f} min = {(est1 + est2) / bare:.2f}x "
+          f"(Phase I {est1 / 60:.1f}, Phase II and dial {est2 / 60:.1f} min): measured / projected "
+          f"{(phase1_cpu + phase2_cpu) / (est1 + est2):.2f} ({rate})")
 
 
 if __name__ == "__main__":

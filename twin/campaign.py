@@ -354,7 +354,8 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
             groups.append([i])
     for g in groups:
         passes = 1 if unit.kind == "phase1" else items[g[0]][0].phase2.rail_passes
-        trajs = run_many([(items[i][1], items[i][2]) for i in g], items[g[0]][3], passes)
+        trajs = run_many([(items[i][1], items[i][2]) for i in g], items[g[0]][3], passes,
+                         contact_guess=unit.kind == "phase2" and passes == 1)
         for i, traj in zip(g, trajs, strict=True):
             s, sim, cond, _, rng, store = items[i]
             if unit.kind == "phase1":

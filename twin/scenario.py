@@ -255,10 +255,11 @@ class Phase2Config(_Section):
     session_hours: list[float] = Field(
         default_factory=list, description="explicit session hours; overrides the interval")
     rail_passes: int = Field(2, ge=1, le=3, description=(
-        "rollout passes of a session: 1 looks the rails up at the command shifted by the known "
-        "backlash lag, 2 at the first pass's true position (the fixed point to below a nm; "
-        "docs/validation.md, 'Simulation speed': one pass is 2.5 s of a 90-run session faster "
-        "and moves the carriage by at most 41 nm)"))
+        "rollout passes of a session: 1 looks the rails up where the nut's flank contact puts "
+        "the carriage, 2 at the first pass's true position (the fixed point to below a nm) at "
+        "twice the rollout's cost; where the carriage rests in the clearance after a stop can "
+        "move by a micrometre with one pass, by less than 0.1 µm on the paper's routine "
+        "(docs/validation.md, 'Simulation speed')"))
     start_flank: Literal["first", "last"] = Field("first", description=(
         "the nut flank the carriage rests on before a run: that of the run's first motion "
         "(\"first\") or of its last (\"last\": the run follows an identical run, so every move "

@@ -11,15 +11,22 @@
 
 Rail waviness follows the carriage's TRUE position. The carriage's travel depends on the rail
 forces only weakly (through the pitch of the carriage, since the nut sits below its centre of
-mass), so a first rollout with the rails looked up at the commanded position gives the true
-travel x(t), and a second rollout with the rails looked up at that x(t) is the fixed point: at
-steady speed a third pass changes x by far less than a nm, and passes 1 and 2 differ by a
-fraction of a nm rms (asserted in ``tests/test_twin_physics.py``; figures in docs/validation.md).
-Phase II, where the micrometre shift between the forward and reverse traces is the measured
-quantity, does both passes unless the scenario's ``phase2.rail_passes`` asks for one. Phase I
-does one pass with the rails at the commanded position plus the known backlash lag: the
-residual error in the rail input is (slope of the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm,
-far below anything the nut accelerometers see.
+mass), so a first rollout with the rails looked up at the commanded position shifted by the
+known backlash lag gives the true travel x(t), and a second rollout with the rails looked up at
+that x(t) is the fixed point: at steady speed a third pass changes x by far less than a nm, and
+passes 1 and 2 differ by a fraction of a nm rms (asserted in ``tests/test_twin_physics.py``;
+figures in docs/validation.md). The residual error of the first pass's rail input is (slope of
+the rail) × (following error) ≈ 2π·0.5 µm/60 mm × 1 µm ≈ 0.05 nm at steady speed. Phase I does
+that one pass. Phase II does both unless the scenario's ``phase2.rail_passes`` asks for one,
+which then looks the rails up where the nut's flank contact puts the carriage
+(:func:`flank_contact_position`: the flank that pushes, its compression, the lead error). The
+lag alone misses the compression, which Phase II measures as part of the lost motion, and the
+flank the carriage coasts to at a stop; where it comes to rest in the clearance can still move
+by a micrometre with one pass (a preloaded nut with a wide clearance,
+``scenarios/backlash-steps.toml``). On the paper's routine and wear law the travels move by
+less than 0.1 µm and the backlash estimates by a few hundredths of a µm, and
+``scenarios/paper-rtf.toml`` does one pass (``benchmarks/bench_rail_passes.py``;
+``tests/test_campaign.py::test_one_rail_pass_keeps_the_paper_figures``).
 """
 
 from __future__ import annotations
@@ -297,13 +304,14 @@ class Simulator:
         ctrl[:, ix.runout] = ax.screw.radial_stiffness * geo.runout(theta, w.screw)
         return ctrl
 
-    def run(self, cond: Condition, cmd: Profile, passes: int = 2) -> Trajectory:
+    def run(self, cond: Condition, cmd: Profile, passes: int = 2,
+            contact_guess: bool = False) -> Trajectory:
         """Roll the model out under ``cmd`` in condition ``cond``.
 
         ``passes`` = 2 looks the rails up at the true carriage position of a first pass (see the
         module docstring); 1 looks them up at the commanded position shifted by the backlash lag.
         """
-        return self.run_batch([cond], cmd, passes)[0]
+        return self.run_batch([cond], cmd, passes, contact_guess=contact_guess)[0]
 
     def rest_pose(self, x: float) -> np.ndarray:
         """Resting pose of the carriage on the rails at rail position ``x`` m: joint coordinates
@@ -316,10 +324,10 @@ class Simulator:
         return np.array([t_y - w.axis.carriage.com_height * e_ax, t_z, e_ax, e_bx, e_cx])
 
     def run_batch(self, conds: list[Condition], cmd: Profile, passes: int = 2,
-                  nthread: int | None = None) -> list[Trajectory]:
+                  nthread: int | None = None, contact_guess: bool = False) -> list[Trajectory]:
         """Roll out several conditions under one command in one ``mujoco.rollout`` call
         (:func:`run_many` with this simulator for every condition)."""
-        return run_many([(self, c) for c in conds], cmd, passes, nthread)
+        return run_many([(self, c) for c in conds], cmd, passes, nthread, contact_guess)
 
     def structure(self) -> tuple:
         """What must agree for models to share one ``mujoco.rollout`` call."""
@@ -327,8 +335,42 @@ class Simulator:
         return (m.nq, m.nv, m.nu, m.na, m.nsensordata, self.timestep)
 
 
+def held_sign(values: np.ndarray, before: float) -> np.ndarray:
+    """(n,) sign of ``values`` (n,), the last nonzero sign held through zeros, ``before`` until
+    the first nonzero value."""
+    sign = np.sign(values)
+    held = np.maximum.accumulate(np.where(sign != 0, np.arange(sign.size), -1))
+    return np.where(held >= 0, sign[np.maximum(held, 0)], before)
+
+
+def flank_contact_position(sim: Simulator, cond: Condition, cmd: Profile, x_cmd: np.ndarray,
+                           before: float) -> np.ndarray:
+    """First guess of the carriage's true position (n,) m at the command ``cmd`` (rail
+    coordinate of the command ``x_cmd`` (n,) m), for the rails' lookup of a first rollout pass:
+    the carriage rides on the flank of the ball nut that pushes it, compressed by that push,
+
+        x = (1 + s)·x_c + ε(θ) − σ·b/2 − F/K,   F = m·a + F_f·sign(v),
+
+    s the lead stretch, ε the cyclic lead error and ball pass of the nut's flank
+    (:meth:`Simulator.flank_motion`), b the clearance, F the force the nut must exert on the
+    carriage of mass m to give it the commanded acceleration a against the rails' Coulomb
+    friction F_f, K the nut's axial stiffness, σ the sign of F held while F = 0 (at rest the
+    carriage stays on the flank it came to; ``before``: the flank before the first push). At a
+    stop that decelerates harder than the friction does, the carriage crosses to the other flank
+    (instantly here; in the rollout within a few ms). Quasi-static: the servo's following error
+    and the axial mode's ringing are the residual (a second pass looks the rails up at the
+    rolled-out position instead)."""
+    ax = sim.world.axis
+    r = ax.screw.radius_per_rad
+    push = ax.carriage.mass * cmd.a + ax.carriage.rail_friction * np.sign(cmd.v)
+    k = stiffness_of(ax, cond.mech)["axial"]
+    eps = sim.flank_motion(x_cmd / r)[0]
+    return ((1.0 + sim.lead_stretch(cond)) * x_cmd + eps
+            - 0.5 * cond.mech.backlash * held_sign(push, before) - push / k)
+
+
 def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int = 2,
-             nthread: int | None = None) -> list[Trajectory]:
+             nthread: int | None = None, contact_guess: bool = False) -> list[Trajectory]:
     """Roll out several (simulator, condition) pairs under one command in one
     ``mujoco.rollout`` call.
 
@@ -351,13 +393,8 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     x_cmd = [cmd.x + c.origin_offset for _, c in items]
     # Direction of the last motion at every instant: the flank the carriage rests on.
     moving = np.flatnonzero(cmd.v)
-    direction = np.sign(cmd.v)
-    if moving.size:
-        held = np.maximum.accumulate(np.where(direction != 0, np.arange(direction.size), -1))
-        before = cmd.rest_direction or np.sign(cmd.v[moving[0]])
-        direction = np.where(held >= 0, direction[np.maximum(held, 0)], before)
-    else:
-        direction = np.full_like(cmd.v, cmd.rest_direction or 1.0)
+    direction = held_sign(cmd.v, cmd.rest_direction
+                          or (np.sign(cmd.v[moving[0]]) if moving.size else 1.0))
     models, s0s, x_rails, used = [], [], [], set()
     for (sim, cond), xc in zip(items, x_cmd, strict=True):
         model = sim.model if id(sim) not in used else copy.deepcopy(sim.model)
@@ -377,7 +414,8 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
         flank0 = sim.flank_motion(np.array([theta0, theta0]))[0][0]
         models.append(model)
         s0s.append(initial_state(model, x0 + flank0 - zn * pose[3], theta0, flank0, pose))
-        x_rails.append(stretch * xc - 0.5 * cond.mech.backlash * direction)
+        x_rails.append(flank_contact_position(sim, cond, cmd, xc, direction[0]) if contact_guess
+                       else stretch * xc - 0.5 * cond.mech.backlash * direction)
     nthread = nthread or min(len(items), os.cpu_count() or 1)
     datas = [first.data] + [mujoco.MjData(first.model) for _ in range(nthread - 1)]
     nq, nv = first.model.nq, first.model.nv
@@ -393,22 +431,31 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     s0s = list(settled[:, -1, :])
     for s0 in s0s:
         s0[0] = 0.0  # time
+    phys = slice(1, 1 + nq + nv)  # qpos and qvel in MuJoCo's full physics state
     for _ in range(max(passes, 1)):
-        ctrl = np.stack([sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)])
-        after, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
-        # Rollout row k is the state after step k; prepend the initial state so that row k
+        ctrls = [sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)]
+        # Rollout row k is the state after step k; with the initial state before it, row k
         # is the state at t_k, the one step k (its rails, its sensors) sees.
-        state = np.concatenate([np.stack(s0s)[:, None, :], after[:, :-1, :]], axis=1)
-        x_rails = [st[:, 1 + sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
+        if len(items) == 1:  # the rollout writes after the initial state: no copy
+            ctrl = ctrls[0][None]
+            full = np.empty((1, cmd.t.size + 1, s0s[0].size))
+            full[0, 0] = s0s[0]
+            sens = np.empty((1, cmd.t.size, first.model.nsensordata))
+            rollout.rollout(models, datas, full[:, 0], ctrl, state=full[:, 1:], sensordata=sens)
+            after, state = full[:, 1:], full[:, :-1, phys]
+        else:
+            ctrl = np.stack(ctrls)
+            after, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+            state = np.concatenate([np.stack(s0s)[:, None, phys], after[:, :-1, phys]], axis=1)
+        x_rails = [st[:, sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
     # The accelerometers read the acceleration of step k that the integrator applies,
     # (v_{k+1} − v_k)/dt, not MuJoCo's explicit qacc (see accelerometer_implicit_correction).
-    vel = slice(1 + nq, 1 + nq + nv)
     for j, model in enumerate(models):
         cols, gain = accelerometer_implicit_correction(model, s0s[j], ctrl[j, 0])
-        applied = (after[j, :, vel] - state[j, :, vel]) / first.timestep
+        applied = (after[j, :, 1 + nq:1 + nq + nv] - state[j, :, nq:]) / first.timestep
         sens[j][:, cols] += applied @ gain.T
     t = np.arange(cmd.t.size) * first.timestep
-    return [Trajectory(t=t, qpos=st[:, 1:1 + nq], qvel=st[:, 1 + nq:1 + nq + nv], sens=se,
+    return [Trajectory(t=t, qpos=st[:, :nq], qvel=st[:, nq:], sens=se,
                        cmd=cmd, theta_cmd=xc / sim.world.axis.screw.radius_per_rad, index=sim.index)
             for st, se, xc, (sim, _) in zip(state, sens, x_cmd, items, strict=True)]
 
@@ -479,7 +526,6 @@ def phase1_measure(sim: Simulator, cfg, traj: Trajectory, rng: np.random.Generat
 
 
 PHASE2_LEAD_IN = 2.0  # s of standstill before the first move (bias estimation needs it)
-_RUNS_PER_GROUP = 8  # runs whose float64 sensor samples phase2_measure_runs holds at once
 
 
 def phase2_moves(cfg) -> list[Move]:
@@ -505,8 +551,11 @@ def phase2_command(sim: Simulator, cfg) -> Profile:
 
 def phase2_trajectory(sim: Simulator, cfg, cond: Condition) -> Trajectory:
     """The deterministic motion of one Phase II run (``cfg.rail_passes`` passes, 2 by default;
-    see the module docstring)."""
-    return sim.run(cond, phase2_command(sim, cfg), passes=cfg.rail_passes)
+    see the module docstring): one pass looks the rails up at
+    :func:`flank_contact_position`, the first of two at the command shifted by the clearance's
+    lag (as Phase I does), so that two passes give what they always gave."""
+    return sim.run(cond, phase2_command(sim, cfg), passes=cfg.rail_passes,
+                   contact_guess=cfg.rail_passes == 1)
 
 
 def phase2_measure(sim: Simulator, traj: Trajectory, rng: np.random.Generator) -> dict:
@@ -533,17 +582,17 @@ def phase2_measure_runs(sim: Simulator, traj: Trajectory, rngs: list[np.random.G
     rate = traj.angular_velocity_imu
     n_cmd = int(math.floor(traj.cmd.t[-1] * w.position_cmd_fs)) + 1
     pos = traj.cmd.position_at(w.position_cmd_fs, n_cmd, position_cmd_lead_s)
-    out = []
-    # Groups of runs, so that only one group's float64 samples are held at a time.
-    for start in range(0, len(rngs), _RUNS_PER_GROUP):
-        group = rngs[start:start + _RUNS_PER_GROUP]
-        _, accs = ins.measure_imu_accelerometer_runs([force] * len(group), fs, w.imu_acc, group)
-        _, gyros = ins.measure_gyroscope_runs([rate] * len(group), fs, w.imu_gyro, group)
-        out += [{"imu_acc": acc.astype(np.float32), "imu_acc_fs_hz": float(w.imu_acc.fs_hz),
-                 "imu_gyro": gyro.astype(np.float32), "imu_gyro_fs_hz": float(w.imu_gyro.fs_hz),
-                 "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
-                for acc, gyro in zip(accs, gyros, strict=True)]
-    return out
+    # All runs in one call per instrument: the motion's part once, the noise in blocks of runs,
+    # each run's samples cast to float32 as its block is done. Run j's generator draws its
+    # accelerometer noise, then its gyroscope noise, as run by run.
+    _, accs = ins.measure_imu_accelerometer_runs([force] * len(rngs), fs, w.imu_acc, rngs,
+                                                 dtype=np.float32)
+    _, gyros = ins.measure_gyroscope_runs([rate] * len(rngs), fs, w.imu_gyro, rngs,
+                                          dtype=np.float32)
+    return [{"imu_acc": acc, "imu_acc_fs_hz": float(w.imu_acc.fs_hz),
+             "imu_gyro": gyro, "imu_gyro_fs_hz": float(w.imu_gyro.fs_hz),
+             "position_cmd": pos, "position_cmd_fs_hz": float(w.position_cmd_fs)}
+            for acc, gyro in zip(accs, gyros, strict=True)]
 
 
 def stroke_travels(world: World, traj: Trajectory, rest_fraction: float = 0.5) -> dict[str, np.ndarray]:

@@ -33,6 +33,11 @@ from scipy import signal
 
 from analysis.resample import not_a_knot_cubic_rows
 
+try:  # the in-place filter behind scipy.signal.sosfilt (see _sosfilt_rows)
+    from scipy.signal._sosfilt import _sosfilt
+except ImportError:  # pragma: no cover
+    _sosfilt = None
+
 __all__ = [
     "STANDARD_GRAVITY",
     "MICRO_G",
@@ -384,8 +389,13 @@ def _daq_quantise(
         return np.asarray(values, dtype=float)
     lsb = 2.0 * daq_range / 2.0**bits
     half = 2.0 ** (bits - 1)
-    codes = np.clip(np.round(np.asarray(values) * sensitivity / lsb), -half, half - 1)
-    return codes * lsb / sensitivity
+    # In one buffer, operation by operation as codes = clip(round(v·S/lsb)), codes·lsb/S.
+    out = np.multiply(values, sensitivity, dtype=float)
+    np.divide(out, lsb, out=out)
+    np.round(out, out=out)
+    np.clip(out, -half, half - 1, out=out)
+    np.multiply(out, lsb, out=out)
+    return np.divide(out, sensitivity, out=out)
 
 
 def _output_count(n_in: int, fs_in: float, fs_out: float) -> int:
@@ -501,7 +511,7 @@ def _filter_design(spec, fs_sim: float) -> tuple[np.ndarray, np.ndarray]:
 
 #: Upper bound on the float64 working array of one block of runs in :func:`_instrument_chains`
 #: (samples × columns × 8 bytes); a block's transient memory is a few times this.
-_BLOCK_BYTES = 64 * 2**20
+_BLOCK_BYTES = 4 * 2**20
 
 
 def _noise_rate(spec, fs_sim: float) -> float:
@@ -514,6 +524,16 @@ def _noise_rate(spec, fs_sim: float) -> float:
     if fs_out < fs_sim and spec.bandwidth_hz < 0.45 * fs_out:
         return fs_out
     return float(fs_sim)
+
+
+def _sosfilt_rows(sos: np.ndarray, rows: np.ndarray, zi: np.ndarray) -> None:
+    """``scipy.signal.sosfilt`` of each row of ``rows`` (r, n) float64 C-contiguous, in place,
+    from the states ``zi`` (r, s, 2) (s sections of ``sos`` (s, 6)). Scipy's own routine without
+    the copy ``sosfilt`` makes of its input (the same arithmetic: bit for bit its output)."""
+    if _sosfilt is None:  # a scipy without the private routine
+        rows[...] = signal.sosfilt(sos, rows, axis=-1, zi=np.moveaxis(zi, 1, 0))[0]
+        return
+    _sosfilt(np.array(sos, dtype=float, order="C"), rows, np.ascontiguousarray(zi, dtype=float))
 
 
 def _instrument_chain(true_values: np.ndarray, fs_sim: float, spec, rng: np.random.Generator,
@@ -555,7 +575,7 @@ def _sample_rows(rows: np.ndarray, fs_sim: float, fs_out: float, t0: float) -> n
 
 
 def _instrument_chains(true_values: list[np.ndarray], fs_sim: float, spec,
-                       rngs: list[np.random.Generator], t0: float
+                       rngs: list[np.random.Generator], t0: float, finish=None, dtype=None
                        ) -> tuple[np.ndarray, list[np.ndarray]]:
     """:func:`_instrument_chain` for several recordings of one instrument at once.
 
@@ -567,11 +587,15 @@ def _instrument_chains(true_values: list[np.ndarray], fs_sim: float, spec,
     ``(n_warm + n_noise, 3)`` block per recording, so the draws and every output array are bit
     for bit those of one :func:`_instrument_chain` call per recording in the same order
     (``sosfilt``, the banded solve and the spline evaluation act on each row alone; checked by
-    tests/test_sensors.py).
+    tests/test_sensors.py). ``finish``, if given, is an elementwise map (the output
+    quantisation) applied to a block's samples as soon as they are filtered, and ``dtype`` the
+    type each recording's samples are then cast to, so that only one block's float64 samples
+    are held at a time.
 
     Returns:
         t_out: (m,) sample instants, s.
-        samples: list of (m, 3) arrays, one per recording, unit of the input.
+        samples: list of (m, 3) arrays, one per recording, unit of the input (or what
+        ``finish`` and ``dtype`` make of them).
     """
     if len(true_values) != len(rngs):
         raise ValueError(f"{len(true_values)} recordings but {len(rngs)} generators")
@@ -611,26 +635,29 @@ def _instrument_chains(true_values: list[np.ndarray], fs_sim: float, spec,
         block = range(start, min(start + per_block, len(rngs)))
         # One row per channel (3 per recording): the layout sosfilt and the spline work in.
         driven = np.empty((3 * len(block), n_warm + n_noise))
-        zi = np.zeros((sos_noise.shape[0], 3 * len(block), 2))
+        zi = np.zeros((3 * len(block), sos_noise.shape[0], 2))
         for j, i in enumerate(block):
             rngs[i].standard_normal(out=noise)
-            noise *= noise_std
             if separate:
-                driven[3 * j:3 * j + 3] = noise.T
+                np.multiply(noise.T, noise_std, out=driven[3 * j:3 * j + 3])
             else:
-                det, zi[:, 3 * j:3 * j + 3, :] = prepared[id(true_values[i])]
+                noise *= noise_std
+                det, zi_det = prepared[id(true_values[i])]
+                zi[3 * j:3 * j + 3] = np.moveaxis(zi_det, 1, 0)
                 np.add(det, noise.T, out=driven[3 * j:3 * j + 3])
-        filtered, _ = signal.sosfilt(sos_noise.copy(), driven, axis=-1, zi=zi)
-        del driven
-        samples = filtered[:, n_warm:]
-        if not separate:
+        _sosfilt_rows(sos_noise, driven, zi)
+        samples = driven[:, n_warm:]
+        if separate:
+            for j, i in enumerate(block):
+                samples[3 * j:3 * j + 3] += prepared[id(true_values[i])][0]
+        else:
             samples = _sample_rows(samples, fs_sim, spec.fs_hz, t0)
-        del filtered
-        for j, i in enumerate(block):
-            rows = samples[3 * j:3 * j + 3]
-            if separate:
-                rows = rows + prepared[id(true_values[i])][0]
-            outputs.append(rows.T)
+        del driven
+        if finish is not None:
+            samples = finish(samples)
+        for j in range(len(block)):
+            rows = samples[3 * j:3 * j + 3].T
+            outputs.append(rows if dtype is None else rows.astype(dtype))
     return t_out, outputs
 
 
@@ -744,36 +771,40 @@ def _validated_recordings(true_values, rngs, name: str) -> list[np.ndarray]:
 
 
 def measure_imu_accelerometer_runs(specific_force, fs_sim: float, spec: AnalogAccelerometerSpec,
-                                   rngs, t0: float = 0.0) -> tuple[np.ndarray, list[np.ndarray]]:
+                                   rngs, t0: float = 0.0, dtype=None
+                                   ) -> tuple[np.ndarray, list[np.ndarray]]:
     """:func:`measure_imu_accelerometer` of several recordings at once: ``specific_force`` is a
-    sequence of (n, 3) arrays (the same object repeated for runs that share their motion),
-    ``rngs`` one generator per recording. Returns ``(t, [samples (m, 3), ...])``, each array bit
-    for bit what :func:`measure_imu_accelerometer` returns for that recording and generator."""
+    sequence of (n, 3) arrays (the same object repeated for runs that share their motion: its
+    error model, response and sampling are computed once), ``rngs`` one generator per recording.
+    Returns ``(t, [samples (m, 3), ...])``, each array bit for bit what
+    :func:`measure_imu_accelerometer` returns for that recording and generator, cast to
+    ``dtype`` if given (block by block: a session's runs are never all held in float64)."""
     values = _validated_recordings(specific_force, rngs, "specific_force")
     _validate_fs(fs_sim)
-    t_out, out = _instrument_chains(values, fs_sim, spec, list(rngs), t0)
-    return t_out, [_daq_quantise(o, spec.sensitivity, spec.daq_range, spec.daq_bits) for o in out]
+    return _instrument_chains(values, fs_sim, spec, list(rngs), t0, lambda o: _daq_quantise(
+        o, spec.sensitivity, spec.daq_range, spec.daq_bits), dtype)
 
 
 def measure_gyroscope_runs(angular_velocity, fs_sim: float, spec: DigitalGyroSpec, rngs,
-                           t0: float = 0.0) -> tuple[np.ndarray, list[np.ndarray]]:
+                           t0: float = 0.0, dtype=None) -> tuple[np.ndarray, list[np.ndarray]]:
     """:func:`measure_gyroscope` of several recordings at once (as
     :func:`measure_imu_accelerometer_runs`; bit for bit the single-recording outputs)."""
     values = _validated_recordings(angular_velocity, rngs, "angular_velocity")
     _validate_fs(fs_sim)
-    t_out, out = _instrument_chains(values, fs_sim, spec, list(rngs), t0)
-    return t_out, [quantise(o, spec.lsb, spec.full_scale) for o in out]
+    return _instrument_chains(values, fs_sim, spec, list(rngs), t0,
+                              lambda o: quantise(o, spec.lsb, spec.full_scale), dtype)
 
 
 def measure_nut_accelerometer_runs(acceleration, fs_sim: float, spec: NutAccelerometerSpec, rngs,
-                                   t0: float = 0.0) -> tuple[np.ndarray, list[np.ndarray]]:
+                                   t0: float = 0.0, dtype=None
+                                   ) -> tuple[np.ndarray, list[np.ndarray]]:
     """:func:`measure_nut_accelerometer` of several recordings at once (as
     :func:`measure_imu_accelerometer_runs`; bit for bit the single-recording outputs). Phase I
     measures its two nut accelerometers with one call and the capture's generator twice."""
     values = _validated_recordings(acceleration, rngs, "acceleration")
     _validate_fs(fs_sim)
-    t_out, out = _instrument_chains(values, fs_sim, spec, list(rngs), t0)
-    return t_out, [_daq_quantise(o, spec.sensitivity, spec.daq_range, spec.daq_bits) for o in out]
+    return _instrument_chains(values, fs_sim, spec, list(rngs), t0, lambda o: _daq_quantise(
+        o, spec.sensitivity, spec.daq_range, spec.daq_bits), dtype)
 
 
 # --------------------------------------------------------------------------------------------
