@@ -270,7 +270,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                                          bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
                                          xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
         except _OutOfTime:
-            _, z, r = min(tried, key=lambda t: t[0]) if tried else (0.0, start_at[free], resid(start_at)[free])
+            _, z, r = min(tried, key=lambda t: t[0])  # least_squares evaluates the start before any Jacobian
             stopped.append(f"the fit stopped at the budget's deadline after {sims[0]} evaluations (not "
                            f"converged: the best point so far, residual {float(np.sqrt(r @ r)):.2f} standard "
                            "errors); a larger --budget-minutes lets it converge")
