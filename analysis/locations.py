@@ -2,7 +2,7 @@
 location written as the key a user types, and the raw value found there.
 
 Shared by every reader that validates with pydantic and must name the key and the value in its
-message: the axis contract (``/@axis``), the import spec, and (through ``twin.config``) the
+message: the axis contract (``/@axis``), the import spec, and (through ``twin.sim.config``) the
 scenario and sweep files.
 """
 

@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.files import read_json, write_json
 from analysis.dataset import DOFS, DatasetError, open_truth
-from analysis.files import read_json, write_json
 from analysis.injected import injected_backlash_um
 from analysis.phase1.scoring import score_method
 from analysis.phase2.error_motion_file import read_error_motion_bands, read_error_motions

@@ -40,11 +40,11 @@ from mujoco import rollout
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from twin import campaign as cp  # noqa: E402
-from twin.campaign import simulate_campaign  # noqa: E402
 from twin.harness.calibration import calibrate  # noqa: E402
-from twin.scenario import from_dict, load  # noqa: E402
-from twin.simulate import Simulator, phase1_profile  # noqa: E402
+from twin.sim import campaign as cp  # noqa: E402
+from twin.sim.campaign import simulate_campaign  # noqa: E402
+from twin.sim.scenario import from_dict, load  # noqa: E402
+from twin.sim.simulate import Simulator, phase1_profile  # noqa: E402
 
 
 def bare_steps_per_s(s) -> float:

@@ -91,8 +91,8 @@ def by_parts(work: Path, scale: list[str], where: list[str], n: int, show) -> No
     import shutil
 
     sys.path.insert(0, str(REPO))
-    from twin.campaign import plan
-    from twin.scenario import load
+    from twin.sim.campaign import plan
+    from twin.sim.scenario import load
 
     paper = str(REPO / "scenarios/paper-rtf.toml")
     hours = [u.hours for u in plan(load(paper, [scale[1]])) if u.kind == "phase2"]

@@ -5,7 +5,7 @@ A recording of ``scenarios/paper-rtf.toml`` (104 Phase I samples of 10 captures,
 sessions of 90 runs: about 46 GB) is not simulated: the diagnosis reads only the parts of the
 subset it chooses, and simulates only the subset's layout. So:
 
-1. the recording's layout is taken from the scenario's campaign plan (:func:`twin.campaign.plan`:
+1. the recording's layout is taken from the scenario's campaign plan (:func:`twin.sim.campaign.plan`:
    the capture and session names, sample indices and hours a recording of it holds, what
    :func:`analysis.diagnosis.subset.inventory` reads from its attributes);
 2. the unit costs are measured as ``twin diagnose`` measures them at its start
@@ -42,10 +42,10 @@ import numpy as np  # noqa: E402
 
 from analysis.dataset import assemble_measurements  # noqa: E402
 from analysis.diagnosis import subset  # noqa: E402
-from twin.campaign import plan, simulate_campaign  # noqa: E402
 from twin.harness.diagnosis.budget import measure_unit_costs, subset_scenario, workload  # noqa: E402
 from twin.harness.diagnosis.cache import with_seed  # noqa: E402
-from twin.scenario import load  # noqa: E402
+from twin.sim.campaign import plan, simulate_campaign  # noqa: E402
+from twin.sim.scenario import load  # noqa: E402
 
 PAPER = REPO / "scenarios" / "paper-rtf.toml"
 BUDGETS_MIN = (15, 30, 60, 120, 240, 480, 960, 1920)
@@ -68,7 +68,7 @@ def skeleton(path: Path, s, inv: subset.Inventory) -> Path:
     """A ``measurements.h5`` with the layout of ``inv`` (every capture, session and run group
     with its attributes) but one-sample arrays: what :func:`analysis.diagnosis.subset.inventory`
     reads of a full recording (attributes only) at a size that fits a disk."""
-    from twin.scenario import nominal_axis_description
+    from twin.sim.scenario import nominal_axis_description
 
     one, tri = np.zeros(1), np.zeros((1, 3))
     p1 = ((n, {"hours": h + j * s.phase1.capture_interval_minutes / 60, "sample": k, "fs_hz": s.phase1.fs_hz},

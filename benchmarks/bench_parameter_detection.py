@@ -34,7 +34,7 @@ from twin.harness.diagnosis.cache import DEFAULT_SEEDS, evaluate_all, with_seed 
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS  # noqa: E402
 from twin.harness.diagnosis.ensemble import build_ensemble  # noqa: E402
 from twin.harness.diagnosis.library import with_effects  # noqa: E402
-from twin.scenario import load  # noqa: E402
+from twin.sim.scenario import load  # noqa: E402
 
 LADDER = (1.1, 1.2, 1.4, 2.0)  # deviations tried on each side (factor and 1/factor)
 CASE_SEED0 = 30_000  # recording seeds: not the twin's nor the blind benchmark's

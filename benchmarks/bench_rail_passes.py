@@ -1,7 +1,7 @@
 """Does Phase II need its second rollout pass? (prints figures; not a test)
 
 One pass looks the rails up where the nut's flank contact puts the carriage
-(``twin.simulate.flank_contact_position``: what ``phase2.rail_passes = 1`` does); two passes
+(``twin.sim.simulate.flank_contact_position``: what ``phase2.rail_passes = 1`` does); two passes
 look them up, in the second, at the true carriage position of a first pass (the fixed point;
 its first pass looks them up at the command shifted by the clearance's lag). For one session of
 the paper's routine (``scenarios/paper-rtf.toml``, which does one pass) early (50 h, no
@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from twin import geometry as geo
-from twin.campaign import condition_at, make_world, origin_offset
-from twin.scenario import load
-from twin.simulate import Simulator, phase2_command, stroke_travels
+from twin.sim import geometry as geo
+from twin.sim.campaign import condition_at, make_world, origin_offset
+from twin.sim.scenario import load
+from twin.sim.simulate import Simulator, phase2_command, stroke_travels
 
 
 def main() -> None:

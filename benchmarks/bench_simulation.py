@@ -53,11 +53,11 @@ from mujoco import rollout  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from twin import campaign as cp  # noqa: E402
-from twin.executors import keep_freed_memory  # noqa: E402
-from twin.parts import PartStore  # noqa: E402
-from twin.scenario import load  # noqa: E402
-from twin.simulate import (  # noqa: E402
+from analysis.base.executors import keep_freed_memory  # noqa: E402
+from twin.sim import campaign as cp  # noqa: E402
+from twin.sim.parts import PartStore  # noqa: E402
+from twin.sim.scenario import load  # noqa: E402
+from twin.sim.simulate import (  # noqa: E402
     Simulator,
     dial_indicator,
     phase1_measure,
@@ -256,7 +256,7 @@ def main() -> None:
                     help="store the measured ratios as the baseline FILE (JSON)")
     args = ap.parse_args()
     repeat = args.repeat if args.repeat > 1 or args.check is None else 3
-    keep_freed_memory()  # as the campaign's worker processes do (twin/executors.py)
+    keep_freed_memory()  # as the campaign's worker processes do (analysis/base/executors.py)
     where = machine()
     print(f"machine: {where}; mujoco {mujoco.__version__}, numpy {np.__version__}; "
           f"CPU time of one process, best of {repeat}")

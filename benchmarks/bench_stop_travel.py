@@ -20,9 +20,9 @@ import argparse
 
 import numpy as np
 
-from twin.campaign import condition_at, make_world
-from twin.scenario import load
-from twin.simulate import Simulator, phase2_trajectory, stroke_travels
+from twin.sim.campaign import condition_at, make_world
+from twin.sim.scenario import load
+from twin.sim.simulate import Simulator, phase2_trajectory, stroke_travels
 
 
 def d_minus_l_um(accel_m_s2: float, backlash_um: float, damping_ratio: float | None,

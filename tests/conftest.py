@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 # Each test process has a core of its own (pytest-xdist, one per core): a command under test
-# runs its work in its own process (twin.executors.default_processes) unless the test asks for
+# runs its work in its own process (analysis.base.executors.default_processes) unless the test asks for
 # --workers; the parallel paths are tested with explicit --workers / --scheduler.
 os.environ.setdefault("TWIN_WORKERS", "1")
 REPO = Path(__file__).resolve().parents[1]

@@ -9,7 +9,7 @@ velocity integrated from the IMU ran ahead of the carriage on every ramp; the re
 the IMU stroke timing (``analysis.phase2.strokes.rest_side_deficit``) came out 0.6–0.9 µm short
 at b = 0 and not with a clearance (whose contact is a constraint, not in D), which moved Eq. 9 on
 the IMU axis by about +1 µm for every backlash step (docs/error-motions.md, the Eq. 9 gate).
-``twin.model.accelerometer_implicit_correction`` removes it; this test checks the result on
+``twin.sim.model.accelerometer_implicit_correction`` removes it; this test checks the result on
 the first acceleration ramp of a slow Phase II move, with and without a clearance: the IMU's x
 reading, its gravity projection removed, integrated over the ramp, against the IMU site's
 velocity change in the simulated state (``mj_objectVelocity``).
@@ -23,10 +23,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from twin.campaign import condition_at, make_world
-from twin.model import MechanicalState, accelerometer_implicit_correction, apply_state, build_model
-from twin.scenario import Scenario, load, to_axis
-from twin.simulate import Simulator, phase2_trajectory
+from twin.sim.campaign import condition_at, make_world
+from twin.sim.model import MechanicalState, accelerometer_implicit_correction, apply_state, build_model
+from twin.sim.scenario import Scenario, load, to_axis
+from twin.sim.simulate import Simulator, phase2_trajectory
 
 GRAVITY = 9.80665
 SETS = ["campaign.phase1=false", "phase2.runs_per_session=1", "phase2.session_hours=[100.0]",

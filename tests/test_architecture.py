@@ -1,6 +1,6 @@
 """The arrows of the layout, read from the source (docs/architecture.md).
 
-cli -> twin.harness -> twin (the simulator) -> analysis. The imports of every module of the two
+twin.cli -> twin.harness -> twin.sim (the simulator) -> analysis. The imports of every module of the two
 packages are collected with :mod:`ast` (top-level and function-level alike, relative imports
 resolved), so nothing here lists modules by hand: a new module is checked the day it appears.
 """
@@ -88,9 +88,22 @@ def test_analysis_imports_neither_twin_nor_mujoco_nor_rerun(name):
     assert not bad, f"{name} ({MODULES[name].relative_to(ROOT)}) imports {bad}"
 
 
-@pytest.mark.parametrize("name", sorted(m for m in MODULES
-                                        if _in(m, "twin") and not _in(m, "twin.harness")
-                                        and not _in(m, "twin.cli") and m != "twin"))
+def test_the_shared_base_imports_nothing_of_the_project_beyond_itself():
+    # registry, files and executors serve both halves: they may not pull either in
+    for name in (m for m in MODULES if _in(m, "analysis.base")):
+        bad = sorted(i for i in IMPORTS[name] if _project_target(i) and not _in(_project_target(i), "analysis.base"))
+        assert not bad, f"{name} imports {bad}"
+
+
+def test_twin_holds_its_three_layers_as_folders():
+    # the simulator, the harness and the face, each a package; nothing loose beside them
+    loose = sorted(p.name for p in (ROOT / "twin").iterdir()
+                   if p.suffix == ".py" and p.stem not in ("__init__", "__main__"))
+    assert not loose, f"modules loose in twin/: {loose} (twin/sim/, twin/harness/ or twin/cli/)"
+    assert {"twin.sim", "twin.harness", "twin.cli"} <= set(MODULES)
+
+
+@pytest.mark.parametrize("name", sorted(m for m in MODULES if _in(m, "twin.sim")))
 def test_simulator_imports_nothing_of_the_harness_or_cli(name):
     bad = sorted(i for i in IMPORTS[name] if _in(i, "twin.harness") or _in(i, "twin.cli"))
     assert not bad, f"{name} ({MODULES[name].relative_to(ROOT)}) imports {bad}"

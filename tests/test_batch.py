@@ -3,10 +3,10 @@ give exactly the trajectories of separate runs."""
 
 import numpy as np
 
-from twin import campaign as cp
-from twin.drive import command_profile
-from twin.scenario import Scenario
-from twin.simulate import Simulator, phase2_moves
+from twin.sim import campaign as cp
+from twin.sim.drive import command_profile
+from twin.sim.scenario import Scenario
+from twin.sim.simulate import Simulator, phase2_moves
 
 
 def test_batched_conditions_equal_single_runs():

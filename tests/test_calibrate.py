@@ -30,7 +30,7 @@ SMALL = ("phase2.start_mm=40.0", "phase2.end_mm=240.0", "phase1.capture_s=1.5", 
 
 def _trapezoids(fs: float, speed: float, accel: float, dwell: float, stroke: float, n_moves: int = 4) -> np.ndarray:
     """(n,) the velocity (mm/s) of back-and-forth trapezoidal moves sampled at ``fs``."""
-    from twin.drive import command_profile, reciprocating
+    from twin.sim.drive import command_profile, reciprocating
 
     moves = reciprocating(0.0, stroke * 1e-3, speed * 1e-3, accel * 1e-3, dwell, n_moves // 2)
     prof = command_profile(moves, fs, lead_in=0.3)
@@ -122,9 +122,9 @@ def test_rest_spectrum_gives_floor_and_bandwidth_of_a_butterworth_channel():
 def _foreign_capture(**axis) -> tuple[dict, float]:
     """One 1-s Phase I capture of `foreign-16mm` (seed 0, 100 h) with ``axis`` keys changed:
     (the capture's channels, its rate in Hz)."""
-    from twin.campaign import KIND_PHASE1, condition_at, make_world, rng_for
-    from twin.scenario import from_dict, load
-    from twin.simulate import Simulator, phase1_capture
+    from twin.sim.campaign import KIND_PHASE1, condition_at, make_world, rng_for
+    from twin.sim.scenario import from_dict, load
+    from twin.sim.simulate import Simulator, phase1_capture
 
     d = load("foreign-16mm").model_dump(mode="json")
     d["phase1"]["capture_s"] = 1.0
@@ -145,7 +145,7 @@ def test_suspension_mode_follows_the_trucks():
     from scipy import signal
 
     from analysis.calibration.drive import suspension_mode
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     def modes(line_m_s2: float = 0.0, **axis) -> tuple[float, float, float]:
         """(vertical mode Hz, lateral mode Hz, the x axis's mean PSD over 100-400 Hz); with a
@@ -185,7 +185,7 @@ def test_speed_overshoot_follows_the_velocity_loop():
     rises (× 1.5: at least 10 %) and moves far less with the position loop (× 1.5: under a
     quarter of that)."""
     from analysis.calibration.drive import speed_overshoot
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     ax = load("foreign-16mm").axis
 
@@ -211,9 +211,9 @@ def test_imu_statistics_follow_the_velocity_loop_and_the_lateral_trucks():
     from types import SimpleNamespace
 
     from analysis.calibration.drive import imu_reversal, imu_yaw_mode
-    from twin.campaign import KIND_PHASE2, condition_at, make_world, rng_for
-    from twin.scenario import from_dict, load
-    from twin.simulate import Simulator, phase2_measure_runs, phase2_trajectory
+    from twin.sim.campaign import KIND_PHASE2, condition_at, make_world, rng_for
+    from twin.sim.scenario import from_dict, load
+    from twin.sim.simulate import Simulator, phase2_measure_runs, phase2_trajectory
 
     base = load("foreign-16mm").model_dump(mode="json")
     base["phase2"].update(start_mm=40.0, end_mm=240.0)
@@ -293,13 +293,13 @@ def round_trip(tmp_path_factory):
 
 
 def _truth(tmp: Path) -> dict:
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     return load(REPO / "scenarios" / "foreign-16mm.toml", list(SMALL)).model_dump(mode="json")
 
 
 def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent(round_trip):
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     tmp, cal = round_trip
     truth = _truth(tmp)
@@ -435,7 +435,7 @@ def test_the_twin_seeds_draw_the_calibrated_values_from_their_joint_distribution
     from twin.harness.calibration.uncertainty import draw_calibrated, joint_covariance
     from twin.harness.calibration.values import Value
     from twin.harness.diagnosis.cache import with_seed
-    from twin.scenario import from_dict, load
+    from twin.sim.scenario import from_dict, load
 
     sd, rho = np.array([0.1, 0.2]), 0.8
     cov = {"keys": ["axis.carriage_mass_kg", "axis.rail_friction_N"],

@@ -13,7 +13,7 @@ import numpy as np
 from conftest import REPO, SMALL, run_twin
 
 from analysis.dataset import measurement_keys, open_measurements, open_truth, truth_mentions
-from twin.parts import PartStore
+from twin.sim.parts import PartStore
 
 
 def _arrays(path):
@@ -125,8 +125,8 @@ def test_resume_refuses_another_scenario(small_campaign):
 
 
 def test_table_onset_is_last_healthy_point():
-    from twin.campaign import onset_hours
-    from twin.scenario import load
+    from twin.sim.campaign import onset_hours
+    from twin.sim.scenario import load
 
     s = load(REPO / "scenarios/paper-reference.toml")
     assert onset_hours(s) == 99.0  # healthy up to 99 h, preload loss from 100 h
@@ -137,8 +137,8 @@ def test_table_onset_is_last_healthy_point():
 
 
 def test_world_does_not_depend_on_nuisance_settings():
-    from twin.campaign import make_world
-    from twin.scenario import load
+    from twin.sim.campaign import make_world
+    from twin.sim.scenario import load
 
     a = make_world(load(REPO / "scenarios/quick.toml"))
     b = make_world(load(REPO / "scenarios/quick.toml", ["phase2.origin_offset_max_mm=1.0",
@@ -148,8 +148,8 @@ def test_world_does_not_depend_on_nuisance_settings():
 
 
 def test_screw_cools_during_pauses():
-    from twin.campaign import temperature_at
-    from twin.scenario import load
+    from twin.sim.campaign import temperature_at
+    from twin.sim.scenario import load
 
     s = load(REPO / "scenarios/paper-rtf.toml")  # pauses at 855.5 h (78 d) and 4033 h (122 d)
     t = temperature_at(s, [0.0, 855.0, 855.5, 856.5, 900.0])
@@ -168,10 +168,10 @@ def test_batched_campaigns_equal_campaigns_simulated_alone(tmp_path):
     gains) give exactly the arrays each gives alone."""
     import pytest
 
-    from twin.campaign import simulate_campaign, simulate_campaigns_batched
     from twin.harness.diagnosis.cache import with_seed
     from twin.harness.diagnosis.library import with_effects
-    from twin.scenario import load
+    from twin.sim.campaign import simulate_campaign, simulate_campaigns_batched
+    from twin.sim.scenario import load
 
     nom = load(REPO / "scenarios" / "diagnose-bench.toml",
                ["campaign.total_hours=60", "phase2.session_hours=[50.0]"])
@@ -202,7 +202,7 @@ def test_batched_campaigns_equal_campaigns_simulated_alone(tmp_path):
 def test_one_rail_pass_keeps_the_paper_figures(tmp_path):
     """``scenarios/paper-rtf.toml`` simulates its Phase II sessions in one rollout pass
     (``phase2.rail_passes = 1``: rails looked up where the nut's flank contact puts the carriage,
-    :func:`twin.simulate.flank_contact_position`) instead of two (the fixed point). The IMU's
+    :func:`twin.sim.simulate.flank_contact_position`) instead of two (the fixed point). The IMU's
     recorded signals change (the passes differ), but what Phase II measures moves by a small
     fraction of its session-to-session scatter (about 1 µm, docs/validation.md): the carriage's
     true rest-to-rest travels by less than 0.1 µm, ``twin backlash``'s change of backlash per
@@ -215,7 +215,7 @@ def test_one_rail_pass_keeps_the_paper_figures(tmp_path):
 
     import h5py
 
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     assert load(REPO / "scenarios/paper-rtf.toml").phase2.rail_passes == 1
     sets = ["campaign.phase1=false", "phase2.session_hours=[50.0, 5000.0, 8000.0]",
@@ -256,8 +256,8 @@ def test_explicit_sample_hours_give_those_samples():
     """``phase1.sample_hours`` (issue 15, item 3): each listed hour starts a sample whose
     captures follow ``capture_interval_minutes`` apart; empty (the default) is the plan of the
     interval, unit for unit."""
-    from twin.campaign import plan
-    from twin.scenario import load
+    from twin.sim.campaign import plan
+    from twin.sim.scenario import load
 
     quick = load(REPO / "scenarios/quick.toml")
     old = [u for u in plan(quick) if u.kind == "phase1"]

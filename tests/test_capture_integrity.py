@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 from conftest import REPO
 
-from twin import campaign as cp
-from twin.model import ModelIndex, build_model
-from twin.scenario import Scenario, to_axis
-from twin.simulate import Simulator, phase1_capture, phase1_profile
+from twin.sim import campaign as cp
+from twin.sim.model import ModelIndex, build_model
+from twin.sim.scenario import Scenario, to_axis
+from twin.sim.simulate import Simulator, phase1_capture, phase1_profile
 
 #: Columns of qpos, sens and ctrl of the axis model, looked up by name.
 IX = ModelIndex.of(build_model(to_axis(Scenario()), 2e-4))
@@ -68,10 +68,10 @@ def test_analysis_never_imports_the_simulator():
 
 def test_simulated_motion_matches_the_kinematic_truth():
     """At constant speed the simulated carriage pose at the IMU equals the quasi-static error
-    motions stored in truth.h5 (twin.geometry.true_error_motions), once the pitch ringing after
+    motions stored in truth.h5 (twin.sim.geometry.true_error_motions), once the pitch ringing after
     the 19.6 m/s² acceleration has settled (its size and decay: docs/validation.md)."""
-    from twin import geometry as geo
-    from twin.simulate import phase2_trajectory
+    from twin.sim import geometry as geo
+    from twin.sim.simulate import phase2_trajectory
 
     sim = Simulator(WORLD, SCEN.phase2.timestep_s)
     cond = cp.condition_at(SCEN, 100.0, 0.001)

@@ -14,8 +14,8 @@ import time
 import pytest
 
 from tests.conftest import REPO, SMALL, TWIN, run_twin
-from twin.campaign import plan
-from twin.scenario import load
+from twin.sim.campaign import plan
+from twin.sim.scenario import load
 
 
 def one_line(text: str) -> str:

@@ -1,11 +1,11 @@
-"""Dotted keys (``--set``, sweep axes, effects) and the validation messages of twin.config."""
+"""Dotted keys (``--set``, sweep axes, effects) and the validation messages of twin.sim.config."""
 
 from __future__ import annotations
 
 import pytest
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from twin.config import explain_errors, get_dotted, set_dotted
+from twin.sim.config import explain_errors, get_dotted, set_dotted
 
 
 def test_set_and_get_dotted_keys_with_list_elements():

@@ -21,7 +21,7 @@ from analysis.dataset import (
     open_truth,
     truth_mentions,
 )
-from twin.parts import PartStore
+from twin.sim.parts import PartStore
 
 AXIS = {"lead_mm": 10.0, "travel_mm": 450.0, "load_kg": 100.0, "instruments": ["acc1", "acc2", "imu"]}
 N1 = 200  # samples per Phase I capture

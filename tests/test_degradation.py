@@ -1,4 +1,4 @@
-"""Tests of twin.degradation: wear law, drag torque, stiffness, thermal transient, XJTU fit."""
+"""Tests of twin.sim.degradation: wear law, drag torque, stiffness, thermal transient, XJTU fit."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.degradation import (
+from twin.sim.degradation import (
     WearLaw,
     backlash_um,
     contact_stiffness,

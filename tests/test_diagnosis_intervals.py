@@ -131,7 +131,7 @@ def test_candidate_scenarios_and_artefact_plans_use_the_response_seeds():
     ``response_seeds`` campaigns, an order line on all (its response is their mean)."""
     from twin.harness import diagnosis as gr
     from twin.harness.diagnosis.candidates import candidates
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     nominal = load(REPO / "scenarios" / "diagnose-bench.toml")
     seeded = [gr.with_seed(nominal, s) for s in gr.twin_seeds(nominal, 5)]

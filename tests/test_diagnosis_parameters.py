@@ -31,9 +31,9 @@ pytestmark = pytest.mark.timeout(1200)
 
 
 def test_every_parameter_is_a_scale_around_one_on_real_keys():
-    from twin.config import get_dotted
     from twin.harness.diagnosis.candidates.parameters import MIN_DEVIATION, PARAMETERS
-    from twin.scenario import load
+    from twin.sim.config import get_dotted
+    from twin.sim.scenario import load
 
     s = load(BENCH_SCENARIO)
     data = s.model_dump(mode="json")
@@ -114,7 +114,7 @@ def test_kinds_choose_the_candidates():
 
 def _result():
     from twin.harness.diagnosis.library import library_json
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     s = load(BENCH_SCENARIO)
     return {"library": library_json(["axis.carriage_mass_kg", "axis.truck_stiffness", "cogging"], nominal=s)}
@@ -270,7 +270,7 @@ def test_a_same_recording_alternative_is_said_so():
     not tell them apart; a floor fitted below 1 is no such twin (then "not told apart"), and
     another alternative keeps "not told apart"."""
     from twin.harness.diagnosis.library import library_json
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     res = {"library": library_json(["noise:torque", "sensors.torque_noise_Nm", "mains_line:torque"],
                                    nominal=load(BENCH_SCENARIO))}

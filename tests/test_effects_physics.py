@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from twin import geometry as geo
-from twin.campaign import KIND_PHASE1, KIND_WORLD, condition_at, make_world, rng_for
-from twin.drive import Move, command_profile
-from twin.model import BaseMode, ModelIndex, build_mjcf, build_model, stiffness_of
-from twin.scenario import Scenario, ScenarioError, from_dict, to_axis
-from twin.simulate import Simulator, phase1_capture, phase1_profile
+from twin.sim import geometry as geo
+from twin.sim.campaign import KIND_PHASE1, KIND_WORLD, condition_at, make_world, rng_for
+from twin.sim.drive import Move, command_profile
+from twin.sim.model import BaseMode, ModelIndex, build_mjcf, build_model, stiffness_of
+from twin.sim.scenario import Scenario, ScenarioError, from_dict, to_axis
+from twin.sim.simulate import Simulator, phase1_capture, phase1_profile
 
 #: Columns of qpos, sens and ctrl of the axis model, looked up by name.
 IX = ModelIndex.of(build_model(to_axis(Scenario()), 2e-4))
@@ -62,7 +62,7 @@ def test_effects_off_leave_the_twin_unchanged():
     # 1369986.2868011594, torque 2906.2089984006016, acc1 -1821.9207116366451, acc2
     # -1822.88680510236, qpos 162826.6000757082, sens 66775.79363842307), and the accelerometers'
     # once more when they came to read the acceleration MuJoCo's implicit step applies
-    # (twin.model.accelerometer_implicit_correction; the motion, speed, torque and qpos, is the
+    # (twin.sim.model.accelerometer_implicit_correction; the motion, speed, torque and qpos, is the
     # same; before it acc1 -1801.0873013682358, acc2 -1802.0504854830288, sens 66775.81590155796).
     before = {"speed": 1369986.2268380523, "torque": 2901.3790013155667,
               "acc1": -1801.048135115605, "acc2": -1802.0051207799406,

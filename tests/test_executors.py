@@ -1,5 +1,5 @@
 """One executor choice for `twin simulate`, `twin backlash` and `twin sweep`
-(twin/executors.py): units of a campaign sent to a real Dask scheduler, and the sessions
+(analysis/base/executors.py): units of a campaign sent to a real Dask scheduler, and the sessions
 of `twin backlash` run on local processes or on that scheduler, give exactly what one process
 gives."""
 
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from conftest import REPO, run_twin
 
+from analysis.base.executors import mapper
 from analysis.phase2.workflow import run as backlash_run
-from twin.campaign import simulate_campaign
-from twin.executors import mapper
-from twin.scenario import load
+from twin.sim.campaign import simulate_campaign
+from twin.sim.scenario import load
 
 # backlash-steps cut to three sessions (0, 2 and 20 µm) of two short runs at 100 mm/s.
 TINY = ["phase2.session_hours=[100.0, 300.0, 600.0]", "phase2.runs_per_session=2",
@@ -174,7 +174,7 @@ def test_keep_freed_memory_stops_refaulting_pages():
     import sys
 
     code = ("import resource, numpy as np\n"
-            "from twin.executors import keep_freed_memory\n"
+            "from analysis.base.executors import keep_freed_memory\n"
             "def faults():\n"
             "    f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
             "    for _ in range(50):\n"
@@ -196,7 +196,7 @@ def test_keep_freed_memory_stops_refaulting_pages():
 def test_twin_workers_sets_the_default_processes_and_a_bad_value_is_refused(monkeypatch, tmp_path):
     """TWIN_WORKERS sets how many local processes a command starts when not told; a value that is
     not a whole number >= 1 ends any command with exit 2 naming the variable and the value."""
-    from twin.executors import _LocalPool, _Serial, default_processes, make_executor
+    from analysis.base.executors import _LocalPool, _Serial, default_processes, make_executor
 
     monkeypatch.setenv("TWIN_WORKERS", "3")
     assert default_processes() == 3

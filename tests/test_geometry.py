@@ -1,4 +1,4 @@
-"""Tests of twin.geometry: truck spatial filter, ball pass, lead error, rail statistics, signs."""
+"""Tests of twin.sim.geometry: truck spatial filter, ball pass, lead error, rail statistics, signs."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from twin import geometry as geo
-from twin.scenario import Scenario, to_axis
+from twin.sim import geometry as geo
+from twin.sim.scenario import Scenario, to_axis
 
 #: The default scenario's carriage layout.
 CARRIAGE = geo.CarriageGeometry.from_carriage(to_axis(Scenario()).carriage)

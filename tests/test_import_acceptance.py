@@ -118,7 +118,7 @@ def test_foreign_recording_small(tmp_path):
     scenario that ``scenario init`` wrote has the recording's layout (the check ``twin diagnose``
     makes before anything else: it simulates the scenario once and compares)."""
     from twin.harness.diagnosis.ensemble import check_layout
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     out = _acceptance(tmp_path, SMALL, wrong_lead=False)
     check_layout(out["campaign"], load(out["lab"] / "axis.toml"), tmp_path / "cache")  # LayoutError if not

@@ -75,7 +75,7 @@ def test_analysis_verbs_run_without_the_optional_modules(small_campaign, tmp_pat
 
 
 def test_shipped_scenarios_by_name(tmp_path):
-    from twin.scenario import ScenarioError, find_scenario, load, shipped_names
+    from twin.sim.scenario import ScenarioError, find_scenario, load, shipped_names
 
     assert {"quick", "demo", "paper-rtf", "backlash-steps"} <= set(shipped_names())
     assert load("quick") == load(REPO / "scenarios/quick.toml")

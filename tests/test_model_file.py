@@ -5,8 +5,8 @@ import mujoco
 import numpy as np
 from conftest import REPO
 
-from twin.model import ModelIndex, build_mjcf, build_model
-from twin.scenario import Scenario, to_axis
+from twin.sim.model import ModelIndex, build_mjcf, build_model
+from twin.sim.scenario import Scenario, to_axis
 
 #: Columns of qpos, sens and ctrl of the axis model, looked up by name.
 IX = ModelIndex.of(build_model(to_axis(Scenario()), 2e-4))

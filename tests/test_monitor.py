@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 import pytest
 
-from analysis.files import write_json
+from analysis.base.files import write_json
 from tests.conftest import REPO, TWIN, run_twin
 
 REFERENCE_SMALL = ["--set", "phase1.captures_per_sample=2", "--set", "phase1.capture_s=4.0",

@@ -1,6 +1,6 @@
 """The ball nut's contact (issue 13, item 6): with a clearance b > 0 the nut transmits no force
 inside the gap, and on a flank it is a Kelvin–Voigt contact K·δ + C·δ' that only pushes (the
-tendon's limit constraint, see twin.model); with b = 0 it is the bilateral spring and damper.
+tendon's limit constraint, see twin.sim.model); with b = 0 it is the bilateral spring and damper.
 
 The nut's force on the carriage is read from MuJoCo, not from the contact law: the ball-nut
 tendon's passive force (``qfrc_passive`` of ``carriage_x``, whose coefficient in the tendon is 1
@@ -17,7 +17,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from twin.model import (
+from twin.sim.model import (
     BaseMode,
     MechanicalState,
     ModelIndex,
@@ -28,13 +28,13 @@ from twin.model import (
     build_model,
     state_fields,
 )
-from twin.scenario import Scenario, to_axis
+from twin.sim.scenario import Scenario, to_axis
 
 AXIS = to_axis(Scenario())
 DT = Scenario().phase1.timestep_s
 IX = ModelIndex.of(build_model(AXIS, DT))
 B = 10e-6  # m, the clearance of the gap tests
-V_CROSS = 9e-3  # m/s: a 10 µm gap crossed at a 400 mm/s reversal (module docstring of twin.model)
+V_CROSS = 9e-3  # m/s: a 10 µm gap crossed at a 400 mm/s reversal (module docstring of twin.sim.model)
 
 
 def _model(backlash: float, axis=AXIS) -> tuple[mujoco.MjModel, object]:

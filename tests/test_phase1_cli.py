@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from analysis import registry
+from analysis.base import registry
 from tests.conftest import REPO, run_twin
 
 # Tiny campaigns: one 3-s capture per sample.

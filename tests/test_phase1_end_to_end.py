@@ -15,7 +15,7 @@ import json
 import numpy as np
 import pytest
 
-from analysis import registry
+from analysis.base import registry
 from analysis.dataset import open_truth
 from analysis.phase1 import detect, pipeline
 from tests.conftest import REPO, run_twin

@@ -331,7 +331,7 @@ def slow_result(slow_campaign):
 
 
 def test_check3_observed_pitch(slow_campaign, slow_result):
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     s = load(STEPS)
     expected = s.axis.lead_mm * 1e-3 * (1.0 + s.geometry.cumulative_lead_error_um_per_m * 1e-6)

@@ -67,7 +67,7 @@ def backlash_step_campaign(tmp_path_factory):
 def truth_on_grid(truth_path, session: str, x_cmd: np.ndarray) -> np.ndarray:
     """True error motions (6, n) at the commanded grid ``x_cmd``: the truth grid is the true
     carriage position, which is the commanded one plus the session's origin offset
-    (``twin.simulate.true_error_motions``); without backlash and up to the lead error, which
+    (``twin.sim.simulate.true_error_motions``); without backlash and up to the lead error, which
     moves rail features by < 4 µm over the stroke. Unobservable terms removed."""
     with open_truth(truth_path) as t:
         x, e, attrs = t.session(session)

@@ -11,9 +11,9 @@ import pytest
 from conftest import REPO
 
 from analysis.phase2.strokes import StrokeError, centroid_delay, find_pulses, half_velocity_delay
-from twin import campaign as cp
-from twin.scenario import load
-from twin.simulate import Simulator, phase2_command, phase2_measure
+from twin.sim import campaign as cp
+from twin.sim.scenario import load
+from twin.sim.simulate import Simulator, phase2_command, phase2_measure
 
 SPEEDS = (0.02, 0.1, 0.5)  # m/s: the paper's three speeds
 

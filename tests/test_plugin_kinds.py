@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from conftest import REPO, TWIN
 
-from analysis import registry
+from analysis.base import registry
 from analysis.dataset import open_truth
 
 MODULE = "mylaws_plugin_kinds"
@@ -139,8 +139,8 @@ def _sets(values: dict) -> list[str]:
 
 
 def test_law_by_module_class_drives_the_campaign_state(plugin):
-    from twin.campaign import condition_at, degradation_at, onset_hours
-    from twin.scenario import from_dict, load
+    from twin.sim.campaign import condition_at, degradation_at, onset_hours
+    from twin.sim.scenario import from_dict, load
 
     s = load(REPO / "scenarios/quick.toml", [f'degradation.law="{MODULE}:Sigmoid"', *_sets(LAW)])
     hours = np.array([0.0, 150.0, 250.0, 400.0, 600.0])
@@ -159,8 +159,8 @@ def test_law_by_module_class_drives_the_campaign_state(plugin):
 
 
 def test_bad_laws_and_keys_raise_the_exact_error(plugin):
-    from twin.laws import names
-    from twin.scenario import ScenarioError, load
+    from twin.sim.laws import names
+    from twin.sim.scenario import ScenarioError, load
 
     quick = REPO / "scenarios/quick.toml"
     assert {"wear", "table"} <= set(names())  # the built-ins register themselves
@@ -194,7 +194,7 @@ def test_bad_laws_and_keys_raise_the_exact_error(plugin):
     assert error(f'degradation.law="{MODULE}:NotALaw"') == (
         f"{quick}: key `degradation.law` = '{MODULE}:NotALaw' is a NotALaw without "
         "preload_fraction, backlash, injected_onset_hours; expected a degradation law with "
-        "preload_fraction, backlash, injected_onset_hours (twin.laws).")
+        "preload_fraction, backlash, injected_onset_hours (twin.sim.laws).")
 
 
 def test_law_by_entry_point_through_twin_simulate(plugin, tmp_path):
@@ -229,13 +229,13 @@ def test_law_by_entry_point_through_twin_simulate(plugin, tmp_path):
 
 def test_entry_points_are_listed_with_the_built_ins(plugin):
     src, ep = plugin
-    code = ("from twin.laws import names; from twin.harness.diagnosis.candidates import candidates; "
+    code = ("from twin.sim.laws import names; from twin.harness.diagnosis.candidates import candidates; "
             "print(list(names())); print(list(candidates()))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                        env=dict(os.environ, PYTHONPATH=os.pathsep.join((str(REPO), src, ep))))
     laws_line, cands_line = r.stdout.strip().splitlines()
     from twin.harness.diagnosis.candidates import LIBRARY
-    from twin.laws import names
+    from twin.sim.laws import names
     assert eval(laws_line) == [*names(), "sigmoid"]
     assert eval(cands_line) == [*LIBRARY, "carriage_mass"]
 
@@ -252,7 +252,7 @@ def test_candidate_by_module_name_and_bad_names(plugin, tmp_path):
     from twin.harness.diagnosis.library import KINDS, candidate_names, library_json, resolve_library, with_effects
 
     ALL_KINDS = tuple(KINDS)  # the error names every candidate --candidate accepts (twin parameters too)
-    from twin.scenario import load
+    from twin.sim.scenario import load
 
     effects, artefacts = resolve_library([f"{MODULE}:HEAVY", "cogging", "gain:acc1"])
     assert list(effects) == ["carriage_mass", "cogging"] and artefacts == ["gain:acc1"]

@@ -22,7 +22,7 @@ import pandas as pd
 import pytest
 from conftest import REPO, TWIN
 
-from analysis import registry
+from analysis.base import registry
 
 PACKAGE = '''
 """A developer's own methods: a kNN detector and a scaled backlash estimator."""
@@ -236,7 +236,7 @@ def test_installed_entry_points_through_every_verb(campaign, tmp_path):
     subprocess.run([*pip, "install", "--no-deps", str(pkg)], check=True, capture_output=True,
                    timeout=600)
     try:
-        r = subprocess.run([sys.executable, "-c", "from analysis import registry; "
+        r = subprocess.run([sys.executable, "-c", "from analysis.base import registry; "
                             "print(registry.names('detectors'), registry.names('backlash_estimators'))"],
                            capture_output=True, text=True, check=True, cwd=tmp_path)
         assert f"knn_{tag}" in r.stdout and f"scaled_{tag}" in r.stdout

@@ -4,7 +4,7 @@ allowed, without a traceback (check 12 of the twin issue)."""
 import pytest
 from conftest import REPO, run_twin
 
-from twin.scenario import ScenarioError, load
+from twin.sim.scenario import ScenarioError, load
 
 QUICK = REPO / "scenarios/quick.toml"
 
@@ -63,7 +63,7 @@ def test_shipped_scenarios_load():
 
 
 def test_reduced_scale_is_one_override():
-    from twin.campaign import plan
+    from twin.sim.campaign import plan
 
     full = load(REPO / "scenarios/paper-rtf.toml")
     reduced = load(REPO / "scenarios/paper-rtf.toml", ["campaign.scale=0.1"])
@@ -80,8 +80,8 @@ def test_reduced_scale_is_one_override():
 def test_friction_constraint_keys():
     """axis.friction_timeconst_ms / friction_impedance set MuJoCo's friction constraint of the
     nut drag and the rails; unset, the MJCF carries no such attribute (MuJoCo's defaults)."""
-    from twin.model import build_mjcf, build_model
-    from twin.scenario import to_axis
+    from twin.sim.model import build_mjcf, build_model
+    from twin.sim.scenario import to_axis
 
     plain = load(QUICK)
     assert "solreffriction" not in build_mjcf(to_axis(plain), 2e-4)

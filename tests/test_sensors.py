@@ -1,4 +1,4 @@
-"""Tests of the instrument measurement models (twin/sensors/instruments.py).
+"""Tests of the instrument measurement models (twin/sim/sensors/instruments.py).
 
 Check 7 of the project's issue: at standstill the IMU's noise densities, sampling rates and the
 sensing of gravity tilt match the paper's section III figures.
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from twin.sensors import instruments
-from twin.sensors.instruments import (
+from twin.sim.sensors import instruments
+from twin.sim.sensors.instruments import (
     MICRO_G,
     MV_PER_G,
     STANDARD_GRAVITY,

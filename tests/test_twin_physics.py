@@ -4,7 +4,7 @@ Run ``pytest -q tests/test_twin_physics.py -s`` to see the measured figures of e
 
 Conventions used throughout:
 
-- Row k of a :class:`twin.simulate.Trajectory` is the state at t_k = k·dt, the time of command
+- Row k of a :class:`twin.sim.simulate.Trajectory` is the state at t_k = k·dt, the time of command
   sample k and of MuJoCo's sensor row k (:func:`_at_rows` is the identity; it marks the places
   where that alignment matters: at 20 mm/s and dt = 0.2 ms one sample is 4 µm of travel).
 - "Nut point": the ball-nut tendon acts along the screw axis, ZN below the centre of mass, so
@@ -29,12 +29,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from twin import campaign as cp
-from twin import geometry as geo
-from twin.drive import Move, Profile, command_profile
-from twin.model import MechanicalState, ModelIndex, apply_state, build_model, state_fields, stiffness_of
-from twin.scenario import DialConfig, Scenario, to_axis
-from twin.simulate import (
+from twin.sim import campaign as cp
+from twin.sim import geometry as geo
+from twin.sim.drive import Move, Profile, command_profile
+from twin.sim.model import MechanicalState, ModelIndex, apply_state, build_model, state_fields, stiffness_of
+from twin.sim.scenario import DialConfig, Scenario, to_axis
+from twin.sim.simulate import (
     PHASE2_LEAD_IN,
     Condition,
     Simulator,
@@ -135,7 +135,7 @@ def _tendon(sim: Simulator, traj, cond: Condition, vel: bool = False) -> np.ndar
 
 
 def _nut_force(sim: Simulator, traj, cond: Condition) -> np.ndarray:
-    """Axial force of the ball nut on the carriage, N, by the model's contact law (twin.model):
+    """Axial force of the ball nut on the carriage, N, by the model's contact law (twin.sim.model):
     with b = 0 the spring and damper −K·L − C·L'; with b > 0 the flank in contact pushes with
     K·δ + C·δ' (δ the compression beyond b/2), never pulls, and nothing inside the gap
     (tests/test_nut_contact.py checks this law against MuJoCo's constraint force)."""

@@ -21,7 +21,7 @@ from scipy.spatial.transform import Rotation
 from analysis.dataset import open_measurements, open_truth
 from tests.conftest import REPO, TWIN, run_twin
 from twin.harness.view import EXAGGERATION, POSE_RATE_HZ, carriage_poses, hours_to_ns
-from twin.scenario import Scenario, from_dict, to_axis
+from twin.sim.scenario import Scenario, from_dict, to_axis
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from analysis.base.files import atomic_write
 from analysis.dataset import schema
 from analysis.dataset.attrs import _dumps, write_attrs
 from analysis.dataset.axis import AxisDescription
@@ -30,7 +31,6 @@ from analysis.dataset.validate import (
     _routine,
     check_dtype,
 )
-from analysis.files import atomic_write
 
 # Unit of a truth timeline array, inferred from the unit its name ends with (longest first).
 _UNIT_SUFFIXES = (

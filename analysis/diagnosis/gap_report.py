@@ -23,6 +23,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
+from analysis.base.files import write_text  # noqa: E402
 from analysis.dataset import DOFS  # noqa: E402
 from analysis.diagnosis import wording as w  # noqa: E402
 from analysis.diagnosis.signature import (  # noqa: E402
@@ -33,7 +34,6 @@ from analysis.diagnosis.signature import (  # noqa: E402
     Region,
     _band_labels,
 )
-from analysis.files import write_text  # noqa: E402
 
 _ENV = jinja2.Environment(
     loader=jinja2.ChoiceLoader([jinja2.PackageLoader("analysis.diagnosis", "templates"),

@@ -158,7 +158,7 @@ def _duration_outliers(rep: CheckReport, kind: str, groups: dict[str, list[tuple
 def _naming_order(rep: CheckReport, path: Path) -> None:
     """The laboratory's session names (``import.json`` next to the recording) in the order of
     the hours: a session named earlier but given more hours than a later one is a warning."""
-    from analysis.files import read_json
+    from analysis.base.files import read_json
 
     src = path.parent / "import.json"
     if not src.is_file():
@@ -322,7 +322,7 @@ def cached_check(directory: str | os.PathLike) -> CheckReport:
     ``measurements.h5`` and ``import.json`` (size, modification time) and :data:`CHECK_VERSION`
     are unchanged: the analyses check a recording before every run, and a campaign of tens of
     GB is read once. A cache that cannot be written (a read-only folder) is skipped."""
-    from analysis.files import write_json
+    from analysis.base.files import write_json
 
     path = Path(directory)
     h5 = path if path.suffix == ".h5" and not path.is_dir() else path / "measurements.h5"

@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.files import atomic_write, write_json
 from analysis.dataset import DatasetError, assemble_measurements
 from analysis.dataset.axis import AxisDescription
 from analysis.dataset.schema import ROUTINE_ATTRS
-from analysis.files import atomic_write, write_json
 from analysis.ingest.readers import Channel, read_channels
 from analysis.ingest.spec import ImportSpec, ImportSpecError, PhaseSpec, load_spec
 from analysis.ingest.units import factor, to_si

@@ -50,11 +50,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from analysis.base.files import read_json, write_json
 from analysis.dataset import DatasetError, assemble_measurements
 from analysis.dataset.axis import AxisDescription
 from analysis.dataset.live import SOURCE_FORMAT, UNIT_FORMAT, UNIT_VERSION, sha256_of
 from analysis.dataset.schema import ROUTINE_ATTRS
-from analysis.files import read_json, write_json
 from analysis.ingest.convert import (
     _hours_table,
     _key,
@@ -180,7 +180,7 @@ class ImportWatcher:
     # --- state -------------------------------------------------------------------------------------
     def _lock(self) -> None:
         """One watcher per output folder (an exclusive lock on ``OUT/.watch.lock``)."""
-        from analysis.files import exclusive_lock
+        from analysis.base.files import exclusive_lock
 
         self._lock_fh = exclusive_lock(self.out / ".watch.lock", f"{self.out}: another twin import --watch is "
                                        "writing this campaign folder; stop it first, or give another -o",

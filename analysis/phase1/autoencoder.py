@@ -33,9 +33,9 @@ from __future__ import annotations
 import numpy as np
 from sklearn.neural_network import MLPRegressor
 
+from analysis.base.registry import register
 from analysis.phase1 import limits
 from analysis.phase1.detectors import PhaseIDetector
-from analysis.registry import register
 
 __all__ = ["TorqueAutoencoder"]
 

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import registry
+from analysis.base import registry
+from analysis.base.files import write_json
 from analysis.dataset import open_measurements, open_truth
-from analysis.files import write_json
 from analysis.phase1 import pipeline
 from analysis.phase1.figures import plot_fig6
 from analysis.phase1.scoring import score_method
@@ -65,7 +65,7 @@ def run(campaign: Path, reference: Path | None, out: Path, methods: Sequence[str
     baseline rows are those whose hours are the model's baseline hours (none if it was fitted
     on another campaign).
 
-    ``methods``: registered detector names or ``module:Class`` (:mod:`analysis.registry`);
+    ``methods``: registered detector names or ``module:Class`` (:mod:`analysis.base.registry`);
     default every registered detector, in registration order.
 
     Raises :class:`DetectError`, :class:`analysis.dataset.DatasetError` or

@@ -42,9 +42,9 @@ from sklearn.mixture import GaussianMixture
 from sklearn.svm import OneClassSVM
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from analysis.base.registry import register
 from analysis.params import InheritedParams
 from analysis.phase1 import limits
-from analysis.registry import register
 
 __all__ = ["GMMMD", "OCSVM", "PCAT2", "SOMMQE", "IForest", "PhaseIDetector"]
 

@@ -1,6 +1,6 @@
 """The figure of Phase I like the paper's Fig. 6: one panel per method, its score against operating
 hours with its limit, the baseline, the onset and the detection (matplotlib, Agg). Each method is
-drawn in its fixed colour and marker (:func:`analysis.registry.style`)."""
+drawn in its fixed colour and marker (:func:`analysis.base.registry.style`)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from analysis.registry import label, style
+from analysis.base.registry import label, style
 
 __all__ = ["plot_fig6"]
 

@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import registry
-from analysis.files import atomic_write
+from analysis.base import registry
+from analysis.base.files import atomic_write
 from analysis.phase1 import limits
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "ModelFileError", "Phase1Model", "recording_signature"]

@@ -20,7 +20,7 @@ import h5py
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from analysis import registry
+from analysis.base import registry
 from analysis.dataset import DatasetError, open_measurements, open_truth
 from analysis.phase1.features import (
     FEATURE_NAMES,
@@ -183,7 +183,7 @@ def select_features(X: np.ndarray, labels: np.ndarray, fraction: float = 0.9) ->
 
 
 def make_detector(name: str, random_state: int = 0, **params):
-    """A fresh detector: ``name`` a registered detector (:mod:`analysis.registry`, the paper's
+    """A fresh detector: ``name`` a registered detector (:mod:`analysis.base.registry`, the paper's
     settings for the six built-ins) or ``module:Class``; ``random_state`` is passed if the
     detector takes one; ``params`` are further constructor parameters."""
     if registry.accepts(registry.get("detectors", name).factory, "random_state"):

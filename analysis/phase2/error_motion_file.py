@@ -9,8 +9,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from analysis.base.files import atomic_write
 from analysis.dataset import DOFS, DatasetError
-from analysis.files import atomic_write
 
 __all__ = ["read_error_motion_bands", "read_error_motions", "write_error_motions"]
 

@@ -13,7 +13,7 @@ Steps (time → position; the approach of Vogl et al., PHM Society 2016):
    angles are unobservable anyway.
 3. **Time → position**: each IMU sample taken at t_s describes the motion at t_s − τ, τ the
    sensor's group delay (second-order Butterworth low-pass, τ = 1/(2π·f_c·sin(π/4)) =
-   √2/(2π·f_c): 0.75 ms at 300 Hz, 1.13 ms at 200 Hz; ``twin.sensors.instruments``
+   √2/(2π·f_c): 0.75 ms at 300 Hz, 1.13 ms at 200 Hz; ``twin.sim.sensors.instruments``
    ``butterworth_group_delay`` and any filter handbook). The commanded position at t_s − τ is
    read by linear interpolation of ``position_cmd``, exact in the cruise where it is linear in t.
    Samples within ``trim_s`` of the cruise start (the carriage pitch rings ~0.1 s after each

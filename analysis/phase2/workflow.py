@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis import registry
+from analysis.base import registry
+from analysis.base.files import write_json
 from analysis.dataset import DOFS, open_measurements, open_truth
-from analysis.files import write_json
 from analysis.injected import injected_change_um
 from analysis.phase2.backlash import (
     BacklashEstimator,
@@ -87,7 +87,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         baseline_sessions: leading sessions known to share the initial backlash; the estimates
             are re-zeroed on their mean.
         estimator: an unfitted backlash estimator, or a registered name or ``module:Class``
-            (:mod:`analysis.registry`; made with ``params`` and the axis's stroke and lead)
+            (:mod:`analysis.base.registry`; made with ``params`` and the axis's stroke and lead)
             (default: the registered default, the paper's method; on the IMU axis with
             ``stationary="E_XX"``, Eq. 5); its registered name and label are recorded in
             ``estimator`` and its class in ``parameters.estimator``.

@@ -30,7 +30,7 @@ def _pearson(a, b) -> float | None:
 
 
 def _method_names() -> dict[str, str]:
-    from analysis.registry import entries
+    from analysis.base.registry import entries
 
     return {name: e.label for name, e in entries("detectors").items()}
 

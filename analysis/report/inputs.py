@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.files import read_json
 from analysis.dataset import open_measurements, open_truth
-from analysis.files import read_json
 from analysis.report.paper import COMMANDS
 from analysis.scoring import score, write_score
 

@@ -11,8 +11,8 @@ from typing import Any
 
 import jinja2
 
+from analysis.base.files import write_text
 from analysis.dataset import DatasetError
-from analysis.files import write_text
 from analysis.report.compare import (
     _f,
     _finite,
@@ -120,7 +120,7 @@ def _scenario_rows(s: dict) -> list[tuple[str, str]]:
                  ("table: hours", d.get("table_hours")),
                  ("table: preload fraction", d.get("table_preload_fraction")),
                  ("table: backlash (µm)", d.get("table_backlash_um"))]
-    elif d.get("law", "wear") != "wear":  # a plug-in law (twin.laws): the whole section
+    elif d.get("law", "wear") != "wear":  # a plug-in law (twin.sim.laws): the whole section
         rows += [("degradation law", d.get("law"))] + [
             (f"degradation: {k}", v) for k, v in d.items() if k != "law"]
     else:

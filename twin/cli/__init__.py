@@ -12,7 +12,7 @@ import importlib
 import sys
 
 from twin.cli.common import app, console, gate_recording
-from twin.scenario import ScenarioError
+from twin.sim.scenario import ScenarioError
 
 #: The verb groups in the order ``twin --help`` lists them (importing one registers its verbs).
 GROUPS = ("simulation", "monitoring", "lab", "diagnosis")
@@ -23,7 +23,7 @@ __all__ = ["GROUPS", "app", "gate_recording", "main"]
 
 
 def main() -> None:
-    from twin.executors import ExecutorError, default_processes, keep_freed_memory
+    from analysis.base.executors import ExecutorError, default_processes, keep_freed_memory
 
     keep_freed_memory()
     try:

@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from twin.scenario import SHIPPED
+from twin.sim.scenario import SHIPPED
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="MuJoCo digital twin of a ball-screw linear axis.")
@@ -81,7 +81,7 @@ def gate_recording(directory: Path, force: bool, verb: str) -> dict:
 
 def record_check(json_path: Path, record: dict) -> None:
     """Add the ``check`` record to an analysis's JSON output (``detection.json``, ...)."""
-    from analysis.files import read_json, write_json
+    from analysis.base.files import read_json, write_json
 
     if json_path.is_file():
         doc = read_json(json_path, "the analysis's results")

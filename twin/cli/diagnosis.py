@@ -29,7 +29,7 @@ from twin.cli.common import (
     gate_recording,
     record_check,
 )
-from twin.scenario import ScenarioError, load
+from twin.sim.scenario import ScenarioError, load
 
 
 @app.command("calibrate-benchmark")
@@ -50,7 +50,7 @@ def calibrate_benchmark(
     scored against the draws. Writes OUT/calibrate-benchmark.json; stopped and run again, it goes
     on from the cases already done."""
     _require("calibrate-benchmark", "sim")
-    from twin.executors import default_processes
+    from analysis.base.executors import default_processes
     from twin.harness.calibration.benchmark import run_benchmark
 
     _writable_dir(out)

@@ -20,7 +20,7 @@ from twin.cli.common import (
     app,
     console,
 )
-from twin.scenario import ScenarioError
+from twin.sim.scenario import ScenarioError
 
 
 # --- bringing a real axis's recordings in: import, check ------------------------------------------
@@ -214,7 +214,7 @@ def scenario_init(
     its /@axis and a comment on every value that is a twin default. Then:
     twin diagnose DIRECTORY --scenario OUT."""
     from analysis.dataset import DatasetError
-    from twin.scenario_init import write_scenario
+    from twin.sim.scenario_init import write_scenario
 
     if out.exists() and out.is_dir():
         _fail(f"-o {out}: is a directory; expected a scenario file path (e.g. {out / 'axis.toml'})")

@@ -169,10 +169,10 @@ def backlash(
     --scheduler); the results are those of one process."""
     import math
 
-    from analysis import registry
+    from analysis.base import registry
+    from analysis.base.executors import ExecutorError, mapper
     from analysis.dataset import DatasetError
     from analysis.phase2.workflow import estimator_dir, run
-    from twin.executors import ExecutorError, mapper
 
     if scheduler is not None:
         _require("backlash --scheduler", "cluster")

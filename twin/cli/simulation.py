@@ -26,13 +26,13 @@ from twin.cli.common import (
     app,
     console,
 )
-from twin.scenario import ScenarioError, load
+from twin.sim.scenario import ScenarioError, load
 
 
 def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: int | None,
                     scheduler: str | None = None) -> dict:
-    from twin.campaign import CampaignDirectoryError, CampaignInterrupted, plan, simulate_campaign
-    from twin.executors import ExecutorError
+    from analysis.base.executors import ExecutorError
+    from twin.sim.campaign import CampaignDirectoryError, CampaignInterrupted, plan, simulate_campaign
 
     try:
         s = load(scenario, overrides)
@@ -85,7 +85,7 @@ def simulate(
     _require("simulate", "sim", *(["cluster"] if scheduler is not None else []))
     _one_executor(scheduler, workers, "units")
     if live:
-        from twin.live import simulate_live
+        from twin.sim.live import simulate_live
 
         try:
             s = load(scenario, set_)
@@ -109,7 +109,7 @@ REFERENCE_SMALL = ["phase1.captures_per_sample=2", "phase1.capture_s=4.0",
 
 def _score_tables(doc: dict) -> list[Table]:
     """The summary tables of a score.json object (shared by ``twin score`` and ``twin demo``)."""
-    from analysis.registry import label
+    from analysis.base.registry import label
 
     def fmt(v, f="{:g}"):
         return "-" if v is None else f.format(v)
@@ -243,9 +243,9 @@ def export_model(
     """Write the MJCF of the axis in its new, healthy state: a complete model that holds still,
     e.g. to open in MuJoCo's viewer (`python -m mujoco.viewer --mjcf models/linear_axis.xml`)."""
     _require("export-model", "sim")
-    from twin.campaign import make_world
-    from twin.model import build_mjcf
-    from twin.scenario import Scenario, to_axis
+    from twin.sim.campaign import make_world
+    from twin.sim.model import build_mjcf
+    from twin.sim.scenario import Scenario, to_axis
 
     try:
         s = load(scenario) if scenario else Scenario()
@@ -323,7 +323,7 @@ def sweep(
     import pandas as pd
 
     df = pd.read_parquet(out / "results.parquet")
-    from analysis import registry
+    from analysis.base import registry
     from twin.harness.sweep.results import phase1_methods
 
     if methods == "all":

@@ -18,8 +18,8 @@ from pathlib import Path
 
 from analysis.dataset import open_measurements
 from analysis.scoring import score, write_score
-from twin.campaign import simulate_campaign
-from twin.scenario import Scenario
+from twin.sim.campaign import simulate_campaign
+from twin.sim.scenario import Scenario
 
 __all__ = ["Analysed", "analyse", "run_point"]
 
@@ -50,7 +50,7 @@ def analyse(directory: str | Path, reference: str | Path | None, *, plots: bool 
     ``module:Class``; default every registered one); ``estimators``: backlash estimators (default
     the registered default), each written to :func:`analysis.phase2.workflow.estimator_dir`.
     """
-    from analysis import registry
+    from analysis.base import registry
     from analysis.phase1 import detect
     from analysis.phase2 import workflow
 

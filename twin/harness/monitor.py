@@ -3,7 +3,7 @@ folder. Phase I scores every new sample against the persisted baseline model; an
 Phase II, whose sessions then give the change of backlash, its trend and the prognosis.
 
 **Source.** ``SOURCE/live/`` (or ``SOURCE`` itself) holds units published as
-:mod:`twin.live` describes: a data file in the dataset format and, written after it, a manifest
+:mod:`twin.sim.live` describes: a data file in the dataset format and, written after it, a manifest
 ``<seq>-<kind>-<name>.json`` with the file's size and SHA-256. A unit is read only once its
 manifest exists and the data file matches it, so a file being written is never read half-way.
 Units are processed in ``seq`` order; a Phase I sample is scored when its
@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.files import read_json
 from analysis.dataset import DatasetError, open_measurements
 from analysis.dataset.live import MANIFEST_KEYS, UNIT_FORMAT, manifest_ok
-from analysis.files import read_json
 from analysis.phase1.features import FeatureError, sample_features, summarise_capture
 from analysis.phase1.model_file import ModelFileError, Phase1Model, recording_signature
 
@@ -155,7 +155,7 @@ class Monitor:
     def _lock(self) -> None:
         """One monitor per state directory: an exclusive lock on ``STATE/.lock``, held while the
         process lives (the kernel releases it when the process dies, even by SIGKILL)."""
-        from analysis.files import exclusive_lock
+        from analysis.base.files import exclusive_lock
 
         self._lock_fh = exclusive_lock(self.state_dir / ".lock", f"{self.state_dir}: another twin monitor is "
                                        "writing this state directory; stop it first, or give another -o",

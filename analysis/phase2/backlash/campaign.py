@@ -81,7 +81,7 @@ def estimator_for(m, spec: str | None = None, **params) -> BacklashEstimator:
     :class:`analysis.dataset.axis.MissingAxisKey` naming it); ``spec``: a registered backlash
     estimator or ``module:Class`` (default: the registered default, the paper's); ``params``:
     further parameters (e.g. ``stationary="E_XX"``), which take precedence."""
-    from analysis import registry
+    from analysis.base import registry
     from analysis.dataset.axis import axis_of
 
     kind = "backlash_estimators"

@@ -10,11 +10,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from sklearn.base import BaseEstimator
 
+from analysis.base.registry import register
 from analysis.params import InheritedParams
 from analysis.phase2.shifts import THRESHOLD, ShiftResult, shift_between
 from analysis.phase2.traces import DOFS, DirectionalTraces, SessionErrorMotions
 from analysis.phase2.winfilt import CUTOFF_WAVELENGTH_M, winfilt
-from analysis.registry import register
 
 SIGMA = 4
 """Weighting exponent σ of Eqs. 6 and 8 (paper section V)."""

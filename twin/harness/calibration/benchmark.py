@@ -46,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.files import write_json
-from twin.scenario import Scenario, from_dict, load
+from analysis.base.files import write_json
+from twin.sim.scenario import Scenario, from_dict, load
 
 #: (Phase I format, Phase II format) of the cases in turn: every reader is used.
 FORMATS = (("tdms", "csv"), ("mat", "mat"), ("mdf", "mdf"), ("csv", "tdms"))
@@ -217,10 +217,10 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     from analysis.diagnosis.artefacts import apply
     from analysis.ingest import run_import
     from analysis.ingest.check import check_record, require_clean_recording
-    from twin.campaign import simulate_campaign
     from twin.harness.calibration import calibrate
     from twin.harness.diagnosis.library import with_effects
     from twin.harness.lab_export import export
+    from twin.sim.campaign import simulate_campaign
 
     effects, artefacts = dict(effects or {}), dict(artefacts or {})
 

@@ -17,7 +17,6 @@ from scipy import optimize
 
 from analysis.calibration.sensor_chain import Measured
 from analysis.dataset import open_measurements
-from twin.config import get_dotted, set_dotted
 from twin.harness.calibration.sensors import corrected_sensor_values
 from twin.harness.calibration.twin_statistics import _statistics, evaluate
 from twin.harness.calibration.values import (
@@ -38,7 +37,8 @@ from twin.harness.calibration.values import (
     _OutOfTime,
     _progress,
 )
-from twin.scenario import Scenario, from_dict
+from twin.sim.config import get_dotted, set_dotted
+from twin.sim.scenario import Scenario, from_dict
 
 # ---------------------------------------------------------------------------------------------
 # Layer (c): the joint fit
@@ -94,7 +94,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     estimate and the smallest budget that would do. ``sensors``: layer (b) as measured; the
     spread at the solution is simulated with their first correction set
     (:func:`corrected_sensor_values`), so its instruments give the second."""
-    from twin.harness.diagnosis.cache import run_tasks
+    from analysis.base.executors import run_tasks
 
     t0 = time.perf_counter()
     with open_measurements(recording / "measurements.h5") as m:

@@ -8,14 +8,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from analysis.files import write_json, write_text
-from twin.config import set_dotted
-from twin.executors import default_processes
+from analysis.base.executors import default_processes
+from analysis.base.files import write_json, write_text
 from twin.harness.calibration.physical import fit_physical
 from twin.harness.calibration.sensors import corrected_sensor_values, sensor_values
 from twin.harness.calibration.uncertainty import joint_covariance
 from twin.harness.calibration.values import CALIBRATE_VERSION, NOT_INFORMED, CalibrationError, _progress, flagged_keys
-from twin.scenario import Scenario, ScenarioError, from_dict, load
+from twin.sim.config import set_dotted
+from twin.sim.scenario import Scenario, ScenarioError, from_dict, load
 
 # ---------------------------------------------------------------------------------------------
 # The verb
@@ -30,7 +30,7 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     was measured, fitted and left, the fit's residuals and time). ``check``: the record of ``twin
     check`` on the recording (the CLI refuses errors unless forced): a value whose channel it flags
     keeps the twin's default (:func:`flagged_keys`). Returns that JSON's content."""
-    from twin.scenario_init import scenario_text
+    from twin.sim.scenario_init import scenario_text
 
     t0 = time.perf_counter()
     recording = Path(recording)

@@ -12,7 +12,7 @@ import numpy as np
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
 from twin.harness.calibration.values import FIT_CAPTURES, SENSOR_KEYS, T90, Z90, Value
-from twin.scenario import Scenario
+from twin.sim.scenario import Scenario
 
 # ---------------------------------------------------------------------------------------------
 # Layer (b): the sensor chain

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.files import write_json
 from analysis.calibration.drive import (
     imu_reversal,
     imu_ripple,
@@ -22,10 +23,9 @@ from analysis.calibration.drive import (
 )
 from analysis.calibration.sensor_chain import measure_instruments
 from analysis.dataset import open_measurements
-from analysis.files import write_json
 from analysis.ingest.routine import MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
 from twin.harness.calibration.values import CALIBRATE_VERSION
-from twin.scenario import Scenario, from_dict
+from twin.sim.scenario import Scenario, from_dict
 
 # ---------------------------------------------------------------------------------------------
 # The twin's statistics for a parameter vector (cached by scenario)
@@ -99,7 +99,7 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
     and return [values, errors] of :data:`STAT_NAMES` for each (kept in ``cache_dir``)."""
     from threadpoolctl import threadpool_limits
 
-    from twin.campaign import simulate_campaigns_batched
+    from twin.sim.campaign import simulate_campaigns_batched
 
     ss = [from_dict(json.loads(p)) for p in payloads]
     files = [Path(cache_dir) / f"{_key(s)}.json" for s in ss]

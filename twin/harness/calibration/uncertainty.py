@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 
-from twin.config import get_dotted, set_dotted
 from twin.harness.calibration.values import Z90, Value
+from twin.sim.config import get_dotted, set_dotted
 
 #: Stream of the draws, beside the twin seed's own streams.
 DRAW_STREAM = 0xCA1B

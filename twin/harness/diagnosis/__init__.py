@@ -36,7 +36,6 @@ from twin.harness.diagnosis.cache import (
     evaluate,
     evaluate_all,
     load_signatures,
-    run_tasks,
     twin_seeds,
     unfeaturisable,
     with_seed,
@@ -70,6 +69,6 @@ __all__ = [
     "calibration_entry", "candidate_names", "candidate_scenarios", "check_kinds", "measure_unit_costs", "check_layout",
     "check_response_seeds", "diagnose_signatures", "ensure_campaigns", "evaluate", "evaluate_all", "grid_points",
     "kind_of", "library_json", "load_signatures", "prepare_subset", "resim_plan", "resimulate", "resolve_library",
-    "responses", "run_diagnosis", "run_tasks", "simulated", "subset_scenario", "twin_seeds", "unfeaturisable",
+    "responses", "run_diagnosis", "simulated", "subset_scenario", "twin_seeds", "unfeaturisable",
     "with_effects", "with_seed", "workload",
 ]

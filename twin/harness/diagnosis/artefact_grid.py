@@ -13,12 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.executors import run_tasks
+from analysis.base.files import atomic_write
 from analysis.diagnosis import artefacts as art
 from analysis.diagnosis.artefacts import ARTEFACT_VERSION, ARTEFACTS, KIND_ARTEFACT
 from analysis.diagnosis.attribution import CandidateResponse, ParamAxis
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Signature, signature, update_signature
-from analysis.files import atomic_write
-from twin.campaign import simulate_campaigns_batched
 from twin.harness.diagnosis.cache import (
     BATCH,
     DEFAULT_RESPONSE_SEEDS,
@@ -26,9 +26,9 @@ from twin.harness.diagnosis.cache import (
     _regions_json,
     _save_npz,
     load_signatures,
-    run_tasks,
 )
-from twin.scenario import Scenario, from_dict
+from twin.sim.campaign import simulate_campaigns_batched
+from twin.sim.scenario import Scenario, from_dict
 
 # ---------------------------------------------------------------------------------------------
 # Signal artefacts: post-processed copies of a simulated recording (no simulation)

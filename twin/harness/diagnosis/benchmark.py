@@ -82,12 +82,12 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.executors import default_processes
+from analysis.base.files import write_json
 from analysis.diagnosis.artefacts import ARTEFACTS, EDITS, KIND_ARTEFACT, KIND_EFFECT, KIND_PARAMETER
 from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
 from analysis.diagnosis.signature import PARTS
 from analysis.diagnosis.wording import same_recording
-from analysis.files import write_json
-from twin.executors import default_processes
 from twin.harness.diagnosis.artefact_grid import artefact_cached, artefact_signatures
 from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS, evaluate_all, with_seed
 from twin.harness.diagnosis.candidates import candidates
@@ -95,7 +95,7 @@ from twin.harness.diagnosis.candidates.parameters import PARAMETERS
 from twin.harness.diagnosis.ensemble import build_ensemble, diagnose_signatures
 from twin.harness.diagnosis.library import DEFAULT_KINDS, with_effects
 from twin.harness.diagnosis.resimulation import add_resimulation, resimulate
-from twin.scenario import Scenario
+from twin.sim.scenario import Scenario
 
 #: Twin seeds the benchmark re-simulates each case with (fewer than the spread's K: the
 #: re-simulation costs that many campaigns per case with candidates added; docs/gap-diagnosis.md).

@@ -12,17 +12,17 @@ import shutil
 import time
 from pathlib import Path
 
+from analysis.base.files import write_json
 from analysis.dataset import DatasetError
 from analysis.diagnosis import subset
 from analysis.diagnosis.artefacts import ARTEFACTS
 from analysis.diagnosis.signature import PARTS, signature
-from analysis.files import write_json
-from twin.campaign import simulate_campaigns_batched
 from twin.harness.diagnosis.artefact_grid import artefact_plans
 from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, _key, twin_seeds, with_seed
 from twin.harness.diagnosis.grid import candidate_scenarios
 from twin.harness.diagnosis.library import resolve_library
-from twin.scenario import Scenario, from_dict
+from twin.sim.campaign import simulate_campaigns_batched
+from twin.sim.scenario import Scenario, from_dict
 
 # ---------------------------------------------------------------------------------------------
 # A campaign-sized recording: a subset sized to a time budget

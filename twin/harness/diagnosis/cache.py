@@ -17,14 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.executors import run_tasks
+from analysis.base.files import atomic_write, write_json, write_text
 from analysis.dataset import DatasetError
 from analysis.diagnosis import layout
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, SignatureError, signature
-from analysis.files import atomic_write, write_json, write_text
 from analysis.phase1.features import FeatureError
-from twin.campaign import simulate_campaigns_batched
-from twin.executors import make_executor, map_ordered
-from twin.scenario import Scenario, from_dict
+from twin.sim.campaign import simulate_campaigns_batched
+from twin.sim.scenario import Scenario, from_dict
 
 #: Twin seeds of the spread unless told otherwise.
 DEFAULT_SEEDS = 8
@@ -37,22 +37,6 @@ UNFEATURISABLE = "unfeaturisable.json"
 BATCH = 6  # campaigns simulated together (batched rollouts) in one task
 SEED_STRIDE = 7919  # twin seeds: scenario seed + SEED_STRIDE·(i + 1)
 
-
-
-def run_tasks(fn: Callable, args: list[tuple], workers: int, scheduler: str | None = None,
-              on_done: Callable[[int], None] | None = None) -> list:
-    """``[fn(*a) for a in args]`` in order: on the Dask cluster at ``scheduler`` when given
-    (its workers must see the cache at the same path), else on ``workers`` local processes
-    (spawn), or in this process when there is one worker or one task (:mod:`twin.executors`,
-    the executor choice of ``twin sweep`` and ``twin simulate``). ``on_done(i)`` is called as
-    task i finishes. Each task is a pure function of its arguments and writes its own cache
-    files, so the results do not depend on where it ran."""
-    if not args:
-        return []
-    local = 1 if workers <= 1 or len(args) <= 1 else min(workers, len(args))
-    with make_executor(local, scheduler=scheduler, prefix="diagnose") as ex:
-        return map_ordered(ex, fn, args, [str(i) for i in range(len(args))],
-                           None if on_done is None else (lambda i, _key: on_done(i)))
 
 
 def twin_seeds(s: Scenario, k: int) -> list[int]:
@@ -96,7 +80,7 @@ def _regions_from(text: str) -> list[Region]:
 
 def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] = False) -> list[str]:
     """Simulate the scenarios not yet cached (one campaign each, batched rollouts:
-    :func:`twin.campaign.simulate_campaigns_batched`) and store the signatures of both parts
+    :func:`twin.sim.campaign.simulate_campaigns_batched`) and store the signatures of both parts
     and the campaign's layout (``layout.json``, :func:`analysis.diagnosis.layout.describe`);
     returns the paths of their ``signature.npz`` (``cal``, ``heldout``: (n,) values;
     ``regions``: JSON). ``keep`` (one flag, or one per scenario): leave the simulated

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.executors import default_processes
 from analysis.diagnosis import attribution, layout
 from analysis.diagnosis.attribution import CandidateResponse
 from analysis.diagnosis.signature import PARTS, Signature, SignatureError
-from twin.executors import default_processes
 from twin.harness.diagnosis.artefact_grid import artefact_plans, artefact_responses
 from twin.harness.diagnosis.cache import (
     DEFAULT_RESPONSE_SEEDS,
@@ -30,7 +30,7 @@ from twin.harness.diagnosis.cache import (
 from twin.harness.diagnosis.candidates import Effect
 from twin.harness.diagnosis.grid import candidate_scenarios, responses
 from twin.harness.diagnosis.library import resolve_library
-from twin.scenario import Scenario
+from twin.sim.scenario import Scenario
 
 # ---------------------------------------------------------------------------------------------
 # The diagnosis

@@ -14,7 +14,7 @@ from analysis.diagnosis.signature import PARTS, Signature
 from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS
 from twin.harness.diagnosis.candidates import Effect
 from twin.harness.diagnosis.library import kind_of
-from twin.scenario import Scenario
+from twin.sim.scenario import Scenario
 
 # ---------------------------------------------------------------------------------------------
 # Candidate grids

@@ -7,13 +7,13 @@ simulated ones and their entry of ``diagnosis.json``.
 
 from __future__ import annotations
 
+from analysis.base.registry import RegistryError
 from analysis.diagnosis import artefacts as art
 from analysis.diagnosis.artefacts import ARTEFACTS, KIND_ARTEFACT, KIND_EFFECT, KIND_PARAMETER
-from analysis.registry import RegistryError
 from twin.harness.diagnosis.candidates import Effect, candidate, candidates
 from twin.harness.diagnosis.candidates import parameters as twin_parameters
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS
-from twin.scenario import Scenario
+from twin.sim.scenario import Scenario
 
 #: The kinds of candidate as ``--kinds`` names them: the registered physical effects, the twin
 #: parameters (:data:`twin.harness.diagnosis.candidates.parameters.PARAMETERS`, simulated like the effects), the

@@ -9,15 +9,15 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+from analysis.base.executors import default_processes, run_tasks
 from analysis.diagnosis import attribution
 from analysis.diagnosis.artefacts import ARTEFACTS
 from analysis.diagnosis.signature import PARTS, Signature
-from twin.executors import default_processes
 from twin.harness.diagnosis.artefact_grid import _artefact_batch, _spec_key, ensure_campaigns
-from twin.harness.diagnosis.cache import _key, evaluate_all, load_signatures, run_tasks, with_seed
+from twin.harness.diagnosis.cache import _key, evaluate_all, load_signatures, with_seed
 from twin.harness.diagnosis.ensemble import TwinEnsemble
 from twin.harness.diagnosis.library import simulated
-from twin.scenario import Scenario
+from twin.sim.scenario import Scenario
 
 # ---------------------------------------------------------------------------------------------
 # The re-simulated shrink: the twin run again with the added candidates at their fitted values

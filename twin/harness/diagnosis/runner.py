@@ -23,7 +23,7 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
 Every simulation is a campaign of the scenario, cached by the hash of its scenario under
 ``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
 the blind benchmark, reuses them. Campaigns are simulated in batches of up to ``BATCH`` with
-batched rollouts (:func:`twin.campaign.simulate_campaigns_batched`: the grid values of a
+batched rollouts (:func:`twin.sim.campaign.simulate_campaigns_batched`: the grid values of a
 candidate, or the seeds of the spread, share one ``mujoco.rollout`` call per capture and
 session), the batches in parallel on ``workers`` processes, each with one BLAS thread; each
 campaign's files are those it gives simulated alone, so results depend neither on the batching
@@ -36,18 +36,18 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from analysis.base.executors import parallel_slots
+from analysis.base.files import write_json
 from analysis.diagnosis import attribution
 from analysis.diagnosis.gap_report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, signature
-from analysis.files import write_json
-from twin.executors import parallel_slots
 from twin.harness.diagnosis.budget import prepare_subset
 from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS
 from twin.harness.diagnosis.ensemble import build_ensemble, check_layout, check_response_seeds, diagnose_signatures
 from twin.harness.diagnosis.library import check_kinds, library_json, resolve_library
 from twin.harness.diagnosis.resimulation import add_resimulation, resimulate
-from twin.scenario import Scenario
+from twin.sim.scenario import Scenario
 
 
 def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> dict | None:

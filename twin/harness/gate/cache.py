@@ -194,14 +194,14 @@ def _load_phase1(path: Path) -> Phase1Input:
 def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str], None]) -> None:
     """Simulate campaign ``c`` into ``folder`` and compute what the checks read of it, then delete
     the measurements (see the module docstring)."""
+    from analysis.base.executors import mapper
     from analysis.dataset import open_measurements, open_truth
     from analysis.dataset.axis import axis_of
     from analysis.injected import injected_change_um
     from analysis.phase1 import pipeline
     from analysis.phase2.backlash import campaign_backlash
-    from twin.campaign import simulate_campaign
-    from twin.executors import mapper
-    from twin.scenario import load
+    from twin.sim.campaign import simulate_campaign
+    from twin.sim.scenario import load
 
     t0 = time.perf_counter()
     simulate_campaign(load(c.scenario, list(c.overrides)), folder)

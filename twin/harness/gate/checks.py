@@ -80,7 +80,7 @@ def _failure(exc: BaseException) -> str:
 
 def method_name(kind: str, method: Any) -> str:
     """The name a method is reported under: its registered name, else its class name."""
-    from analysis import registry
+    from analysis.base import registry
 
     if isinstance(method, str):
         return registry.get(kind, method).name
@@ -94,7 +94,7 @@ def _fresh(kind: str, method: Any, params: dict, defaults: dict | None = None) -
     """A fresh, unfitted instance of ``method`` (a registered name, ``module:Class`` or an
     instance, which is cloned) with ``params`` set where it takes them, and ``defaults`` where it
     takes them and (an instance) leaves them None."""
-    from analysis import registry
+    from analysis.base import registry
 
     defaults = defaults or {}
     if isinstance(method, str):
@@ -248,7 +248,7 @@ def select_checks(suite: Suite, names: Sequence[str]) -> tuple[list[BacklashChec
 def resolve_methods(kind: str, specs: Sequence[str]) -> list[str]:
     """Check that every spec names a method of ``kind`` (registered name or ``module:Class``);
     :class:`GateError` naming the bad one otherwise."""
-    from analysis import registry
+    from analysis.base import registry
 
     out = []
     for s in specs:

@@ -55,13 +55,13 @@ def junit_xml(results: Sequence[CheckResult], suite: Suite, path: str | Path) ->
 
 
 def _default(kind: str) -> list[str]:
-    from analysis import registry
+    from analysis.base import registry
 
     return [registry.default(kind).name]
 
 
 def _expand(kind: str, specs: Sequence[str]) -> list[str]:
-    from analysis import registry
+    from analysis.base import registry
 
     out: list[str] = []
     for s in specs:

@@ -39,7 +39,7 @@ A sweep file (TOML; paths relative to the file)::
 
 The points are the Cartesian product of the grid axes (in file order, the last axis varying
 fastest), times the random draws if there are both; every point runs once per seed. Every
-point's scenario is validated (:func:`twin.scenario.from_dict`) before anything runs, so a bad
+point's scenario is validated (:func:`twin.sim.scenario.from_dict`) before anything runs, so a bad
 value stops the sweep with the scenario's own message and exit code 2.
 
 Output directory::
@@ -71,12 +71,11 @@ them, or N with ``workers=N``) before any point is submitted; it is bit-identica
 of processes.
 """
 
-from twin.harness.sweep.executors import make_executor, run_task
 from twin.harness.sweep.plan import Plan, Task, plan_sweep
 from twin.harness.sweep.plots import roc_table, write_plots
 from twin.harness.sweep.results import method_summary, phase1_methods, records, results_table, summary, write_table
 from twin.harness.sweep.runlog import point_dir, read_log, read_result
-from twin.harness.sweep.runner import Callbacks, run_sweep
+from twin.harness.sweep.runner import Callbacks, run_sweep, run_task
 from twin.harness.sweep.schema import LOG_NAME, MANIFEST_NAME, RESULT_NAME, SweepError, SweepFile, load_sweep
 
 __all__ = [
@@ -89,7 +88,6 @@ __all__ = [
     "SweepFile",
     "Task",
     "load_sweep",
-    "make_executor",
     "method_summary",
     "phase1_methods",
     "plan_sweep",

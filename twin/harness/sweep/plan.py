@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from twin.config import parse_key, set_dotted
 from twin.harness.sweep.schema import FORMAT, SweepError, SweepFile, _keys, load_sweep
-from twin.scenario import ScenarioError, from_dict
+from twin.sim.config import parse_key, set_dotted
+from twin.sim.scenario import ScenarioError, from_dict
 
 # ---------------------------------------------------------------------------------------------
 # Scenario dicts
@@ -103,8 +103,8 @@ class Plan:
 
 
 def _analysis(sw, src: str) -> tuple[list[str] | None, list[str] | None]:
-    """The ``[analysis]`` lists, each name checked against :mod:`analysis.registry`."""
-    from analysis import registry
+    """The ``[analysis]`` lists, each name checked against :mod:`analysis.base.registry`."""
+    from analysis.base import registry
 
     if sw.analysis is None:
         return None, None
@@ -126,7 +126,7 @@ def _analysis(sw, src: str) -> tuple[list[str] | None, list[str] | None]:
 
 def plan_sweep(path: str | Path) -> Plan:
     """Load, expand and validate a sweep: every point's scenario goes through
-    :func:`twin.scenario.from_dict`. Raises :class:`SweepError`."""
+    :func:`twin.sim.scenario.from_dict`. Raises :class:`SweepError`."""
     path = Path(path)
     sw = load_sweep(path)
     src = str(path)

@@ -16,7 +16,7 @@ false-alarm-rate curves.
 
 "Detected" is score.json's (:mod:`analysis.phase1.scoring`): a first alarm after the injected
 onset; alarms before it are false alarms. Every method and estimator has one colour and marker
-(:func:`analysis.registry.style`) in every figure, and each figure's legend lists every method,
+(:func:`analysis.base.registry.style`) in every figure, and each figure's legend lists every method,
 also those without data in a panel.
 
 Sweeps over many distinct values (random sampling) are drawn as scatter plots without lines.
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.files import write_json
-from analysis.registry import label, style
+from analysis.base.files import write_json
+from analysis.base.registry import label, style
 from twin.harness.sweep.results import phase1_methods, phase2_estimators, records
 
 __all__ = ["roc_table", "write_plots"]

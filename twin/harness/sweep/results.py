@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.files import atomic_write
+from analysis.base.files import atomic_write
 from twin.harness.sweep.plan import Plan, Task
 from twin.harness.sweep.runlog import point_dir
 from twin.harness.sweep.schema import RESULT_NAME
@@ -93,7 +93,7 @@ def summary(plan: Plan, df, methods: list[str] | None = None) -> tuple[list[str]
     are several, and for each of ``methods`` (default: the registered default detector) the
     Phase I delay, false-alarm rate and the fraction of seeds detected (an alarm after the
     onset). Raises ValueError naming a method the table does not have."""
-    from analysis import registry
+    from analysis.base import registry
 
     score_cols = [c for c in KEY_SCORES if c in df.columns]
     have = phase1_methods(df)

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from analysis.files import write_json
+from analysis.base.files import write_json
 from twin.harness.sweep.plan import Plan, Task
 from twin.harness.sweep.schema import LOG_NAME, MANIFEST_NAME, RESULT_NAME, SweepError
 

@@ -2,21 +2,47 @@
 
 from __future__ import annotations
 
+import os
 import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from analysis.files import write_json
-from twin.executors import default_processes
-from twin.harness.sweep.executors import make_executor, run_task
+from analysis.base.executors import ExecutorError, default_processes, make_executor
+from analysis.base.files import write_json
 from twin.harness.sweep.plan import Plan, Task
 from twin.harness.sweep.plots import write_plots
 from twin.harness.sweep.results import results_table, write_table
 from twin.harness.sweep.runlog import _append_log, _claim, point_dir, read_result
 from twin.harness.sweep.schema import RESULT_NAME, SweepError
-from twin.scenario import from_dict
+from twin.sim.scenario import from_dict
+
+# ---------------------------------------------------------------------------------------------
+# Work done on a worker
+
+
+def run_task(scenario: dict, point_dir: str, reference_dir: str | None,
+             analysis: dict | None = None) -> dict:
+    """Simulate, analyse and score one point in this process with one BLAS thread.
+    ``analysis``: {"methods", "estimators"} of the sweep's ``[analysis]`` (None: the defaults).
+
+    Returns ``{"score": score.json object or None, "simulated_units", "reused_units",
+    "skipped", "seconds", "host", "pid"}``."""
+    import socket
+
+    from threadpoolctl import threadpool_limits
+
+    from twin.harness.chain import run_point
+
+    t0 = time.perf_counter()
+    s = from_dict(scenario)
+    with threadpool_limits(1):
+        r = run_point(s, point_dir, reference_dir, **(analysis or {}))
+    r["seconds"] = time.perf_counter() - t0
+    r["host"], r["pid"] = socket.gethostname(), os.getpid()
+    return r
+
 
 # ---------------------------------------------------------------------------------------------
 # Running
@@ -55,7 +81,7 @@ def run_sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
     ref_units = 0
     if plan.reference is not None:
         ref_dir = out / "reference"
-        from twin.campaign import CampaignDirectoryError, simulate_campaign
+        from twin.sim.campaign import CampaignDirectoryError, simulate_campaign
 
         try:
             summary = simulate_campaign(from_dict(plan.reference), ref_dir,
@@ -68,7 +94,11 @@ def run_sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
     computed = failed = sim_units = reused_units = 0
     n_done = len(done_tasks)
     if todo:
-        with make_executor(workers, scheduler) as ex:
+        try:  # default: all local cores; workers=N: a Dask LocalCluster of N; scheduler: a cluster
+            executor = make_executor(default_processes(), dask_workers=workers, scheduler=scheduler, prefix="sweep")
+        except ExecutorError as exc:
+            raise SweepError(str(exc)) from None
+        with executor as ex:
             cb.executor(ex.description)
             futures = {}
             for t in todo:

@@ -17,8 +17,8 @@ from pydantic import (
     model_validator,
 )
 
-from twin.config import explain_errors, value_at
-from twin.scenario import read_toml
+from twin.sim.config import explain_errors, value_at
+from twin.sim.scenario import read_toml
 
 LOG_NAME = "sweep-log.jsonl"
 MANIFEST_NAME = "sweep.json"
@@ -194,7 +194,7 @@ def _axis_label(data: dict, loc: tuple) -> str:
 
 def _sweep_messages(data: dict):
     """The messages only a sweep file has (its validators' markers, the axis named), as a hook of
-    :func:`twin.config.explain_errors`."""
+    :func:`twin.sim.config.explain_errors`."""
     def special(kind: str, loc: tuple, key: str, value: Any, msg: str, ctx: dict) -> str | None:
         axis = _axis_label(data, loc)
         if loc and loc[-1] == "key" and kind in ("string_type", "list_type"):

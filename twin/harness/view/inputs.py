@@ -7,10 +7,10 @@ import math
 from pathlib import Path
 from typing import Any
 
-from analysis.files import read_json
-from twin.axis import Axis
+from analysis.base.files import read_json
 from twin.harness.view.base import ViewError
-from twin.scenario import Scenario, ScenarioError, from_dict, to_axis
+from twin.sim.axis import Axis
+from twin.sim.scenario import Scenario, ScenarioError, from_dict, to_axis
 
 # ---------------------------------------------------------------------------------------------
 # Inputs

@@ -9,8 +9,8 @@ import numpy as np
 
 from analysis.dataset import DatasetError
 from analysis.phase2.error_motion_file import read_error_motions
-from twin.axis import Axis
 from twin.harness.view.base import GREY, ViewError
+from twin.sim.axis import Axis
 
 # ---------------------------------------------------------------------------------------------
 # Geometry and poses (numpy only)

@@ -36,7 +36,7 @@ from twin.harness.view.base import (
 from twin.harness.view.blueprint import _blueprint
 from twin.harness.view.inputs import _axis_from_measurements, _backlash, _detection, _flatten
 from twin.harness.view.poses import _direction, _estimated_error_motions, _geometry, _Shape, _stride, carriage_poses
-from twin.scenario import Scenario, ScenarioError, from_dict, to_axis
+from twin.sim.scenario import Scenario, ScenarioError, from_dict, to_axis
 
 # ---------------------------------------------------------------------------------------------
 # The recording

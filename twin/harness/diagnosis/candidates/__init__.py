@@ -2,7 +2,7 @@
 each with its physical parameters, prior ranges and physical source; see
 :mod:`twin.harness.diagnosis.candidates.base`).
 
-Every effect is a candidate of the kind ``gap_candidates`` of :mod:`analysis.registry`: the
+Every effect is a candidate of the kind ``gap_candidates`` of :mod:`analysis.base.registry`: the
 modules below register theirs on import, in the library's order (the order of the diagnosis's
 candidates and of the blind benchmark's draws); installed packages add theirs through the
 entry-point group ``ballscrew_twin.gap_candidates``. :func:`candidates` gives them all,
@@ -22,7 +22,7 @@ from twin.harness.diagnosis.candidates import imu_misalignment  # noqa: F401
 from twin.harness.diagnosis.candidates import base_resonance  # noqa: F401
 # isort: on
 
-from analysis import registry
+from analysis.base import registry
 
 __all__ = ["KIND", "LIBRARY", "Effect", "Param", "candidate", "candidates", "register_effect"]
 
@@ -54,7 +54,7 @@ def candidates() -> dict[str, Effect]:
 
 def candidate(spec: str) -> Effect:
     """The effect named ``spec``: a registered name or ``module:NAME``. Raises
-    :class:`analysis.registry.RegistryError` naming the value and the candidates available; an
+    :class:`analysis.base.registry.RegistryError` naming the value and the candidates available; an
     effect of another object under a registered name is refused."""
     e = registry.get(KIND, spec)
     effect = _effect(e.factory, spec)

@@ -6,7 +6,7 @@ returns the scenario with the effect added (``add``: the value is added to the s
 ``scale``: multiplies it, ``set``: replaces it; ``index`` picks an element of a list key).
 
 The effects are the twin's candidates of the gap diagnosis, found by name in
-:mod:`analysis.registry` under the kind ``gap_candidates`` (defined here, entry-point group
+:mod:`analysis.base.registry` under the kind ``gap_candidates`` (defined here, entry-point group
 ``ballscrew_twin.gap_candidates``): the built-ins of :mod:`twin.harness.diagnosis.candidates` register with
 :func:`register_effect`, an installed package names an :class:`Effect` object in an entry point,
 and ``module:NAME`` (an :class:`Effect`, or a class or function that returns one when called
@@ -22,10 +22,10 @@ from typing import Any, Literal
 
 import numpy as np
 
-from analysis import registry
+from analysis.base import registry
 from analysis.diagnosis.candidate import CandidateParam
-from twin.config import get_dotted, set_dotted
-from twin.scenario import Scenario, from_dict
+from twin.sim.config import get_dotted, set_dotted
+from twin.sim.scenario import Scenario, from_dict
 
 KIND = "gap_candidates"
 registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.harness.diagnosis.candidates",), "gap-diagnosis candidate")

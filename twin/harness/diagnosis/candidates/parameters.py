@@ -12,7 +12,7 @@ owner's words with the nominal value of the scenario it was run with: "carriage 
 120 kg (interval 158–171 kg)" (:func:`analysis.diagnosis.wording.owner_phrase`). The candidate's
 name is its scenario key (``axis.carriage_mass_kg``): what to fix.
 
-The keys (``twin/scenario.py``) and the physical ground of each prior range (the factor, real
+The keys (``twin/sim/scenario.py``) and the physical ground of each prior range (the factor, real
 over nominal):
 
 - **Masses and inertias.** ``axis.carriage_mass_kg`` 0.75–1.5: the nominal is the carriage of
@@ -78,9 +78,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.config import get_dotted
 from twin.harness.diagnosis.candidates.base import Effect, Param
-from twin.scenario import Scenario
+from twin.sim.config import get_dotted
+from twin.sim.scenario import Scenario
 
 #: The least mis-setting the blind benchmark draws (a factor of 1.15 or 1/1.15), or the
 #: parameter's ``least_seen`` on that side when larger.

@@ -3,7 +3,7 @@
 While the axis runs, friction in the nut and the support bearings heats the screw towards a
 steady rise ΔT above ambient with a time constant of the order of an hour; during a stop it cools
 back. Two consequences are modelled (the twin's first-order temperature model,
-:func:`twin.campaign.temperature_at`, gives ΔT at every capture and session):
+:func:`twin.sim.campaign.temperature_at`, gives ΔT at every capture and session):
 
 - the lead grows by α·ΔT (α = 11.5e-6 /K for steel): the carriage moves (1 + α·ΔT) times the
   commanded travel (ISO 230-3 thermal effects; Ramesh, Mannan & Poo, "Error compensation in

@@ -5,7 +5,7 @@ the hours) and the routines are measured from the recording
 (:func:`analysis.ingest.routine.measure_recording`), the axis values come from its axis
 contract (``/@axis``), and every other value is the twin's default. Each line of the written
 TOML says which of the three it is, so the owner knows what to check. The text is validated by
-:func:`twin.scenario.load` before it is written.
+:func:`twin.sim.scenario.load` before it is written.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from analysis.files import write_text
+from analysis.base.files import write_text
 from analysis.ingest.routine import measure_recording
-from twin.scenario import (
+from twin.sim.scenario import (
     AxisConfig,
     CampaignConfig,
     DegradationConfig,

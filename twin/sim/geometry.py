@@ -1,6 +1,6 @@
 """Geometric imperfections of the linear axis as functions of position (quasi-static kinematics).
 
-Pure numpy/scipy; no MuJoCo. The dynamics (:mod:`twin.model`) apply these errors as prescribed
+Pure numpy/scipy; no MuJoCo. The dynamics (:mod:`twin.sim.model`) apply these errors as prescribed
 displacements; this module is also the kinematic truth (what a perfect, infinitely stiff axis
 would do), stored next to the simulated signals.
 
@@ -12,7 +12,7 @@ Frames and sign conventions
   margin so the trucks at x ± a/2 always stay on the stored profiles.
 - Rail 0 at y = −w/2, rail 1 at y = +w/2 (w: rail spacing). The truck order is FL, FR, RL, RR:
   front = +X, "left" = rail 0 (−Y), "right" = rail 1 (+Y) -- left/right as seen by an observer
-  at the +X end looking back along −X; the same order as :mod:`twin.model`. The truck offsets
+  at the +X end looking back along −X; the same order as :mod:`twin.sim.model`. The truck offsets
   from the carriage centre are (x, y) = (+a/2, −w/2), (+a/2, +w/2), (−a/2, −w/2), (−a/2, +w/2).
 - Carriage centre C: midway between the four trucks, in the rail plane (the plane through the
   truck–rail reference points, z = 0). Profiles are rail deviations in that plane: "vertical"
@@ -52,7 +52,7 @@ from scipy.interpolate import CubicSpline
 from analysis.dataset import DOFS
 
 if TYPE_CHECKING:
-    from twin.axis import Carriage
+    from twin.sim.axis import Carriage
 
 __all__ = [
     "TRAVEL_M",

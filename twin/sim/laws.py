@@ -1,6 +1,6 @@
 """Degradation laws by name: what ``law`` in a scenario's ``[degradation]`` section selects.
 
-A law is looked up in :mod:`analysis.registry` under the kind ``degradation_laws`` (defined
+A law is looked up in :mod:`analysis.base.registry` under the kind ``degradation_laws`` (defined
 here): a registered name (the built-ins ``wear`` and ``table`` below, registered with the
 decorator; an installed package's entry point in the group ``ballscrew_twin.degradation_laws``)
 or ``module:Class`` importable from ``sys.path``.
@@ -22,8 +22,8 @@ be subclassed, but need not be):
   (``truth.h5``'s ``/@onset_hours``), NaN if the law never degrades.
 - ``label`` (class attribute, optional): how tables name it.
 
-That is all the campaign asks of a law (:func:`twin.campaign.condition_at`): the preload and the
-backlash at each capture and session become the :class:`twin.model.MechanicalState` (contact
+That is all the campaign asks of a law (:func:`twin.sim.campaign.condition_at`): the preload and the
+backlash at each capture and session become the :class:`twin.sim.model.MechanicalState` (contact
 stiffness, drag torque, the trucks' share through ``truck_wear_coupling``), the thermal
 transient keeps its own keys of ``[degradation]``.
 """
@@ -38,11 +38,11 @@ from typing import Any
 
 import numpy as np
 
-from analysis import registry
-from twin import degradation as deg
+from analysis.base import registry
+from twin.sim import degradation as deg
 
 KIND = "degradation_laws"
-registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.laws",), "degradation law")
+registry.define_kind(KIND, f"ballscrew_twin.{KIND}", ("twin.sim.laws",), "degradation law")
 
 __all__ = ["KIND", "DegradationLaw", "Table", "Wear", "default_name", "law_from_section", "names",
            "parameters"]
@@ -70,10 +70,10 @@ class DegradationLaw:
 @registry.register(KIND, "wear", label="wear (Archard, Hertz)", default=True)
 @dataclass(frozen=True)
 class Wear(deg.WearLaw, DegradationLaw):
-    """The wear chain of :mod:`twin.degradation`: Archard wear after ``onset_hours`` lowers the
+    """The wear chain of :mod:`twin.sim.degradation`: Archard wear after ``onset_hours`` lowers the
     preload of a ball population with scattered interference (Hertz), then opens backlash
-    (:func:`twin.degradation.preload_fraction`, :func:`twin.degradation.backlash_um`). Its
-    parameters are the fields of :class:`twin.degradation.WearLaw`."""
+    (:func:`twin.sim.degradation.preload_fraction`, :func:`twin.sim.degradation.backlash_um`). Its
+    parameters are the fields of :class:`twin.sim.degradation.WearLaw`."""
 
     label = "wear (Archard, Hertz)"
 
@@ -175,9 +175,9 @@ def parameters(factory) -> dict[str, Any]:
 
 def law_from_section(section: dict[str, Any]) -> Any:
     """The law of a ``[degradation]`` section (a dict with ``law``; validated by
-    :class:`twin.scenario.DegradationConfig`), made with the section's values of its parameters.
+    :class:`twin.sim.scenario.DegradationConfig`), made with the section's values of its parameters.
 
-    Raises :class:`analysis.registry.RegistryError` for an unknown law and ``ValueError`` for
+    Raises :class:`analysis.base.registry.RegistryError` for an unknown law and ``ValueError`` for
     values the law refuses (the law's message, which starts with the parameter's name)."""
     entry = registry.get(KIND, section["law"])
     kw = {k: section[k] for k in parameters(entry.factory) if k in section}
@@ -191,7 +191,7 @@ def law_from_section(section: dict[str, Any]) -> Any:
     if missing:
         raise ValueError(f"law = {section['law']!r} is a {type(law).__name__} without "
                          f"{', '.join(missing)}; expected a degradation law with "
-                         f"{', '.join(_METHODS)} (twin.laws)")
+                         f"{', '.join(_METHODS)} (twin.sim.laws)")
     return law
 
 

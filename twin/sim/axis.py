@@ -1,9 +1,9 @@
 """Physical description of the linear-axis testbed (the paper's section III) and its derived figures.
 
 Everything here is a plain parameter with an SI unit. The numbers come from one place, the
-scenario (:class:`twin.scenario.AxisConfig`, in the units of the file), and are converted into
-these dataclasses by :func:`twin.scenario.to_axis`; the few defaults here are parameters a
-scenario does not expose. The MuJoCo model is built from them by :mod:`twin.model`.
+scenario (:class:`twin.sim.scenario.AxisConfig`, in the units of the file), and are converted into
+these dataclasses by :func:`twin.sim.scenario.to_axis`; the few defaults here are parameters a
+scenario does not expose. The MuJoCo model is built from them by :mod:`twin.sim.model`.
 
 Sources: Pandhare et al., "Ball Screw Health Monitoring with Inertial Sensors", section III
 (450 mm travel, 10 mm lead, four trucks on two rails, 100 kg of steel load); THK and HIWIN ball
@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from twin import degradation as deg
+from twin.sim import degradation as deg
 
 # The reference carriage (plate, nut housing and the paper's 100 kg load) whose inertia scales
 # with the mass of a scenario's carriage.
@@ -83,7 +83,7 @@ class ScrewDrive:
 
     def nut_stiffness(self, preload_N: float) -> float:
         """Nut contact stiffness at preload ``preload_N``, N/m: Hertz k ∝ F^(1/3) from the new
-        nut's value, floored (see :func:`twin.degradation.contact_stiffness`)."""
+        nut's value, floored (see :func:`twin.sim.degradation.contact_stiffness`)."""
         return float(deg.contact_stiffness(self.nut_stiffness_new, preload_N, self.preload))
 
     def axial_stiffness(self, preload_N: float) -> float:
@@ -98,7 +98,7 @@ class ScrewDrive:
 
     def drag_torque(self, preload_N: float) -> float:
         """Nut drag torque in N·m: no-load torque + catalogue preload torque
-        (:func:`twin.degradation.drag_torque_Nm`)."""
+        (:func:`twin.sim.degradation.drag_torque_Nm`)."""
         kp = float(deg.preload_torque_coefficient(self.lead, self.pitch_diameter))
         return float(deg.drag_torque_Nm(max(preload_N, 0.0), self.lead, self.no_load_torque, kp))
 

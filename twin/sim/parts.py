@@ -11,11 +11,11 @@ from typing import Any
 import h5py
 import numpy as np
 
+from analysis.base.files import atomic_write
 from analysis.dataset import DatasetError
 from analysis.dataset.attrs import from_attr, write_attrs
 from analysis.dataset.h5file import open_h5
 from analysis.dataset.validate import NAME_RE, as_str, check_dtype
-from analysis.files import atomic_write
 
 _KIND_RE = re.compile(r"^[A-Za-z0-9_-]+(/[A-Za-z0-9_-]+)*$")
 _PART_FORMAT = "ballscrew-twin/part"

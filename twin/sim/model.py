@@ -1,4 +1,4 @@
-"""The MuJoCo model of the linear axis: MJCF text built from :class:`twin.axis.Axis`.
+"""The MuJoCo model of the linear axis: MJCF text built from :class:`twin.sim.axis.Axis`.
 
 Degrees of freedom (8, or 9 with a compliant machine base):
 - ``screw``: hinge of the motor rotor and screw about X (the servo acts here);
@@ -31,12 +31,12 @@ about 1e12 N/m: 1 nm under a 1 kN nut force) while it stays explicit-stable (ω�
 never carries the carriage's load, which the drive passes to the ground.
 
 The servo is MuJoCo's ``<pid input="pos vel ff">`` actuator on the screw hinge (see
-:class:`twin.axis.Servo`); a second motor on the hinge carries the torque ripple of the motor,
+:class:`twin.sim.axis.Servo`); a second motor on the hinge carries the torque ripple of the motor,
 which the controller does not know. Nut drag torque is Coulomb friction (``frictionloss``) plus
 viscous damping on the hinge; rail and seal friction is ``frictionloss`` on ``carriage_x``.
 
 Unmodelled-effect actuators (zero unless the scenario's ``[effects]`` switches them on, see
-:class:`twin.simulate.World`): ``nut_axial``, an axial force on the carriage at the nut site (ball
+:class:`twin.sim.simulate.World`): ``nut_axial``, an axial force on the carriage at the nut site (ball
 recirculation impulses), and ``rail_stribeck``, a force on ``carriage_x`` (Stribeck friction in
 excess of the rail's Coulomb friction). The motor cogging torque shares the ``ripple`` motor.
 
@@ -98,9 +98,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from twin.axis import Axis
-from twin.degradation import contact_stiffness
-from twin.sensors.instruments import STANDARD_GRAVITY as GRAVITY  # m/s²
+from twin.sim.axis import Axis
+from twin.sim.degradation import contact_stiffness
+from twin.sim.sensors.instruments import STANDARD_GRAVITY as GRAVITY  # m/s²
 
 TRUCKS = ("FL", "FR", "RL", "RR")
 
@@ -167,7 +167,7 @@ class ModelIndex:
                 return getattr(model, kind)(name)
             except KeyError:
                 raise ModelLayoutError(f"the axis model has no {kind} named {name!r}; the simulator "
-                                       f"drives or reads it (see twin.model.build_mjcf)") from None
+                                       f"drives or reads it (see twin.sim.model.build_mjcf)") from None
 
         def ctrl(name: str, inputs: int = 1) -> int:
             i = element("actuator", name).id

@@ -18,10 +18,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from analysis import registry
-from twin import laws
-from twin.axis import Axis, Carriage, ScrewDrive, Servo
-from twin.config import explain_errors, set_dotted
+from analysis.base import registry
+from twin.sim import laws
+from twin.sim.axis import Axis, Carriage, ScrewDrive, Servo
+from twin.sim.config import explain_errors, set_dotted
 
 
 class ScenarioError(ValueError):
@@ -39,7 +39,7 @@ def _per_axis(description: str):
 
 class AxisConfig(_Section):
     """The testbed: drive, carriage, guideway and servo (the paper's section III; catalogue values
-    of a 25×10 preloaded nut). Converted to the SI dataclasses of :mod:`twin.axis` by :func:`to_axis`."""
+    of a 25×10 preloaded nut). Converted to the SI dataclasses of :mod:`twin.sim.axis` by :func:`to_axis`."""
 
     travel_mm: float = Field(450.0, gt=0, le=5000, description="length of rail the carriage travels, mm")
     lead_mm: float = Field(10.0, gt=0, le=100, description="screw lead: carriage travel per screw revolution, mm")
@@ -148,7 +148,7 @@ class SensorsConfig(_Section):
 class DegradationConfig(_Section):
     """The degradation law and its parameters, and the thermal transient.
 
-    ``law`` names a registered degradation law or ``module:Class`` (:mod:`twin.laws`); the law
+    ``law`` names a registered degradation law or ``module:Class`` (:mod:`twin.sim.laws`); the law
     reads its parameters from the keys of the same name here. The keys of the built-in laws are
     fields with their ranges (``wear``: onset, interference, wear rate, scatter, backlash gain;
     ``table``: the three lists); a law from elsewhere brings keys of its own, accepted only
@@ -157,7 +157,7 @@ class DegradationConfig(_Section):
     model_config = ConfigDict(extra="allow", validate_assignment=True)
 
     law: str = Field(default_factory=laws.default_name, description=(
-        "a registered degradation law (twin.laws: built-in or installed; default: the "
+        "a registered degradation law (twin.sim.laws: built-in or installed; default: the "
         "registered default) or module:Class"))
     onset_hours: float = Field(2500.0, ge=0, description="running-in hours before wear removes interference")
     interference_um: float = Field(4.0, gt=0, le=100, description=(
@@ -205,7 +205,7 @@ class DegradationConfig(_Section):
         return self
 
     def make_law(self):
-        """The degradation law of this section (:func:`twin.laws.law_from_section`)."""
+        """The degradation law of this section (:func:`twin.sim.laws.law_from_section`)."""
         return laws.law_from_section(self.model_dump())
 
 
@@ -383,7 +383,7 @@ class Scenario(_Section):
     def _base_mode(self) -> Scenario:
         fx = self.effects
         if fx.base_modal_mass_kg > 0:
-            from twin.model import BaseMode, check_base_mode
+            from twin.sim.model import BaseMode, check_base_mode
             base = BaseMode(fx.base_modal_mass_kg, fx.base_frequency_hz, fx.base_damping_ratio)
             for cfg in (self.phase1, self.phase2):
                 check_base_mode(to_axis(self), cfg.timestep_s, base)
@@ -444,7 +444,7 @@ def read_toml(path: str | Path, what: str, error: type[Exception] = ValueError) 
 
 #: The scenarios shipped with the package (``scenarios/`` of the checkout, package data once
 #: installed): found by name, e.g. ``twin simulate quick``.
-SHIPPED = Path(__file__).parent / "scenarios"
+SHIPPED = Path(__file__).parent.parent / "scenarios"
 
 
 def shipped_names() -> list[str]:

@@ -5,7 +5,7 @@ Determinism: every random draw comes from ``numpy.random.SeedSequence([seed, kin
 so a unit of work gives the same arrays whichever process, executor or order runs it.
 
 Resuming: each finished unit is stored as its own part file (atomic rename, see
-:class:`twin.parts.PartStore`); a rerun skips the parts that exist and assembles
+:class:`twin.sim.parts.PartStore`); a rerun skips the parts that exist and assembles
 ``measurements.h5`` and ``truth.h5`` from all parts at the end.
 """
 
@@ -19,15 +19,15 @@ from pathlib import Path
 import numpy as np
 
 from analysis import dataset as ds
-from analysis.files import write_json
-from twin import degradation as deg
-from twin import geometry as geo
-from twin.model import MechanicalState, stiffness_of
-from twin.parts import PartStore
-from twin.scenario import Scenario, from_dict, nominal_axis_description, to_axis
-from twin.sensors import instruments as ins
-from twin.sensors.instruments import MICRO_G
-from twin.simulate import (
+from analysis.base.files import write_json
+from twin.sim import degradation as deg
+from twin.sim import geometry as geo
+from twin.sim.model import MechanicalState, stiffness_of
+from twin.sim.parts import PartStore
+from twin.sim.scenario import Scenario, from_dict, nominal_axis_description, to_axis
+from twin.sim.sensors import instruments as ins
+from twin.sim.sensors.instruments import MICRO_G
+from twin.sim.simulate import (
     Condition,
     Simulator,
     World,
@@ -124,7 +124,7 @@ def make_world(s: Scenario) -> World:
 
 
 def degradation_law(s: Scenario):
-    """The scenario's degradation law (:mod:`twin.laws`: ``degradation.law`` looked up in the
+    """The scenario's degradation law (:mod:`twin.sim.laws`: ``degradation.law`` looked up in the
     registry, made with its parameters from ``[degradation]``)."""
     return s.degradation.make_law()
 
@@ -319,7 +319,7 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
     """Simulate one unit of several campaigns of the same plan (scenarios differing in their
     seed, effects, sensors...) with batched rollouts: the captures or sessions whose models share
     a structure and whose commands are equal go into one ``mujoco.rollout`` call
-    (:func:`twin.simulate.run_many`); each campaign's part is what :func:`run_unit` stores.
+    (:func:`twin.sim.simulate.run_many`); each campaign's part is what :func:`run_unit` stores.
     Dial-indicator units run one by one."""
     import json
 
@@ -501,19 +501,19 @@ def simulate_campaign(s: Scenario, out_dir: str | Path, workers: int | None = No
     Args:
         s: the scenario. out_dir: campaign directory (created).
         workers: local processes (default: ``TWIN_WORKERS`` or all local cores,
-            :func:`twin.executors.default_processes`; 1 runs in this process).
+            :func:`analysis.base.executors.default_processes`; 1 runs in this process).
         on_progress: called as (done, total, unit name) after each unit.
         scheduler: address of a running Dask scheduler to send the units to instead
-            (:mod:`twin.executors`); its workers must see ``out_dir`` at the same path.
+            (:mod:`analysis.base.executors`); its workers must see ``out_dir`` at the same path.
     Returns:
         {"units": n, "simulated": n_new, "skipped": n_existing, "executor": where they ran}.
 
     Raises:
-        twin.executors.ExecutorError: no scheduler answers at ``scheduler``.
+        analysis.base.executors.ExecutorError: no scheduler answers at ``scheduler``.
         CampaignInterrupted: on Ctrl-C (KeyboardInterrupt), after cancelling the queued units and
             stopping the running ones; the finished units stay stored.
     """
-    from twin.executors import make_executor
+    from analysis.base.executors import make_executor
 
     out = Path(out_dir).resolve()  # the workers (possibly elsewhere) get absolute paths
     out.mkdir(parents=True, exist_ok=True)

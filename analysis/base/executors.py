@@ -20,7 +20,7 @@ import os
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 
-__all__ = ["ExecutorError", "Executor", "default_processes", "make_executor", "map_ordered", "mapper"]
+__all__ = ["ExecutorError", "Executor", "default_processes", "make_executor", "map_ordered", "mapper", "run_tasks"]
 
 
 class ExecutorError(ValueError):
@@ -298,3 +298,19 @@ def mapper(processes: int | None = None, *, scheduler: str | None = None,
                 yield fut.result()
 
     return run
+
+
+def run_tasks(fn: Callable, args: list[tuple], workers: int, scheduler: str | None = None,
+              on_done: Callable[[int], None] | None = None, prefix: str = "task") -> list:
+    """``[fn(*a) for a in args]`` in order: on the Dask cluster at ``scheduler`` when given
+    (its workers must see the files the tasks read and write at the same paths), else on
+    ``workers`` local processes (never more than there are tasks), or in this process when there
+    is one worker or one task. ``on_done(i)`` is called as task i finishes; ``prefix`` names the
+    tasks on the cluster's dashboard. Each task must be a pure function of its arguments, so the
+    results do not depend on where it ran."""
+    if not args:
+        return []
+    local = 1 if workers <= 1 or len(args) <= 1 else min(workers, len(args))
+    with make_executor(local, scheduler=scheduler, prefix=prefix) as ex:
+        return map_ordered(ex, fn, args, [str(i) for i in range(len(args))],
+                           None if on_done is None else (lambda i, _key: on_done(i)))

@@ -41,10 +41,10 @@ import numpy as np
 from mujoco import rollout
 from scipy import signal
 
-from twin import geometry as geo
-from twin.axis import Axis
-from twin.drive import Move, Profile, command_profile, reciprocating
-from twin.model import (
+from twin.sim import geometry as geo
+from twin.sim.axis import Axis
+from twin.sim.drive import Move, Profile, command_profile, reciprocating
+from twin.sim.model import (
     FLANK_MASS,
     BaseMode,
     MechanicalState,
@@ -55,7 +55,7 @@ from twin.model import (
     initial_state,
     stiffness_of,
 )
-from twin.sensors import instruments as ins
+from twin.sim.sensors import instruments as ins
 
 SETTLE_TIME = 0.1  # s of standstill simulated before t = 0 of every rollout
 
@@ -87,7 +87,7 @@ class World:
             stribeck_velocity: Stribeck velocity v_s, m/s (see :func:`stribeck_force`).
         base_modal_mass: modal mass of the machine base's X mode, kg (0 = rigid base);
             base_frequency: its natural frequency, Hz; base_damping_ratio: ζ (see
-            :class:`twin.model.BaseMode`).
+            :class:`twin.sim.model.BaseMode`).
     """
 
     axis: Axis
@@ -134,7 +134,7 @@ def recirculation_force(theta: np.ndarray, v_cmd: np.ndarray, world: World) -> n
 
     When balls re-enter the loaded zone through the return/deflector they strike the nut: one
     impulse per ball-pass period, at the ball-pass phase u = (N_bp·θ + φ_bp)/2π of
-    :func:`twin.geometry.ball_pass` (pulse centred where u is an integer). Each is a raised
+    :func:`twin.sim.geometry.ball_pass` (pulse centred where u is an integer). Each is a raised
     cosine p(d) = ½(1 + cos(2πd/w)) for |d| < w/2 (d = u − round(u), w the width as a fraction
     of the period), of peak F, opposing the motion: F·p·(−sign v). The mean, F·w/2, is kept
     (a one-sided contact force: it is a real drag of the recirculation). Zero at standstill.
@@ -204,7 +204,7 @@ class Trajectory:
     """A rollout, row k at t_k = k·dt (state and sensors). t (n,) s;
     qpos (n, 8) [screw rad, x y z m, roll pitch yaw rad, lead flank m] or
     (n, 9) with a compliant base (``base_x`` m last); qvel likewise;
-    sens (n, 14) MuJoCo sensors (see :mod:`twin.model`); cmd: the commanded profile (controller
+    sens (n, 14) MuJoCo sensors (see :mod:`twin.sim.model`); cmd: the commanded profile (controller
     frame); theta_cmd (n,) rad; index: the columns of qpos and sens by name."""
 
     t: np.ndarray
@@ -272,7 +272,7 @@ class Simulator:
 
     def controls(self, cond: Condition, cmd: Profile, x_rail: np.ndarray) -> np.ndarray:
         """(n, nu) control array: servo set-points, torque ripple (+ cogging), the prescribed
-        lead flank, the rail and runout errors as force pairs K·e (see :mod:`twin.model`), rails
+        lead flank, the rail and runout errors as force pairs K·e (see :mod:`twin.sim.model`), rails
         looked up at ``x_rail`` (n,) m, and the recirculation and Stribeck forces of the
         world's effects (zero when off)."""
         w, ax = self.world, self.world.axis
@@ -316,7 +316,7 @@ class Simulator:
     def rest_pose(self, x: float) -> np.ndarray:
         """Resting pose of the carriage on the rails at rail position ``x`` m: joint coordinates
         (y, z, roll, pitch, yaw) of its centre of mass, (5,) in m and rad (quasi-static truck
-        fit, :func:`twin.geometry.error_motions_from_trucks`)."""
+        fit, :func:`twin.sim.geometry.error_motions_from_trucks`)."""
         w = self.world
         t_y, t_z, e_ax, e_bx, e_cx = geo.error_motions_from_trucks(
             geo.truck_displacements(w.rails, w.carriage, np.array([x])), w.carriage)[:, 0]
@@ -376,14 +376,14 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
 
     The simulators may hold different worlds (rails, effects, servo, sensors: anything but the
     model's structure, see :meth:`Simulator.structure`); the models of different conditions
-    differ only in float fields (see :func:`twin.model.apply_state`), so they batch; ``nthread``
+    differ only in float fields (see :func:`twin.sim.model.apply_state`), so they batch; ``nthread``
     threads share the work (the GIL is released). A simulator's own model serves its first
     item, copies the others. Each item's trajectory is the one a rollout of it alone gives.
 
     Row k of a trajectory is the state at t_k = k·dt, before step k, which is also when
     MuJoCo evaluates the sensors of step k (``sens`` row k). The accelerometers' rows are the
     acceleration that step k applies, (v_{k+1} − v_k)/dt at the sensor
-    (:func:`twin.model.accelerometer_implicit_correction`)."""
+    (:func:`twin.sim.model.accelerometer_implicit_correction`)."""
     first = items[0][0]
     for sim, _ in items[1:]:
         if sim.structure() != first.structure():
@@ -471,7 +471,7 @@ PHASE1_LEAD_OUT = 0.005  # s simulated (and discarded) after a capture ends
 def phase1_profile(cfg, fs: float, rng: np.random.Generator) -> Profile:
     """Command of one Phase I capture: the reciprocating routine of Table I entered at a random
     moment of a dwell (captures are taken every 30 min of continuous operation, at no particular
-    phase of the motion). ``cfg`` is a :class:`twin.scenario.Phase1Config`."""
+    phase of the motion). ``cfg`` is a :class:`twin.sim.scenario.Phase1Config`."""
     start, end = cfg.start_mm * 1e-3, cfg.end_mm * 1e-3
     one = Move(start, end, cfg.speed_mm_s * 1e-3, cfg.accel_mm_s2 * 1e-3, cfg.dwell_s)
     cycles = int(math.ceil(cfg.capture_s / (2.0 * one.duration))) + 1

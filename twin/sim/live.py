@@ -31,11 +31,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from analysis import dataset as ds
+from analysis.base.files import read_json, write_json
 from analysis.dataset.live import SOURCE_FORMAT, UNIT_FORMAT, UNIT_VERSION, manifest_ok, sha256_of
-from analysis.files import read_json, write_json
-from twin.campaign import Unit, _claim, assemble, phase2_item, plan, run_unit
-from twin.parts import PartStore
-from twin.scenario import Scenario, nominal_axis_description
+from twin.sim.campaign import Unit, _claim, assemble, phase2_item, plan, run_unit
+from twin.sim.parts import PartStore
+from twin.sim.scenario import Scenario, nominal_axis_description
 
 __all__ = ["LIVE_DIR", "UNIT_FORMAT", "live_units", "manifest_ok", "publish_unit", "simulate_live",
            "sha256_of"]

@@ -24,7 +24,7 @@ Kinds and what their objects must be (contracts: docs/developer-guide.md):
   subclass of :class:`analysis.phase2.backlash.BacklashEstimator`.
 
 Other layers add kinds of their own with :func:`define_kind` (this module imports none of them):
-the twin defines ``degradation_laws`` (``twin.laws``: the laws of a scenario's ``[degradation]``
+the twin defines ``degradation_laws`` (``twin.sim.laws``: the laws of a scenario's ``[degradation]``
 section) and ``gap_candidates`` (``twin.harness.diagnosis.candidates.base``: the effects the gap diagnosis can add),
 each with its entry-point group ``ballscrew_twin.<kind>`` and the modules holding its built-ins.
 """
