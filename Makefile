@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-slow lint bench bench-check venv clean
+.PHONY: demo test test-slow lint bench bench-check validate venv clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -37,6 +37,14 @@ bench: $(STAMP)
 #   .venv/bin/python benchmarks/bench_simulation.py --no-quick --repeat 3 --write-baseline benchmarks/baseline.json
 bench-check: $(STAMP)
 	$(PY) benchmarks/bench_simulation.py --no-quick --check benchmarks/baseline.json
+
+# Every figure the README and the docs quote, re-measured: each benchmark below stores its figures
+# in docs/validation.json (--record), then benchmarks/record.py writes them into the docs' quoted
+# spans (<!-- fig:... -->, <!-- table:... -->); tests/test_quoted_figures.py checks they agree.
+VALIDATE := benchmarks/bench_demo.py benchmarks/table3_phase1.py
+validate: $(STAMP)
+	for b in $(VALIDATE); do $(PY) $$b --record || exit 1; done
+	$(PY) benchmarks/record.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

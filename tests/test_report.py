@@ -250,7 +250,7 @@ def test_comparison_lines_follow_the_data():
     """The Fig. 10 and Fig. 12 lines change their verdict with the data (not hard-coded)."""
     def session(h, fwd, rev, gamma):
         return {"session": f"s{h}", "hours": float(h),
-                "position_shift_um": {"E_YX/forward": fwd, "E_YX/reverse": rev},
+                "position_shift_um": {"E_XX/forward": fwd, "E_XX/reverse": rev},
                 "gamma": gamma}
     common = {"parameters": {"dofs": ["E_YX"], "sigma": 4},
               "sessions": [session(0, 0.0, 0.0, {}),

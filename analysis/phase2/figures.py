@@ -10,12 +10,14 @@ analysed with ``--no-plots``) draw the same figure. :func:`write_figures` writes
 - ``fig09_correlation.png``: correlation against lag of the last session's E_YX (forward) with
   the 75 % threshold, the fit of the main peak, and the line through the local shifts of the
   comb DOF if any (Fig. 9);
-- ``fig10_position_shifts.png``: position shifts per session, forward and reverse (Fig. 10);
+- ``fig10_position_shifts.png``: E_XX's position shift per session, forward and reverse, whole
+  and zoomed (Fig. 10a, b), and ours: forward − reverse of the estimator's DOFs;
 - ``fig11_delta_position_shift.png``: ΔPositionShift per DOF (Fig. 11);
-- ``fig12_gamma.png``: γ per DOF and ΔBacklash per DOF with the weighted sum (Fig. 12);
-- ``fig13_backlash.png``: Δbacklash by shifts and by pitch against hours, the Kalman-smoothed
-  trend, the Savitzky–Golay trend the paper draws, dial-indicator changes and, when given, the
-  injected change (Fig. 13).
+- ``fig12_gamma.png``: γ per DOF, the DOF of the highest γ without E_XX, ΔBacklash per DOF with
+  the weighted sum (Fig. 12a, b, c);
+- ``fig13_backlash.png``: Δbacklash by shifts (a) and by pitch (b) against hours, each with the
+  Savitzky–Golay filtered curve the paper draws; ours: the Kalman-smoothed trend (±2σ) in (a),
+  dial-indicator changes and, when given, the injected change (Fig. 13).
 """
 
 from __future__ import annotations
@@ -158,17 +160,28 @@ def draw_trend_figure(fig: str, doc: dict, path: Path,
     dofs = list(params.get("dofs") or [])
     present = [d for d in DOFS if any(d in (s.get("gamma") or {}) for s in ses)]
     if fig == "10":
-        f, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+        # the paper's Fig. 10: E_XX's position shift in both directions (a) and zoomed (b); the
+        # difference of the directions (c) is ours
+        f, axes = plt.subplots(1, 3, figsize=(15, 3.6))
+        fw = _column(ses, lambda s: s["position_shift_um"]["E_XX/forward"])
+        rv = _column(ses, lambda s: s["position_shift_um"]["E_XX/reverse"])
+        for ax, scale, unit in ((axes[0], 1e3, "mm"), (axes[1], 1.0, "µm")):
+            ax.plot(hours, fw / scale, "-", marker=".", label="E_XX forward")
+            ax.plot(hours, rv / scale, "--", marker=".", label="E_XX reverse")
+            ax.set_ylabel(f"position shift ({unit})")
+        both = np.concatenate([fw, rv])
+        if np.isfinite(both).any():  # the zoom: the middle half of the shifts, with a margin
+            lo, hi = np.nanpercentile(both, [25, 75])
+            pad = max(0.5 * (hi - lo), 5.0)
+            axes[1].set_ylim(lo - pad, hi + pad)
         for d in dofs:
-            fw = _column(ses, lambda s, d=d: s["position_shift_um"][f"{d}/forward"])
-            rv = _column(ses, lambda s, d=d: s["position_shift_um"][f"{d}/reverse"])
-            axes[0].plot(hours, fw / 1e3, "-", marker=".", label=f"{d} forward")
-            axes[0].plot(hours, rv / 1e3, "--", marker=".", label=f"{d} reverse")
-            axes[1].plot(hours, fw - rv, marker=".", label=d)
-        axes[0].set_ylabel("position shift (mm)")
-        axes[0].set_title("position shift vs the first session (Fig. 10)")
-        axes[1].set_ylabel("forward − reverse (µm)")
-        axes[1].set_title("difference of the directions (Fig. 10b)")
+            dfw = _column(ses, lambda s, d=d: s["position_shift_um"][f"{d}/forward"])
+            drv = _column(ses, lambda s, d=d: s["position_shift_um"][f"{d}/reverse"])
+            axes[2].plot(hours, dfw - drv, marker=".", label=d)
+        axes[0].set_title("E_XX position shift vs the first session (Fig. 10a)")
+        axes[1].set_title("zoomed, both directions (Fig. 10b)")
+        axes[2].set_ylabel("forward − reverse (µm)")
+        axes[2].set_title("difference of the directions, estimator's DOFs (ours)")
     elif fig == "11":
         f, ax = plt.subplots(figsize=(7, 3.6))
         axes = [ax]
@@ -179,42 +192,54 @@ def draw_trend_figure(fig: str, doc: dict, path: Path,
         ax.set_ylabel("ΔPositionShift (µm, clipped ±100)")
         ax.set_title("ΔPositionShift per DOF (Eq. 4, Fig. 11)")
     elif fig == "12":
-        f, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+        f, axes = plt.subplots(1, 3, figsize=(15, 3.6))
         for d in present:
             axes[0].plot(hours, _column(ses, lambda s, d=d: s["gamma"][d]), marker=".", label=d)
+        # Fig. 12b: per session, the DOF of the highest correlation other than E_XX
+        others = [d for d in present if d != "E_XX"]
+        best = []
+        for s in ses:
+            g = {d: v for d, v in (s.get("gamma") or {}).items() if d in others and v is not None}
+            best.append(others.index(max(g, key=g.get)) if g else np.nan)
+        axes[1].plot(hours, best, "o", ms=4, label="highest γ without E_XX")
+        axes[1].set_yticks(range(len(others)), others)
+        axes[1].set_ylim(-0.5, max(len(others) - 0.5, 0.5))
         for d in dofs:
-            axes[1].plot(hours, _column(ses, lambda s, d=d: s["delta_backlash_um_by_dof"][d]), marker=".",
+            axes[2].plot(hours, _column(ses, lambda s, d=d: s["delta_backlash_um_by_dof"][d]), marker=".",
                          lw=0.7, label=f"ΔBacklash {d}")
-        axes[1].plot(hours, _column(ses, lambda s: s["delta_backlash_um_shift"]), "k-", marker="o", ms=3,
+        axes[2].plot(hours, _column(ses, lambda s: s["delta_backlash_um_shift"]), "k-", marker="o", ms=3,
                      label=f"weighted (σ = {params.get('sigma', '?')})")
         axes[0].set_ylabel("γ_ij = min over directions")
         axes[0].set_title("correlation per DOF (Fig. 12a)")
-        axes[1].set_ylabel("Δbacklash (µm)")
-        axes[1].set_title("per DOF and weighted sum (Eqs. 5–6, Fig. 12c)")
+        axes[1].set_ylabel("DOF")
+        axes[1].set_title("DOF of the highest correlation, E_XX excluded (Fig. 12b)")
+        axes[2].set_ylabel("Δbacklash (µm)")
+        axes[2].set_title("per DOF and weighted sum (Eqs. 5–6, Fig. 12c)")
     else:
         f, axes = plt.subplots(1, 2, figsize=(12, 4))
         smoothed = _column(ses, lambda s: s["smoothed_um"])
         std = _column(ses, lambda s: s["smoothed_std_um"])
         dial = _column(ses, lambda s: s["dial_delta_um"])
-        series = (("delta_backlash_um_shift", "signal position shifts (Eq. 6)", True),
-                  ("delta_backlash_um_pitch", "perceived pitch (Eq. 9)", False))
-        for ax, (key, title, with_trend) in zip(axes, series, strict=True):
+        series = (("delta_backlash_um_shift", "savgol_um", "signal position shifts (Eq. 6, Fig. 13a)", True),
+                  ("delta_backlash_um_pitch", "savgol_pitch_um", "perceived pitch (Eq. 9, Fig. 13b)", False))
+        for ax, (key, sg_key, title, with_trend) in zip(axes, series, strict=True):
             ax.plot(hours, _column(ses, lambda s, key=key: s[key]), "o", ms=3, label="estimate")
             if with_trend and not np.all(np.isnan(smoothed)):
-                ax.plot(hours, smoothed, "-", label="Kalman-smoothed")
+                ax.plot(hours, smoothed, "-", label="Kalman-smoothed ±2σ (ours)")
                 if not np.all(np.isnan(std)):
                     ax.fill_between(hours, smoothed - 2 * std, smoothed + 2 * std, alpha=0.2)
-            sg = _column(ses, lambda s: s["savgol_um"])
-            if with_trend and not np.all(np.isnan(sg)):
+            sg = _column(ses, lambda s, sg_key=sg_key: s[sg_key])
+            if not np.all(np.isnan(sg)):
                 p = (doc.get("parameters") or {}).get("savgol") or {}
                 ax.plot(hours, sg, "-.", color="tab:purple",
-                        label=f"Savitzky–Golay ({p.get('window_sessions')} sessions, order {p.get('polyorder')})")
+                        label=f"filtered: Savitzky–Golay ({p.get('window_sessions')} sessions, "
+                              f"order {p.get('polyorder')})")
             if not np.all(np.isnan(dial)):
                 ax.plot(hours, dial, "s", ms=3, mfc="none", label="dial indicator (change)")
             if injected is not None:
                 ax.plot(injected[0], injected[1], "k--", lw=0.8, label="injected (truth)")
             ax.set_ylabel("Δbacklash (µm)")
-            ax.set_title(f"estimated change of backlash by {title}")
+            ax.set_title(f"change of backlash by {title}", fontsize=10)
     for ax in axes:
         ax.set_xlabel("operating hours (h)")
         ax.legend(fontsize=7)

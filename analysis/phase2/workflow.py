@@ -124,6 +124,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         trend = BacklashTrend(process_noise=process_noise).fit(hours, shift)
     prog = prognosis(trend) if trend is not None else None
     savgol = savgol_trend(shift)
+    savgol_pitch = savgol_trend([s.delta_backlash_pitch_m for s in ses])  # Fig. 13b's filtered curve
     dial_delta = None
     if dial is not None and len(dial[0]):
         dial_delta = (dial[0], dial[1] - dial[1][0])
@@ -138,6 +139,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
             rec["smoothed_std_um"] = float(trend.smoothed_std[i] * 1e6)
         if savgol is not None and np.isfinite(savgol.values[i]):
             rec["savgol_um"] = float(savgol.values[i] * 1e6)
+        if savgol_pitch is not None and np.isfinite(savgol_pitch.values[i]):
+            rec["savgol_pitch_um"] = float(savgol_pitch.values[i] * 1e6)
         if dial_delta is not None:
             k = int(np.argmin(np.abs(dial_delta[0] - s.hours)))
             if abs(dial_delta[0][k] - s.hours) < 1e-6:

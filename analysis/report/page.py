@@ -323,7 +323,8 @@ def _prognosis(bl: dict) -> list[Block]:
     if bl.get("prognosis"):
         p = bl["prognosis"]
         band = p.get("band_hours") or [None, None]
-        out.append(_p(f"Prognosis at {_f(p.get('at_hours'))} h: level {_f(p.get('level_um'), '{:.3g}')} µm, "
+        out.append(_p(f"Prognosis (ours: the paper has none) at {_f(p.get('at_hours'))} h: "
+                      f"level {_f(p.get('level_um'), '{:.3g}')} µm, "
                       f"rate {_f(p.get('rate_um_per_kh'), '{:.3g}')} µm per 1000 h; "
                       f"{_f(p.get('limit_um'))} µm reached at {_f(p.get('crossing_hours'), '{:.0f}')} h "
                       f"(95 % band {_f(band[0], '{:.0f}')}–{_f(band[1], '{:.0f}')} h)."))
@@ -335,11 +336,14 @@ def _prognosis(bl: dict) -> list[Block]:
 
 
 _PHASE2_CAPTIONS = {
-    "10": "position shift of each session against the first, forward and reverse, and their difference",
+    "10": ("E_XX's position shift of each session against the first, forward and reverse, whole and "
+           "zoomed (as the paper), and ours: forward − reverse of the DOFs the estimate sums"),
     "11": "ΔPositionShift (forward − reverse) per DOF against operating hours",
-    "12": "γ per DOF and ΔBacklash per DOF with their weighted sum",
-    "13": ("estimated change of backlash by shifts and by pitch, Kalman-smoothed trend, dial indicator "
-           "and injected change"),
+    "12": ("γ per DOF, the DOF of the highest γ without E_XX, and ΔBacklash per DOF with their "
+           "weighted sum"),
+    "13": ("estimated change of backlash by shifts (a) and by pitch (b), each with its Savitzky–Golay "
+           "filtered curve (as the paper); ours: the Kalman-smoothed trend, the dial indicator and the "
+           "injected change"),
 }
 
 
