@@ -39,7 +39,7 @@ POSITION_REFERENCES = {
                 "by +Δbacklash forward minus reverse"),
     "imu": ("IMU-based position (strokes timed from the accelerometer, the routine's nominal trapezoid "
             "between them); rail-fixed features stay put, E_XX's screw-locked content moves with the "
-            "backlash: Eq. 5 subtracts each DOF's shift from E_XX's"),
+            "backlash: Eq. 5 refers each DOF's ΔPositionShift to E_XX's (ΔPositionShift_j − ΔPositionShift_XX)"),
 }
 
 

@@ -176,7 +176,11 @@ class BacklashEstimator(InheritedParams, BaseEstimator):
         pitch_dofs: DOFs of the perceived pitch (Eq. 8).
         pitch_method: "harmonic" (default) or "comb": how each trace's pitch is read
             (:meth:`observed_pitch`).
-        stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to (Eq. 5).
+        stationary: "command" (default) or "E_XX": what ΔPositionShift is referred to. With
+            "E_XX", Eq. 5 as computed here: ΔBacklash_j = ΔPositionShift_j − ΔPositionShift_XX
+            (the paper writes ΔPositionShift_XX − ΔPositionShift_j; its shifts have the opposite
+            sign to ours, positive when the features sit at a larger commanded position, so both
+            give more backlash as a positive change).
         travel_m, lead_m: L and p of Eq. 9, m (the paper's 0.45 m and 10 mm).
         pitch_bound_factor, pitch_bound_floor_m, pitch_bound_lead_fraction: the plausibility
             bound of Eq. 9 (module doc; ``pitch_bound_lead_fraction=inf`` with
