@@ -215,7 +215,11 @@ def _phase1(m: Measurements, part: str, b: _Builder) -> None:
                 "diagnosis needs at least 2 per sample (even ones to fit, odd ones held out)")
         caps = [m.phase1(n) for n in chosen]
         hours = float(np.mean([c.hours for c in caps]))
-        stats = np.nanmean([_phase1_capture_stats(c) for c in caps], axis=0)
+        per_capture = np.array([_phase1_capture_stats(c) for c in caps])
+        # a statistic no capture of the sample has (NaN in all) stays NaN, without numpy's warning
+        seen = ~np.isnan(per_capture).all(axis=0)
+        stats = np.full(per_capture.shape[1], np.nan)
+        stats[seen] = np.nanmean(per_capture[:, seen], axis=0)
         for v, r in zip(stats, _phase1_regions(hours), strict=True):
             b.add(v, r)
         summaries = [summarise_capture(c, m.label) for c in caps]
