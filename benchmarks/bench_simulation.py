@@ -55,6 +55,7 @@ sys.path.insert(0, str(REPO))
 
 from analysis.base.executors import keep_freed_memory  # noqa: E402
 from twin.sim import campaign as cp  # noqa: E402
+from twin.sim.campaign import units as campaign_units  # noqa: E402
 from twin.sim.parts import PartStore  # noqa: E402
 from twin.sim.scenario import load  # noqa: E402
 from twin.sim.simulate import (  # noqa: E402
@@ -161,8 +162,8 @@ def measure(runs: int, repeat: int) -> dict:
     sig1 = phase1_measure(sim1, s.phase1, traj1, cp.rng_for(0, cp.KIND_PHASE1, 0))
     with tempfile.TemporaryDirectory() as tmp:
         store = PartStore(tmp)
-        part1, _, _ = clock(lambda: cp._store_phase1(store, u1, sig1), 3 * repeat)
-        part2, _, _ = clock(lambda: cp._store_phase2(s, sim2, store, u2, cond2, traj2))
+        part1, _, _ = clock(lambda: campaign_units._store_phase1(store, u1, sig1), 3 * repeat)
+        part2, _, _ = clock(lambda: campaign_units._store_phase2(s, sim2, store, u2, cond2, traj2))
         part2 -= f["phase2_imu_s"]  # _store_phase2 measures the scenario's runs again
         # Less the assembly's own cost (the files, the truth timeline), once per campaign.
         asm0, _, _ = clock(lambda: cp.assemble(s, Path(tmp), []), repeat)

@@ -1,4 +1,4 @@
-"""Tests of the instrument measurement models (twin/sim/sensors/instruments.py).
+"""Tests of the instrument measurement models (twin/sim/sensors/).
 
 Check 7 of the project's issue: at standstill the IMU's noise densities, sampling rates and the
 sensing of gravity tilt match the paper's section III figures.
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from twin.sim.sensors import instruments
+from twin.sim.sensors import chain, instruments
 from twin.sim.sensors.instruments import (
     MICRO_G,
     MV_PER_G,
@@ -371,15 +371,15 @@ def test_runs_are_bit_for_bit_the_single_recordings():
         single.append((measure_imu_accelerometer(force, 5_000.0, acc_spec, g)[1],
                        measure_gyroscope(rate, 5_000.0, gyro_spec, g)[1]))
     gens = [np.random.default_rng([9, r]) for r in range(5)]
-    old_block = instruments._BLOCK_BYTES
+    old_block = chain._BLOCK_BYTES
     # The accelerometer's noise is drawn at its 1613 Hz: 1291 samples after a 54-sample warm-up;
     # two runs per block for it (blocks and a remainder), three for the gyroscope.
-    instruments._BLOCK_BYTES = 2 * (1291 + 54) * 3 * 8
+    chain._BLOCK_BYTES = 2 * (1291 + 54) * 3 * 8
     try:
         _, accs = measure_imu_accelerometer_runs([force] * 5, 5_000.0, acc_spec, gens)
         _, gyros = measure_gyroscope_runs([rate] * 5, 5_000.0, gyro_spec, gens)
     finally:
-        instruments._BLOCK_BYTES = old_block
+        chain._BLOCK_BYTES = old_block
     for (acc, gyro), a, g in zip(single, accs, gyros, strict=True):
         assert np.array_equal(acc, a) and np.array_equal(gyro, g)
     # Phase I: the two nut accelerometers from one generator in one call.
@@ -448,12 +448,13 @@ def test_determinism(call):
 
 
 def test_module_is_pure_numpy_scipy():
-    """The sensor models need no simulator: numpy, scipy and the analysis package's resampler."""
-    tree = ast.parse(Path(instruments.__file__).read_text())
+    """The sensor models need no simulator: numpy, scipy, the analysis package's resampler and the
+    modules of their own package (twin/sim/sensors/)."""
     imported = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            imported |= {alias.name.split(".")[0] for alias in node.names}
-        elif isinstance(node, ast.ImportFrom):
-            imported.add((node.module or "").split(".")[0])
+    for path in Path(instruments.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                imported |= {alias.name.split(".")[0] for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and not (node.module or "").startswith("twin.sim.sensors."):
+                imported.add((node.module or "").split(".")[0])
     assert imported <= {"__future__", "functools", "math", "dataclasses", "numpy", "scipy", "analysis"}

@@ -33,7 +33,8 @@ from pathlib import Path
 from analysis import dataset as ds
 from analysis.base.files import read_json, write_json
 from analysis.dataset.live import SOURCE_FORMAT, UNIT_FORMAT, UNIT_VERSION, manifest_ok, sha256_of
-from twin.sim.campaign import Unit, _claim, assemble, phase2_item, plan, run_unit
+from twin.sim.campaign import Unit, assemble, phase2_item, plan, run_unit
+from twin.sim.campaign.runner import _claim
 from twin.sim.parts import PartStore
 from twin.sim.scenario import Scenario, nominal_axis_description
 

@@ -45,8 +45,9 @@ from twin.harness.view.base import (
     ViewSummary,
     hours_to_ns,
 )
+from twin.harness.view.output import serve_recording, write_recording
 from twin.harness.view.poses import carriage_poses
-from twin.harness.view.recording import build, serve_recording, write_recording
+from twin.harness.view.recording import build
 
 __all__ = ["ENTITY_CARRIAGE", "EXAGGERATION", "MAX_POINTS", "POSE_RATE_HZ", "ViewError", "ViewSummary",
            "build", "carriage_poses", "hours_to_ns", "serve_recording", "write_recording"]

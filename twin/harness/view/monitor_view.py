@@ -19,7 +19,7 @@ from urllib.parse import quote
 import rerun.blueprint as rrb
 
 from twin.harness.view.base import APP_ID, RED
-from twin.harness.view.recording import _Recorder
+from twin.harness.view.recorder import _Recorder
 
 __all__ = ["MonitorView"]
 

@@ -12,7 +12,7 @@ owner's words with the nominal value of the scenario it was run with: "carriage 
 120 kg (interval 158–171 kg)" (:func:`analysis.diagnosis.wording.owner_phrase`). The candidate's
 name is its scenario key (``axis.carriage_mass_kg``): what to fix.
 
-The keys (``twin/sim/scenario.py``) and the physical ground of each prior range (the factor, real
+The keys (``twin/sim/scenario/sections.py``) and the physical ground of each prior range (the factor, real
 over nominal):
 
 - **Masses and inertias.** ``axis.carriage_mass_kg`` 0.75–1.5: the nominal is the carriage of
