@@ -6,8 +6,9 @@
   origin set by the operator).
 - :class:`Simulator`: one compiled model per time step; :meth:`Simulator.run` rolls it out with
   ``mujoco.rollout`` under a commanded profile.
-- :func:`phase1_capture`, :func:`phase2_session`, :func:`dial_indicator`: the three measurement
-  procedures of the paper (section III).
+- :func:`phase1_capture`, :func:`phase2_trajectory` with :func:`phase2_measure_runs` (the motion of a
+  session once, then each run's sensors), :func:`dial_indicator`: the three measurement procedures
+  of the paper (section III).
 
 Modules: :mod:`~twin.sim.simulate.world` (the world and its effects' forces),
 :mod:`~twin.sim.simulate.simulator` (condition, trajectory, simulator, batched rollouts; how the
