@@ -193,16 +193,16 @@ def test_resimulated_shrink_uses_the_same_statistic_and_sets_the_verdict(tmp_pat
     def runs(p_true, n):
         return {p: [Signature(s.values + p_true * k * sd[p], regions) for s in twin[p][:n]] for p in twin}
 
-    exact = at.resimulated(real, twin, runs(10.0, 8))
+    exact = at.resimulated_gap(real, twin, runs(10.0, 8))
     assert exact["heldout_gap_after"] == pytest.approx(res["heldout_gap_after"], abs=1e-9)
     assert exact["heldout_shrink"] == pytest.approx(res["heldout_shrink"], abs=1e-12)
     assert exact["seeds"] == 8 and exact["n_statistics"] == 10 and exact["verdict"] == at.EXPLAINED
-    half = at.resimulated(real, twin, runs(5.0, 2))  # t = 5 left on 10 statistics: 250 of 1000
+    half = at.resimulated_gap(real, twin, runs(5.0, 2))  # t = 5 left on 10 statistics: 250 of 1000
     assert half["seeds"] == 2
     assert half["heldout_gap_before"] == pytest.approx(res["heldout_gap_before"])
     assert half["heldout_gap_after"] == pytest.approx(250.0, rel=1e-9)
     assert half["heldout_shrink"] == pytest.approx(0.75, rel=1e-9)
-    out = at.with_resimulation(res, half)
+    out = at.merge_resimulation(res, half)
     assert out["verdict"] == at.UNEXPLAINED and out["verdict_interpolated"] == at.EXPLAINED
     assert out["heldout_shrink_resimulated"] == pytest.approx(0.75)
     assert out["heldout_shrink"] == res["heldout_shrink"]  # the interpolated one, side by side
@@ -217,7 +217,7 @@ def test_resimulated_shrink_uses_the_same_statistic_and_sets_the_verdict(tmp_pat
     assert "shrink 75 % re-simulated with the twin seeds (2 seeds; 1\u202f000 → 250), 100 % interpolated" in html
     assert "The verdict follows the re-simulated shrink (interpolated, it would be: explained)." in html
     with pytest.raises(ValueError, match="re-simulation with 9 seeds"):
-        at.resimulated(real, twin, runs(10.0, 8) | {"heldout": runs(10.0, 9)["heldout"] + [twin["heldout"][0]]})
+        at.resimulated_gap(real, twin, runs(10.0, 8) | {"heldout": runs(10.0, 9)["heldout"] + [twin["heldout"][0]]})
 
 
 def test_nothing_added_is_not_resimulated():
@@ -225,7 +225,7 @@ def test_nothing_added_is_not_resimulated():
     real, twin, regions, sd = _signatures({"torque": 10.0})
     res, _ = at.diagnose(real, twin, [])
     assert res["added"] == [] and res["verdict"] == at.UNEXPLAINED
-    out = at.with_resimulation(res, None, "nothing was added")
+    out = at.merge_resimulation(res, None, "nothing was added")
     assert out["resimulation"] == {"done": False, "reason": "nothing was added"}
     assert out["heldout_shrink_resimulated"] is None and out["verdict"] == at.UNEXPLAINED
     html = render_page({**out, "library": {}}, [])

@@ -77,7 +77,7 @@ with every added candidate at its fitted values (the simulation is the caller's:
 never simulates) for the first n of the K seeds, the response taken as the mean paired
 difference to the same seeds (common random numbers: Law, Simulation Modeling and Analysis,
 5th ed., section 11.2), with the same statistic G over the same statistics S;
-:func:`with_resimulation` makes the verdict follow it.
+:func:`merge_resimulation` makes the verdict follow it.
 
 The ranking lists the added effects in the order they were added, then the others by their
 net held-out reduction in the last round. ``worse_regions`` of the summary compares the twin
@@ -250,7 +250,7 @@ def _gap_setup(real: dict[str, Signature], twin: dict[str, list[Signature]], alp
     return sp, z0, select, sel_ho, g_before, crit
 
 
-def resimulated(real: dict[str, Signature], twin: dict[str, list[Signature]],
+def resimulated_gap(real: dict[str, Signature], twin: dict[str, list[Signature]],
                 resim: dict[str, list[Signature]], *, alpha: float = 0.01,
                 explained_fraction: float = 0.9) -> dict:
     """The held-out gap with the added candidates **re-simulated** instead of interpolated.
@@ -300,7 +300,7 @@ def resimulated(real: dict[str, Signature], twin: dict[str, list[Signature]],
             "worse_regions": worse_regions(z0["heldout"], z["heldout"], regions, alpha)}
 
 
-def with_resimulation(result: dict, resim: dict | None, reason: str = "") -> dict:
+def merge_resimulation(result: dict, resim: dict | None, reason: str = "") -> dict:
     """``result`` of :func:`diagnose` with its ``resimulation`` entry (:func:`resimulated`, or
     None: not re-simulated, for ``reason``): the verdict becomes the re-simulated one, the
     interpolated one stays in ``verdict_interpolated``; ``heldout_shrink_resimulated`` is the
@@ -347,5 +347,5 @@ def _hours(regions, z_before, z_after, select) -> list[dict]:
 __all__ = ["BOOTSTRAP_DRAWS", "EXPLAINED", "FOOTPRINT_SIGMAS", "INTERVAL_LEVEL", "NO_GAP", "TIE_FRACTION", "TIE_SIGMAS",
            "UNEXPLAINED", "WORSE_FRACTION", "CandidateResponse", "Fit", "ParamAxis", "alternatives",
            "bootstrap_interval", "chi2_quantile", "diagnose", "fit_candidate", "footprint_left", "grid_edge",
-           "interpolation_shift", "noise_interval", "resimulated", "response_error_var", "search_step",
-           "seed_interval", "stated_interval", "with_resimulation", "worse_regions"]
+           "interpolation_shift", "noise_interval", "resimulated_gap", "response_error_var", "search_step",
+           "seed_interval", "stated_interval", "merge_resimulation", "worse_regions"]

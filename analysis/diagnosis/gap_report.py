@@ -233,7 +233,7 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
              f"α = {w.number(result.get('alpha', 0.01), 2)}",
              f"held-out gap {w.gap_number(result['heldout_gap_before'])} (the spread allows "
              f"{w.gap_number(result['heldout_gap_critical'])})"]
-    if result["verdict"] != "no significant gap" or w.resimulated(result):
+    if result["verdict"] != "no significant gap" or w.resimulation_summary(result):
         facts.append(f"shrink {w.shrink_phrase(result)}")
     title_of = lambda e: result.get("library", {}).get(e, {}).get("title", e)  # noqa: E731
     added = [{"step": a.get("step", i + 1), "title": title_of(a["effect"]), "effect": a["effect"],
@@ -272,7 +272,7 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
                for r in [r for r in result.get("regions", []) if r["significant"]][:15]]
     figures = [{"link": q.name, "alt": q.stem.replace("_", " "),
                 "caption": _CAPTIONS.get(q.stem, q.stem.replace("_", " "))} for q in pngs]
-    rs = w.resimulated(result)
+    rs = w.resimulation_summary(result)
     if rs is not None:
         before = result.get("verdict_interpolated", verdict)
         other = "" if before == verdict else f" (interpolated, it would be: {before})"

@@ -264,7 +264,7 @@ def _places(rows: list[dict], k: int = 3) -> str:
     return "; ".join(names[:-1]) + " and " + names[-1]
 
 
-def resimulated(result: dict) -> dict | None:
+def resimulation_summary(result: dict) -> dict | None:
     """The ``resimulation`` entry of a result when the twin was re-simulated with the added
     candidates, else None (nothing added, no gap, or results written before it existed)."""
     rs = result.get("resimulation")
@@ -276,7 +276,7 @@ def shrink_phrase(result: dict) -> str:
     seeds; 71 612 → 926), 99 % interpolated (→ 421)"; "no re-simulation: nothing was added"
     when the twin was not run again."""
     g0, g1 = result["heldout_gap_before"], result["heldout_gap_after"]
-    rs = resimulated(result)
+    rs = resimulation_summary(result)
     interp = (f"{percent(result['heldout_shrink'])} interpolated from the responses "
               f"({gap_number(g0)} → {gap_number(g1)})")
     if rs is None:
@@ -322,7 +322,7 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
         edges = [f"{r['label']} is {r['note']}" for a in added for r in parameters(result, a) if r["note"]]
         out.append(("How sure", f"{sure} on the held-out part"
                     + (f"; but {'; '.join(edges)}" if edges else "") + "."))
-        rs = resimulated(result)
+        rs = resimulation_summary(result)
         if rs is not None:
             out.append(("How much", f"run with the added candidates at their fitted values, the twin "
                         f"({rs['seeds']} seed{'s' if rs['seeds'] != 1 else ''}) removes "
@@ -350,7 +350,7 @@ def answer_parts(result: dict) -> list[tuple[str, str]]:
         out.append(("How much", f"nothing is removed (held-out gap {gap_number(g0)}; the twin's "
                     f"own spread allows {gap_number(crit)})."))
     # What is left follows the verdict: the re-simulated twin when there is one.
-    rs = resimulated(result)
+    rs = resimulation_summary(result)
     residual = rs["residual"] if rs is not None else result.get("residual", {})
     shrink = rs["heldout_shrink"] if rs is not None else result["heldout_shrink"]
     g1 = rs["heldout_gap_after"] if rs is not None else g1

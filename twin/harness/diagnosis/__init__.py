@@ -59,7 +59,7 @@ from twin.harness.diagnosis.library import (
     simulated,
     with_effects,
 )
-from twin.harness.diagnosis.resimulation import add_resimulation, resim_plan, resimulate
+from twin.harness.diagnosis.resimulation import add_resimulation, resimulation_plan, simulate_with_added
 from twin.harness.diagnosis.runner import calibration_entry, run_diagnosis
 
 __all__ = [
@@ -68,7 +68,7 @@ __all__ = [
     "artefact_grid", "artefact_plans", "artefact_responses", "artefact_signatures", "build_ensemble",
     "calibration_entry", "candidate_names", "candidate_scenarios", "check_kinds", "measure_unit_costs", "check_layout",
     "check_response_seeds", "diagnose_signatures", "ensure_campaigns", "evaluate", "evaluate_all", "grid_points",
-    "kind_of", "library_json", "load_signatures", "prepare_subset", "resim_plan", "resimulate", "resolve_library",
-    "responses", "run_diagnosis", "simulated", "subset_scenario", "twin_seeds", "unfeaturisable",
+    "kind_of", "library_json", "load_signatures", "prepare_subset", "resimulation_plan", "resolve_library",
+    "responses", "run_diagnosis", "simulate_with_added", "simulated", "subset_scenario", "twin_seeds", "unfeaturisable",
     "with_effects", "with_seed", "workload",
 ]

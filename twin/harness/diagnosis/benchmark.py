@@ -94,7 +94,7 @@ from twin.harness.diagnosis.candidates import candidates
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS
 from twin.harness.diagnosis.ensemble import build_ensemble, diagnose_signatures
 from twin.harness.diagnosis.library import DEFAULT_KINDS, with_effects
-from twin.harness.diagnosis.resimulation import add_resimulation, resimulate
+from twin.harness.diagnosis.resimulation import add_resimulation, simulate_with_added
 from twin.sim.scenario import Scenario
 
 #: Twin seeds the benchmark re-simulates each case with (fewer than the spread's K: the
@@ -329,7 +329,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     diagnosis tries (default :data:`DEFAULT_KINDS`, and "parameter" when there are parameter
     cases). Every case with candidates added is re-simulated with them for the first
     ``resim_seeds`` twin seeds (0: none; all the cases' campaigns together,
-    :func:`twin.harness.diagnosis.resimulation.resimulate`) and scored with the verdict that gives."""
+    :func:`twin.harness.diagnosis.resimulation.simulate_with_added`) and scored with the verdict that gives."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
@@ -361,7 +361,7 @@ def run_benchmark(out: Path, nominal: Scenario, cases: list[Case], *, seeds: int
     # The re-simulated shrink: the twin run with each case's added candidates (all cases at once).
     todo = [i for i, r in enumerate(results) if r["added"] and r["verdict"] != NO_GAP] if resim_seeds else []
     resims: list = [None] * len(cases)
-    for i, rs in zip(todo, resimulate(ens, [results[i]["added"] for i in todo], cache, workers,
+    for i, rs in zip(todo, simulate_with_added(ens, [results[i]["added"] for i in todo], cache, workers,
                                       resim_seeds, on_progress=prog("re-simulations")), strict=True):
         resims[i] = rs
     rows = []

@@ -23,7 +23,7 @@ from twin.sim.scenario import Scenario
 # The re-simulated shrink: the twin run again with the added candidates at their fitted values
 
 
-def resim_plan(ens: TwinEnsemble, added: list[dict], n_seeds: int | None = None
+def resimulation_plan(ens: TwinEnsemble, added: list[dict], n_seeds: int | None = None
                ) -> tuple[list[Scenario], dict[str, dict[str, float]]]:
     """What re-simulates the added candidates (entries of ``added``: effect, params): the
     scenarios of the first ``n_seeds`` twin seeds (default: all K) with every added physical
@@ -47,12 +47,12 @@ def _resim_path(s: Scenario, spec: dict[str, dict[str, float]], cache: Path) -> 
     return d / "artefacts" / f"{_spec_key(spec, s.seed)}.npz" if spec else d / "signature.npz"
 
 
-def resimulate(ens: TwinEnsemble, addeds: list[list[dict]], cache: Path, workers: int | None = None,
+def simulate_with_added(ens: TwinEnsemble, addeds: list[list[dict]], cache: Path, workers: int | None = None,
                n_seeds: int | None = None, scheduler: str | None = None,
                on_progress: Callable[[int, int], None] | None = None
                ) -> list[dict[str, list[Signature]] | None]:
     """The signatures of the twin re-simulated with each list of added candidates (one list per
-    diagnosis; None where it is empty) for the first ``n_seeds`` twin seeds (:func:`resim_plan`),
+    diagnosis; None where it is empty) for the first ``n_seeds`` twin seeds (:func:`resimulation_plan`),
     all diagnoses' campaigns simulated together through the cache and the executor of the grid
     (:func:`evaluate_all`: batched rollouts, ``workers`` processes or the Dask cluster at
     ``scheduler``). Signal artefacts are applied to those campaigns by their post-processing
@@ -61,7 +61,7 @@ def resimulate(ens: TwinEnsemble, addeds: list[list[dict]], cache: Path, workers
     kept only for the nominal twin's seeds (every artefact-only diagnosis of the scenario
     post-processes those)."""
     workers = workers or default_processes()
-    plans = [resim_plan(ens, a, n_seeds) if a else None for a in addeds]
+    plans = [resimulation_plan(ens, a, n_seeds) if a else None for a in addeds]
     cache = Path(cache)
     plain = [s for p in plans if p and not p[1] for s in p[0]]
     if plain:
@@ -103,17 +103,17 @@ def resimulate(ens: TwinEnsemble, addeds: list[list[dict]], cache: Path, workers
 
 def add_resimulation(result: dict, real: dict[str, Signature], ens: TwinEnsemble,
                      resim: dict[str, list[Signature]] | None, alpha: float = 0.01) -> dict:
-    """``result`` with its ``resimulation`` entry (:func:`analysis.diagnosis.attribution.resimulated`
+    """``result`` with its ``resimulation`` entry (:func:`analysis.diagnosis.attribution.resimulated_gap`
     on the re-simulated signatures; the reason when there are none) and the verdict it gives."""
     if result["verdict"] == attribution.NO_GAP:
-        return attribution.with_resimulation(result, None, "no significant gap: nothing to explain")
+        return attribution.merge_resimulation(result, None, "no significant gap: nothing to explain")
     if not result["added"]:
-        return attribution.with_resimulation(result, None, "nothing was added")
+        return attribution.merge_resimulation(result, None, "nothing was added")
     if resim is None:
-        return attribution.with_resimulation(result, None, "not asked for (0 re-simulation seeds)")
-    rs = attribution.resimulated(real, ens.twin, resim, alpha=alpha,
+        return attribution.merge_resimulation(result, None, "not asked for (0 re-simulation seeds)")
+    rs = attribution.resimulated_gap(real, ens.twin, resim, alpha=alpha,
                                  explained_fraction=result.get("explained_fraction", 0.9))
     rs["twin_seeds"] = ens.seeds[:rs["seeds"]]
-    return attribution.with_resimulation(result, rs)
+    return attribution.merge_resimulation(result, rs)
 
 

@@ -16,8 +16,8 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
    :func:`analysis.diagnosis.attribution.diagnose`;
 5. when candidates were added, simulates the twin again with them at their fitted values for
    the seeds of the spread (signal artefacts post-processed on those campaigns) and measures
-   the held-out gap on it: the re-simulated shrink the verdict follows (:func:`resimulate`,
-   :func:`analysis.diagnosis.attribution.resimulated`);
+   the held-out gap on it: the re-simulated shrink the verdict follows (:func:`simulate_with_added`,
+   :func:`analysis.diagnosis.attribution.resimulated_gap`);
 6. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
 
 Every simulation is a campaign of the scenario, cached by the hash of its scenario under
@@ -46,7 +46,7 @@ from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS
 from twin.harness.diagnosis.ensemble import build_ensemble, check_layout, check_response_seeds, diagnose_signatures
 from twin.harness.diagnosis.library import check_kinds, library_json, resolve_library
-from twin.harness.diagnosis.resimulation import add_resimulation, resimulate
+from twin.harness.diagnosis.resimulation import add_resimulation, simulate_with_added
 from twin.sim.scenario import Scenario
 
 
@@ -92,7 +92,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
     twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
-    0: none) and the verdict follows the re-simulated shrink (:func:`resimulate`). With
+    0: none) and the verdict follows the re-simulated shrink (:func:`simulate_with_added`). With
     ``budget_minutes`` the diagnosis is that of a subset of the recording sized to that time
     (:func:`prepare_subset`; ``subset`` in the result), else of the whole recording.
     ``response_seeds``: the twin seeds each candidate's response is computed with
@@ -116,7 +116,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
     resim = None
     if result["added"] and result["verdict"] != attribution.NO_GAP and resim_seeds != 0:
-        resim = resimulate(ens, [result["added"]], cache, workers, resim_seeds, scheduler, on_resim_progress)[0]
+        resim = simulate_with_added(ens, [result["added"]], cache, workers, resim_seeds, scheduler,
+                                    on_resim_progress)[0]
     result = add_resimulation(result, real, ens, resim, alpha)
     result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
               "response_seeds": response_seeds, "calibration": calibration,
