@@ -169,3 +169,10 @@ def test_the_cycle_finder_finds_a_cycle():
 def test_no_import_cycle():
     cycles = _cycles(_graph())
     assert not cycles, "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def test_no_source_file_is_over_500_lines():
+    # one concept per module: a file that grows past this holds several jobs; split it along them
+    long = {str(p.relative_to(ROOT)): n for p in MODULES.values()
+            if (n := len(p.read_text().splitlines())) > 500}
+    assert not long, f"source files over 500 lines: {long}"
