@@ -183,16 +183,6 @@ class Axis:
     friction_timeconst: float | None = None
     friction_impedance: float | None = None
 
-    def friction_solver_attributes(self) -> str:
-        """MJCF attributes of a friction joint for the settings above ("" for MuJoCo's defaults)."""
-        out = ""
-        if self.friction_timeconst is not None:
-            out += f' solreffriction="{self.friction_timeconst!r} 1.0"'
-        if self.friction_impedance is not None:
-            d = float(self.friction_impedance)
-            out += f' solimpfriction="{d!r} {d!r} 0.001 0.5 2"'
-        return out
-
     def total_inertia(self) -> float:
         """Rotational inertia seen by the motor: J_m + J_s + m·R², kg·m²."""
         r = self.screw.radius_per_rad
