@@ -25,8 +25,11 @@ again and exits 1 if any is more than ``--tolerance`` (20 %) above the stored on
 bench-check``; ratios below the baseline are reported, not failed). A measured campaign at scale:
 ``benchmarks/bench_campaign.py``.
 
+``--record`` stores the speed table the docs show (docs/validation.json, ``benchmarks/record.py``).
+
 Run: make bench   (or .venv/bin/python benchmarks/bench_simulation.py [--runs 90] [--no-quick])
      make bench-check
+     .venv/bin/python benchmarks/bench_simulation.py --no-quick --repeat 3 --record
 """
 
 from __future__ import annotations
@@ -222,6 +225,32 @@ def report(f: dict) -> None:
         for n in (2, 8, 32, 128)) + f" ({rate}; goal <= 15 min on 2 cores)")
 
 
+def speed_table(f: dict) -> str:
+    """The docs' table of the ratios (Markdown), each with its CPU time and goal."""
+    c = f["campaign_counts"]
+    met = lambda ok: "met" if ok else "not met"  # noqa: E731
+    two = max(f["campaign_s"] / 2, f["campaign_longest_s"]) / 60
+    rows = [
+        "| unit | ratio to the bare stepping of its steps | CPU | goal |",
+        "|---|---|---|---|",
+        f"| Phase I capture ({f['phase1_simulated_s']:.1f} s simulated, eight sensors) | **{f['phase1']:.2f}×** "
+        f"(rollout {f['phase1_rollout']:.2f}×, sensor models {f['phase1_sensors_s'] / f['phase1_s']:.0%}) | "
+        f"{f['phase1_s']:.2f} s | ≤ {GOALS['phase1']}×: {met(f['phase1'] <= GOALS['phase1'])} |",
+        f"| Phase II session ({f['phase2_runs']} runs, {f['phase2_steps']:,} steps, {f['phase2_passes']} rollout "
+        f"pass{'es' if f['phase2_passes'] > 1 else ''}) | **{f['phase2']:.2f}×** (motion {f['phase2_motion']:.2f}×, "
+        f"IMU models {f['phase2_imu']:.2f}×) | {f['phase2_s']:.1f} s | ≤ {GOALS['phase2']}×: "
+        f"{met(f['phase2'] <= GOALS['phase2'])} |",
+        f"| dial-indicator unit | {f['dial_bare_steps'] * 1000:,.0f} bare steps | {f['dial_s']:.2f} s | |",
+        f"| storage per unit (its part, its assembly into `measurements.h5` and `truth.h5`) | Phase II session "
+        f"{f['phase2_storage']:.2f}×; Phase I capture {f['phase1_storage_s'] * 1e3:.0f} ms | "
+        f"{f['phase2_storage_s']:.2f} s | |",
+        f"| the paper's campaign, projected from these units ({c['phase1']} captures, {c['phase2']} sessions, "
+        f"{c['dial']} dial units) | **{f['campaign']:.2f}×** (sensor models {f['campaign_sensors']:.0%}, storage "
+        f"{f['campaign_storage']:.0%}) | {f['campaign_s'] / 60:.1f} min; {two:.1f} min on 2 cores | ≤ 15 min on "
+        f"2 cores: {met(two <= 15)} |"]
+    return "\n".join(rows)
+
+
 def check(f: dict, path: Path, tolerance: float) -> int:
     """Compare the ratios with the baseline at ``path``; 1 if any is above it by more than
     ``tolerance`` (relative), else 0."""
@@ -255,6 +284,8 @@ def main() -> None:
     ap.add_argument("--tolerance", type=float, default=0.2, help="relative slack of --check (0.2)")
     ap.add_argument("--write-baseline", type=Path, default=None, metavar="FILE",
                     help="store the measured ratios as the baseline FILE (JSON)")
+    ap.add_argument("--record", action="store_true",
+                    help="store the speed table in docs/validation.json (benchmarks/record.py)")
     args = ap.parse_args()
     repeat = args.repeat if args.repeat > 1 or args.check is None else 3
     keep_freed_memory()  # as the campaign's worker processes do (analysis/base/executors.py)
@@ -263,6 +294,20 @@ def main() -> None:
           f"CPU time of one process, best of {repeat}")
     f = measure(args.runs, repeat)
     report(f)
+    if args.record:
+        from record import record
+
+        record("bench_simulation", command=".venv/bin/python benchmarks/bench_simulation.py --no-quick "
+               f"--repeat {repeat} --record", scale=f"scenarios/paper-rtf.toml: one Phase I capture, one "
+               f"{args.runs}-run Phase II session, one dial unit; CPU time of one process, best of {repeat}",
+               figures={"bare_steps_per_s": (round(f["bare_steps_per_s"]), f"{f['bare_steps_per_s']:,.0f}"),
+                        "phase2_bare_steps_per_s": (round(f["phase2_bare_steps_per_s"]),
+                                                    f"{f['phase2_bare_steps_per_s']:,.0f}"),
+                        "phase1": (round(f["phase1"], 3), f"{f['phase1']:.2f}"),
+                        "phase2": (round(f["phase2"], 3), f"{f['phase2']:.2f}"),
+                        "phase2_imu": (round(f["phase2_imu"], 3), f"{f['phase2_imu']:.2f}"),
+                        "campaign": (round(f["campaign"], 3), f"{f['campaign']:.2f}")},
+               tables={"speed": speed_table(f)})
     if args.write_baseline:
         args.write_baseline.write_text(json.dumps({
             "machine": where, "bare_steps_per_s": round(f["bare_steps_per_s"]),
