@@ -68,3 +68,13 @@ def test_the_readme_stays_short():
     # the README is for users: the two commands, then each part; measured tables live in the docs
     n = len((REPO / "README.md").read_text().splitlines())
     assert n <= 200, f"README.md has {n} lines (at most 200: move detail to docs/)"
+
+
+def test_render_replaces_what_a_span_holds_and_nothing_else():
+    doc = {"b": {"figures": {"x": {"value": 1.5, "text": "1.50"}}, "tables": {"t": "| a |\n|---|\n| 1 |"}}}
+    text = ("before <!-- fig:b.x -->9.99<!-- /fig --> after\n"
+            "<!-- table:b.t -->\n| old |\n<!-- /table -->\nend\n")
+    out = record.render(text, doc)
+    assert out == ("before <!-- fig:b.x -->1.50<!-- /fig --> after\n"
+                   "<!-- table:b.t -->\n| a |\n|---|\n| 1 |\n<!-- /table -->\nend\n")
+    assert record.render(out, doc) == out  # idempotent: a rendered page is what the test reads
