@@ -238,6 +238,14 @@ def _phase1(m: Measurements, part: str, b: _Builder) -> None:
 # Phase II
 
 
+def speed_key(speed_m_s: float) -> float:
+    """The label of a cruise speed (m/s) in the statistics' names, mm/s to 0.1. Rounded to 4
+    decimals first: a routine's speed with two decimals (85.95 mm/s) measured as 85.949999999 in
+    one recording and 85.950000001 in another (a lab's file, the twin) must get one label, not
+    85.9 and 86."""
+    return round(round(speed_m_s * 1e3, 4), 1)
+
+
 def _phase2_run_stats(run, acc_bandwidth_hz: float = 300.0) -> tuple[dict, np.ndarray]:
     """Band powers per speed {speed_mm_s: (6, nb)} (acc x y z, gyro x y z) and the (6·4 + 6,)
     phase statistics (log RMS per channel and phase, then the dwell mean per channel)."""
@@ -257,7 +265,7 @@ def _phase2_run_stats(run, acc_bandwidth_hz: float = 300.0) -> tuple[dict, np.nd
             sel = (t >= mo.t0_s + 0.1) & (t <= mo.t1_s - 0.005)
             cruise |= sel
             if sel.sum() >= 64:
-                per_speed.setdefault(round(mo.speed_m_s * 1e3, 1), []).append(
+                per_speed.setdefault(speed_key(mo.speed_m_s), []).append(
                     _band_powers(arr[sel], fs, PHASE2_BANDS_HZ, 256))
         bands.append({k: np.mean(p, axis=0) for k, p in per_speed.items()})
         if run.position_cmd is not None:
