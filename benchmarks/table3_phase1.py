@@ -14,7 +14,8 @@ whose default limit departs from the paper's (GMM-MD, SOM-MQE, Isolation Forest,
 autoencoder's earlier scalar scaling).
 
 Run: .venv/bin/python benchmarks/table3_phase1.py [WORKDIR] [--record]   (default runs/table3;
-``--record``: the table into docs/validation.json, :mod:`record`). Not part of ``make bench``.
+``--record``: the table into docs/validation.json, :mod:`record`, and the Fig. 6 analogue into
+docs/figures/fig6-paper-rtf.png). Not part of ``make bench``.
 """
 
 from __future__ import annotations
@@ -87,6 +88,9 @@ def main() -> None:
     table = "\n".join(rows)
     print(table)
     if "--record" in sys.argv[1:]:
+        import shutil
+
+        shutil.copyfile(out / "detection.png", REPO / "docs" / "figures" / "fig6-paper-rtf.png")  # Fig. 6 analogue
         record("table3_phase1", command=".venv/bin/python benchmarks/table3_phase1.py --record",
                scale="paper-rtf at campaign.scale=0.2 (2 captures per 84-h sample, 8693 h, Phase II off); "
                      "paper-reference with 3 captures per sample",
