@@ -115,6 +115,27 @@ def test_segmentation_finds_steady_and_transient_segments():
         assert 0.09 * FS <= len(t) <= 0.1 * FS
 
 
+def test_a_plateau_broken_up_by_ripple_is_segmented_on_its_mean_over_a_revolution():
+    # cogging or torque ripple at 6 per revolution, ±4 % of the plateau: the raw speed leaves
+    # 0.98 of its 99th percentile many times a revolution, and no piece is long enough for the PSD
+    from analysis.phase1.segmentation import _segment
+
+    def raw(speed):
+        return _segment(speed, np.abs(speed), FS, 0.02, 0.02, 0.02, 0.1)
+
+    v = _profile()
+    angle = np.cumsum(v) / FS
+    rippled = v * (1.0 + 0.04 * np.sin(6.0 * angle))
+    assert all(len(s) < 0.2 * FS for s in raw(rippled).steady)
+    seg = segment_capture(rippled, FS)
+    assert [s.direction for s in seg.steady] == [1, -1, 1]
+    for s in seg.steady:  # the 0.45 s plateau, less the trims and the half revolution the mean takes
+        assert 0.35 * FS <= len(s) <= 0.45 * FS, len(s)
+    # without ripple the segments are the raw speed's, sample for sample
+    assert ([(s.start, s.stop) for s in segment_capture(v, FS).steady]
+            == [(s.start, s.stop) for s in raw(v).steady])
+
+
 def test_capture_features_end_to_end_on_a_synthetic_capture():
     """A synthetic capture with 40/80/120 Hz lines on acc1_x during motion: the sample features
     read them back within 1 %; torque statistics use the oriented torque."""

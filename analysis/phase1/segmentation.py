@@ -78,11 +78,49 @@ def segment_capture(
     A transient segment is kept only when the motion starts inside the capture (the speed is at
     rest before it); a steady run touching the capture's end is kept if long enough.
 
+    A speed whose ripple (cogging, torque ripple: orders of the motor's revolution) breaks the
+    plateau into pieces shorter than ``min_steady_s`` is segmented on its moving average over one
+    revolution at the plateau speed, which removes every order of the revolution (the segments
+    of a speed without such ripple are those of the raw speed, unchanged).
+
     Returns:
         :class:`Segmentation`; ``steady`` and ``transient`` may be empty (the caller decides
         whether that is an error).
     """
-    v = np.abs(np.asarray(speed, dtype=float))
+    speed = np.asarray(speed, dtype=float)
+    seg = _segment(speed, np.abs(speed), fs_hz, steady_tol, rest_tol, trim_s, min_steady_s)
+    if not seg.plateau_rad_s > 0.0:
+        return seg
+    rev = int(round(2.0 * np.pi / seg.plateau_rad_s * fs_hz))  # samples of one revolution
+    if rev < 2 or rev >= speed.size:
+        return seg
+    smooth = _segment(speed, np.abs(_moving_mean(speed, rev)), fs_hz, steady_tol, rest_tol, trim_s,
+                      min_steady_s)
+    # the mean over a revolution rounds the ramps' corners, so on a speed without ripple its
+    # plateau is a little shorter than the raw speed's; only a plateau the ripple broke up gains
+    return smooth if _steady_samples(smooth) > RIPPLE_GAIN * _steady_samples(seg) else seg
+
+
+#: How much longer the steady segments of the speed's mean over a revolution must be than the
+#: raw speed's for the ripple to be taken as what broke the plateau up.
+RIPPLE_GAIN = 1.5
+
+
+def _steady_samples(seg: Segmentation) -> int:
+    return sum(len(s) for s in seg.steady)
+
+
+def _moving_mean(x: np.ndarray, k: int) -> np.ndarray:
+    """Centred moving average of ``x`` (n,) over ``k`` samples (zeros beyond the ends), (n,)."""
+    padded = np.concatenate([np.zeros(k // 2), x, np.zeros(k - 1 - k // 2)])
+    c = np.concatenate([[0.0], np.cumsum(padded)])
+    return (c[k:] - c[:-k]) / k
+
+
+def _segment(speed: np.ndarray, v: np.ndarray, fs_hz: float, steady_tol: float, rest_tol: float,
+             trim_s: float, min_steady_s: float) -> Segmentation:
+    """:func:`segment_capture` on ``v`` (n,), the magnitude of ``speed`` or of its mean over a
+    revolution; the directions come from ``speed``."""
     plateau = float(np.percentile(v, 99)) if v.size else 0.0
     if not np.isfinite(plateau) or plateau <= 0.0:
         return Segmentation(plateau, 0.0, (), ())

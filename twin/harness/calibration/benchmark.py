@@ -62,6 +62,10 @@ ROUTINE_KEYS = ("phase1.speed_mm_s", "phase1.accel_mm_s2", "phase1.dwell_s", "ph
                 "phase2.accel_mm_s2", "phase2.dwell_s", "phase2.start_mm", "phase2.end_mm")
 
 
+#: Least Phase I cruise a drawn axis gets, s (the features' 0.2-s spectra plus the trims).
+MIN_CRUISE_S = 0.3
+
+
 def _base() -> dict:
     return load("foreign-16mm").model_dump(mode="json")
 
@@ -102,6 +106,12 @@ def draw_case(rng: np.random.Generator, i: int) -> Scenario:
                        speed_mm_s=speed1, accel_mm_s2=round(float(rng.uniform(1500.0, 6000.0)), 2),
                        start_mm=start1, end_mm=round(start1 + p1_stroke, 2),
                        dwell_s=round(float(rng.uniform(0.2, 0.4)), 3), capture_s=2.0)
+    # at least MIN_CRUISE_S of cruise (the Phase I features' 0.2-s spectra after the segments'
+    # trims): on a short stroke the speed is lowered until the stroke holds it
+    a1 = d["phase1"]["accel_mm_s2"]
+    if speed1 * MIN_CRUISE_S + speed1 ** 2 / a1 > p1_stroke:
+        d["phase1"]["speed_mm_s"] = round(0.5 * a1 * (math.sqrt(MIN_CRUISE_S ** 2 + 4.0 * p1_stroke / a1)
+                                                      - MIN_CRUISE_S), 2)
     vmax2 = min(300.0, 2400.0 / 60.0 * lead)
     # the slow speed: no move longer than 8 s (the cost of a case), the fast one above it
     s_lo = round(max(float(rng.uniform(0.15, 0.4)) * vmax2, stroke / 8.0), 2)
