@@ -335,3 +335,28 @@ def test_a_candidate_the_statistics_cannot_be_computed_for_is_left_out(plugin, t
     assert res["added"][0]["effect"] == "carriage_mass"
     assert "left out: candidate slow_accel" in flat(r.stdout)
     assert "no constant-speed segment" in (out / "report" / "index.html").read_text()
+
+
+def test_a_simulation_that_runs_away_is_cached_as_such_and_the_batch_goes_on(tmp_path, monkeypatch):
+    """A candidate's value (or a drawn calibrated one) can make the axis unstable: its carriage
+    leaves the rails' modelled length and the batched simulation raises RailRangeError. The
+    other scenarios of the batch are simulated alone and get their statistics; the runaway is
+    cached as unfeaturisable with the reason (the calibrate benchmark's case 9 failed its whole
+    diagnosis on one)."""
+    from twin.harness.diagnosis import cache
+    from twin.sim.geometry import RailRangeError
+    from twin.sim.scenario import load
+
+    real = cache.simulate_campaigns_batched
+    good, bad = load("quick"), load("quick").model_copy(update={"seed": 99})
+
+    def batched(scenarios, outs):
+        if any(s.seed == 99 for s in scenarios):
+            raise RailRangeError("rail coordinate outside the stored profiles [-0.15, 0.465] m: [-120, 89]")
+        return real(scenarios, outs)
+
+    monkeypatch.setattr(cache, "simulate_campaigns_batched", batched)
+    paths = cache.evaluate([good.to_json(), bad.to_json()], str(tmp_path))
+    assert os.path.exists(paths[0]) and cache.unfeaturisable(paths[0]) is None
+    assert not os.path.exists(paths[1])
+    assert cache.unfeaturisable(paths[1]).startswith("its simulation ran away (the carriage left the rails'")

@@ -24,6 +24,7 @@ from analysis.diagnosis import layout
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, SignatureError, signature
 from analysis.phase1.features import FeatureError
 from twin.sim.campaign import simulate_campaigns_batched
+from twin.sim.geometry import RailRangeError
 from twin.sim.scenario import Scenario, from_dict
 
 #: Twin seeds of the spread unless told otherwise.
@@ -93,7 +94,12 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
     todo = [i for i, d in enumerate(dirs) if not (d / "signature.npz").exists()]
     with threadpool_limits(1):
         if todo:
-            simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
+            try:
+                simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
+            except RailRangeError:
+                # a scenario of the batch ran away (its carriage left the rails: a candidate's or a
+                # drawn value that makes the axis unstable): each alone, the runaways cached as such
+                todo = [i for i in todo if _simulate_alone(ss[i], dirs[i], scenario_jsons[i])]
         for i in todo:
             d = dirs[i]
             try:
@@ -112,6 +118,20 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
             if not keeps[i]:
                 shutil.rmtree(d / "campaign", ignore_errors=True)
     return [str(d / "signature.npz") for d in dirs]
+
+
+def _simulate_alone(s: Scenario, d: Path, scenario_json: str) -> bool:
+    """Simulate ``s`` into ``d/campaign``; False (and ``d`` marked :data:`UNFEATURISABLE` with the
+    reason) when its simulation runs away."""
+    try:
+        simulate_campaigns_batched([s], [d / "campaign"])
+    except RailRangeError as exc:
+        write_json(d / UNFEATURISABLE, {"error": f"its simulation ran away (the carriage left the rails' "
+                                                 f"modelled length): {exc}"})
+        write_text(d / "scenario.json", scenario_json)
+        shutil.rmtree(d / "campaign", ignore_errors=True)
+        return False
+    return True
 
 
 def unfeaturisable(path: str | Path) -> str | None:

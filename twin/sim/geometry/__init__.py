@@ -59,7 +59,13 @@ from twin.sim.geometry.frames import (
     TRAVEL_M,
     TRUCK_NAMES,
 )
-from twin.sim.geometry.rails import RailProfiles, RailSpec, make_rail_profiles, sinusoidal_rail_profiles
+from twin.sim.geometry.rails import (
+    RailProfiles,
+    RailRangeError,
+    RailSpec,
+    make_rail_profiles,
+    sinusoidal_rail_profiles,
+)
 from twin.sim.geometry.screw import (
     ScrewSpec,
     ball_pass,
@@ -75,6 +81,7 @@ from twin.sim.geometry.screw import (
 )
 
 __all__ = [
+    "RailRangeError",
     "TRAVEL_M",
     "DEFAULT_RAIL_LENGTH_M",
     "DEFAULT_RAIL_START_M",

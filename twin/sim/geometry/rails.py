@@ -21,6 +21,11 @@ from twin.sim.geometry.frames import (
 )
 
 
+class RailRangeError(ValueError):
+    """A rail coordinate outside the stored profiles: the carriage left the rails' modelled
+    length, which in a simulation means it ran away (an unstable set of parameters)."""
+
+
 @dataclass(frozen=True)
 class RailSpec:
     """Statistical description of the two rails' geometric deviations (SI units).
@@ -162,7 +167,7 @@ class RailProfiles:
         lo, hi = self.u_range
         tol = 1e-9 * max(1.0, abs(lo), abs(hi))
         if uu.size and (uu.min() < lo - tol or uu.max() > hi + tol):
-            raise ValueError(
+            raise RailRangeError(
                 f"rail coordinate outside the stored profiles [{lo:.6g}, {hi:.6g}] m: "
                 f"[{uu.min():.6g}, {uu.max():.6g}]")
         if method == "linear":
