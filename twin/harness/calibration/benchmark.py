@@ -72,8 +72,8 @@ def _base() -> dict:
 
 def draw_case(rng: np.random.Generator, i: int) -> Scenario:
     """A foreign axis within the priors: lead 4–20 mm, stroke 150–800 mm, moving mass 30–400 kg
-    (log-uniform), Phase I speed up to 2400 rpm of the motor and its acceleration (its stroke at most
-    0.6 s of cruise: a 2-s capture holds whole moves and rests), two Phase II
+    (log-uniform), Phase I speed up to 2400 rpm of the motor and its acceleration (its stroke 0.3–0.6 s
+    of cruise: a 2-s capture holds whole moves and rests, and the features their 0.2-s spectra), two Phase II
     speeds (the slower no longer than 8 s a move), Phase I DAQ rate 5.12–25.6 kHz, IMU rate
     1–2 kHz, noise floors ×0.5–2 of the twin's, rail friction 5–40 N, viscous drag
     1–5 × 10⁻⁴ N·m·s/rad, torque ripple 0.005–0.03 N·m, the trucks' vertical and lateral
