@@ -26,6 +26,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 from record import record  # noqa: E402
 
+from analysis.base.executors import default_processes  # noqa: E402
+
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
@@ -39,13 +41,13 @@ def main() -> None:
             sys.exit(f"twin demo failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
         peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
         size_mb = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) / 1e6
-        print(f"twin demo on {os.environ.get('TWIN_WORKERS') or os.cpu_count()} processes: {wall:.1f} s wall "
+        print(f"twin demo on {default_processes()} processes: {wall:.1f} s wall "
               f"(issue 5 budget: 600 s); peak RSS of one process {peak_mb:.0f} MB; "
               f"output {size_mb:.0f} MB")
         for line in proc.stderr.splitlines():
             if line.startswith(("scenario", "demo done")) or "units simulated" in line:
                 print("  " + line.strip())
-        procs = int(os.environ.get("TWIN_WORKERS") or os.cpu_count())  # what `twin demo` starts
+        procs = default_processes()  # what `twin demo` starts
         sc = json.loads((out / "score.json").read_text())
         t2 = sc["phase1"]["methods"]["pca_t2"]
         err = max(abs(r["error_um"]) for r in sc["phase2"]["sessions"])

@@ -106,10 +106,7 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
                 write_json(d / "layout.json", layout.describe(d / "campaign" / "measurements.h5"), indent=None)
                 sigs = {p: signature(d / "campaign" / "measurements.h5", p) for p in PARTS}
             except (FeatureError, DatasetError) as exc:  # cached as such: see load_signatures
-                write_json(d / UNFEATURISABLE, {"error": f"{type(exc).__name__}: {exc}"})
-                write_text(d / "scenario.json", scenario_jsons[i])
-                if not keeps[i]:
-                    shutil.rmtree(d / "campaign", ignore_errors=True)
+                _mark_unfeaturisable(d, f"{type(exc).__name__}: {exc}", scenario_jsons[i], keeps[i])
                 continue
             arrays = {"cal": sigs["cal"].values, "heldout": sigs["heldout"].values,
                       "regions": np.array(_regions_json(sigs["cal"].regions))}
@@ -126,12 +123,19 @@ def _simulate_alone(s: Scenario, d: Path, scenario_json: str) -> bool:
     try:
         simulate_campaigns_batched([s], [d / "campaign"])
     except RailRangeError as exc:
-        write_json(d / UNFEATURISABLE, {"error": f"its simulation ran away (the carriage left the rails' "
-                                                 f"modelled length): {exc}"})
-        write_text(d / "scenario.json", scenario_json)
-        shutil.rmtree(d / "campaign", ignore_errors=True)
+        _mark_unfeaturisable(d, f"its simulation ran away (the carriage left the rails' modelled length): {exc}",
+                             scenario_json, keep=False)
         return False
     return True
+
+
+def _mark_unfeaturisable(d: Path, why: str, scenario_json: str, keep: bool) -> None:
+    """Cache ``d`` as a simulation without statistics (:data:`UNFEATURISABLE`, with ``why``);
+    its campaign's files are deleted unless ``keep``."""
+    write_json(d / UNFEATURISABLE, {"error": why})
+    write_text(d / "scenario.json", scenario_json)
+    if not keep:
+        shutil.rmtree(d / "campaign", ignore_errors=True)
 
 
 def unfeaturisable(path: str | Path) -> str | None:
