@@ -30,6 +30,10 @@ REST_MARGIN_S = 0.05
 PHASE2_REST_MARGIN_S = 0.2
 #: Shortest rest whose spectrum is used, s.
 REST_MIN_S = 0.1
+#: Share of a Phase I rest, at its end, whose nut-accelerometer spectrum gives the floor: after a
+#: move the carriage rings on its trucks (the suspension modes, inside the floor's band) and the
+#: ringing decays over tens of milliseconds, longer than REST_MARGIN_S in a short dwell.
+SETTLED_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -55,6 +59,12 @@ def rest_segments(moving: np.ndarray, fs: float, margin_s: float = REST_MARGIN_S
         if b2 - a2 >= min_s * fs:
             out.append((int(a2), int(b2)))
     return out
+
+
+def settled(segments: list[tuple[int, int]], share: float = SETTLED_SHARE) -> list[tuple[int, int]]:
+    """The last ``share`` of each [start, end) rest in ``segments``: where what the move left
+    ringing has decayed, so a mode's decaying power is not taken for the floor."""
+    return [(b - max(1, int(round(share * (b - a)))), b) for a, b in segments]
 
 
 def rest_spectrum(x: np.ndarray, fs: float, segments: list[tuple[int, int]],
@@ -206,7 +216,7 @@ def measure_instruments(m, phase1_captures: list[str], phase2_runs: list[tuple[s
             segs = rest_segments(np.abs(sp) > 0.02 * plateau, fs1)
             if not segs:
                 continue
-            f1, p, k = rest_spectrum(np.column_stack([c.acc1, c.acc2]), fs1, segs, seg_s=0.02)
+            f1, p, k = rest_spectrum(np.column_stack([c.acc1, c.acc2]), fs1, settled(segs), seg_s=0.02)
             ps.append(p * k)
             n_avg += k
             tq = np.asarray(c.torque, float)
@@ -218,7 +228,7 @@ def measure_instruments(m, phase1_captures: list[str], phase2_runs: list[tuple[s
             dens, rel = floor_density(f1, psd, band, n_avg)
             out["sensors.nut_acc_noise_ug_per_rthz"] = Measured(
                 float(np.mean(dens)) * 1e6 / G0, "µg/√Hz", rel / math.sqrt(6),
-                f"mean density of the six nut axes at rest, {band[0]:.3g}–{band[1]:.3g} Hz")
+                f"mean density of the six nut axes over the last half of each rest, {band[0]:.3g}–{band[1]:.3g} Hz")
             d = np.concatenate(diffs)
             q = torque_resolution(np.concatenate(tq_all))
             # white noise per sample: a difference has variance 2σ²; the quantisation's q²/12 removed
