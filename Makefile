@@ -41,9 +41,15 @@ bench-check: $(STAMP)
 # Every figure the README and the docs quote, re-measured: each benchmark below stores its figures
 # in docs/validation.json (--record), then benchmarks/record.py writes them into the docs' quoted
 # spans (<!-- fig:... -->, <!-- table:... -->); tests/test_quoted_figures.py checks they agree.
-VALIDATE := benchmarks/bench_demo.py benchmarks/table3_phase1.py
+# The `validate` tests (the diagnosis benchmark's targets, tests/test_diagnosis_benchmark.py) run
+# on the cache bench_diagnose.py leaves in runs/validate/diagnose-benchmark; the `quoted` tests
+# record the figures they measure (TWIN_RECORD=1, their `quote` fixture). CI runs this after
+# `make test`.
+VALIDATE := benchmarks/bench_diagnose.py benchmarks/bench_demo.py benchmarks/table3_phase1.py
 validate: $(STAMP)
 	for b in $(VALIDATE); do $(PY) $$b --record || exit 1; done
+	TWIN_RECORD=1 TWIN_DIAGNOSE_BENCH_CACHE=runs/validate/diagnose-benchmark/cache \
+	  $(PY) -m pytest -q -m "(validate or quoted) and not slow" --durations=10
 	$(PY) benchmarks/record.py
 
 clean:

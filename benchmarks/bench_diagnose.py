@@ -1,21 +1,28 @@
-"""Benchmark: wall time of the sim-to-real gap diagnosis (issue 6, check 7).
+"""Benchmark: the sim-to-real gap diagnosis, its blind benchmark's figures and its wall time.
 
-1. One diagnosis on the quick campaign: a "real" recording of ``scenarios/quick.toml`` with
-   seed 4242 and a cogging torque of 0.05 N·m at 12 per revolution is simulated, then
-   ``twin diagnose REAL --scenario scenarios/quick.toml`` runs with a fresh cache (8 twin seeds
-   plus every candidate's grid simulated on all local cores).
-2. ``twin diagnose-benchmark`` (the default plan: 86 cases on ``scenarios/diagnose-bench.toml``, the
-   candidates of the three kinds), fresh.
+1. ``twin diagnose-benchmark --resim-seeds 2`` (the default plan: 86 cases on
+   ``scenarios/diagnose-bench.toml``, the candidates of the three kinds, every case with something
+   added re-simulated with 2 twin seeds) from an empty cache in ``--out`` (default
+   runs/validate/diagnose-benchmark, emptied first): the per-kind table, the nulls, the
+   out-of-everything cases, the pairs, the false attributions, the misses and the times.
+2. With ``--quick``, also one diagnosis on the quick campaign: a "real" recording of
+   ``scenarios/quick.toml`` with seed 4242 and a cogging torque of 0.05 N·m at 12 per revolution
+   is simulated, then ``twin diagnose REAL --scenario scenarios/quick.toml`` runs with a fresh
+   cache (8 twin seeds plus every candidate's grid of a longer campaign: most of half an hour).
 
-Prints the wall times, the diagnosis's answer and the benchmark's summary.
+With ``--record`` (what ``make validate`` runs) the figures the docs quote go into
+docs/validation.json (:mod:`record`); ``make validate`` then runs the ``validate`` tests
+(tests/test_diagnosis_benchmark.py) on this run's cache.
 
-Usage: .venv/bin/python benchmarks/bench_diagnose.py
+Usage: .venv/bin/python benchmarks/bench_diagnose.py [--out DIR] [--record] [--quick]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -23,6 +30,12 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from record import record  # noqa: E402
+
+from analysis.base.executors import default_processes  # noqa: E402
+
+KINDS = ("physical effect", "signal artefact", "parameter")
 
 
 def _twin(*args: str) -> tuple[float, subprocess.CompletedProcess]:
@@ -36,31 +49,120 @@ def _twin(*args: str) -> tuple[float, subprocess.CompletedProcess]:
     return wall, proc
 
 
+def _pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:.0f} %"
+
+
+def _of(rows: list[dict], kind: str, key: str = "correct") -> str:
+    sel = [r for r in rows if r["kind"] == kind]
+    return f"{sum(bool(r[key]) for r in sel)} of {len(sel)}"
+
+
+def kinds_table(b: dict) -> str:
+    """The per-kind table of benchmark.json ``b`` (Markdown)."""
+    rows = b["cases"]
+    case_kind = {"physical effect": "single", "signal artefact": "artefact", "parameter": "parameter"}
+    cov = b["interval_coverage"]
+
+    def cell_top1(k):
+        return f"{_pct(b['per_kind_top1'][k])} ({_of(rows, case_kind[k])})"
+
+    def cell_shrink(k):
+        a, r = b["per_kind_median_heldout_shrink"][k], b["per_kind_median_heldout_shrink_resimulated"][k]
+        return "-" if a is None else f"{100 * a:.1f} / " + ("-" if r is None else f"{100 * r:.1f} %")
+
+    lines = ["| figure | physical effect | signal artefact | parameter | issue 15's target |",
+             "|---|---|---|---|---|",
+             "| top-1 (`per_kind_top1`) | " + " | ".join(cell_top1(k) for k in KINDS) + " | ≥ 90 % each |",
+             "| first or not told apart from the first | "
+             + " | ".join(_pct(b["per_kind_top1_or_not_told_apart"][k]) for k in KINDS) + " | |",
+             "| seen at all (`per_kind_detected`) | "
+             + " | ".join(_pct(b["per_kind_detected"][k]) for k in KINDS) + " | |",
+             f"| median held-out shrink, interpolated / re-simulated ({b['resim_seeds']} seeds) | "
+             + " | ".join(cell_shrink(k) for k in KINDS) + " | ≥ 80 % |",
+             "| stated 90 % interval holding the injected value | "
+             + " | ".join(f"{_pct(cov['per_kind'][k])} ({cov['n'][k]})" for k in KINDS) + " | ≥ 85 % |"]
+    return "\n".join(lines) + "\n"
+
+
+def misses_table(b: dict) -> str:
+    """The confusion of benchmark.json ``b``: every case whose first added candidate is not the
+    injected one (Markdown)."""
+    lines = ["| case | kind | injected | named first | verdict when none |", "|---|---|---|---|---|"]
+    for g in b["confusion"]:
+        for case in g["cases"]:
+            lines.append(f"| {case} | {g['kind']} | {g['injected']} | {g['named'] or '-'} | {g['verdict'] or ''} |")
+    if len(lines) == 2:
+        lines.append("| - | | | | |")
+    return "\n".join(lines) + "\n"
+
+
+def benchmark_figures(b: dict, wall_s: float, workers: int) -> dict[str, tuple[float | None, str]]:
+    rows = b["cases"]
+    ooe = [r for r in rows if r["kind"] in ("open_set", "edit")]
+    t = b["wall_time_s"]
+    n_false = sum(bool(r["false_attribution"]) for r in rows)
+    changed = b["verdict_changed_by_resimulation"]
+    return {
+        "n_cases": (b["n_cases"], str(b["n_cases"])),
+        "nulls": (b["null_correct_fraction"], f"{_pct(b['null_correct_fraction'])} ({_of(rows, 'null')})"),
+        "out_of_everything": (b["out_of_everything_unexplained_fraction"],
+                              f"{_pct(b['out_of_everything_unexplained_fraction'])} "
+                              f"({sum(bool(r['correct']) for r in ooe)} of {len(ooe)})"),
+        "pairs": (b["pair_both_top3_fraction"], f"{_pct(b['pair_both_top3_fraction'])} ({_of(rows, 'pair')})"),
+        "false_attributions": (b["false_attribution_rate"],
+                               f"{100 * b['false_attribution_rate']:.2g} % ({n_false} of {len(rows)})"),
+        "verdicts_changed_by_resimulation": (len(changed), ", ".join(changed) or "none"),
+        "n_resimulated": (b["n_resimulated"], str(b["n_resimulated"])),
+        "time_total_min": (wall_s / 60, f"{wall_s / 60:.1f} min on {workers} processes"),
+        "time_grids_s": (t["twin_and_candidates"], f"{t['twin_and_candidates']:.0f} s"),
+        "time_recordings_s": (t["recordings"], f"{t['recordings']:.0f} s"),
+        "time_diagnoses_s": (t["diagnoses"], f"{t['diagnoses']:.0f} s"),
+        "time_resimulations_s": (t["resimulations"], f"{t['resimulations']:.0f} s"),
+    }
+
+
 def main() -> None:
-    with tempfile.TemporaryDirectory() as tmp:
-        real = Path(tmp) / "real"
-        t_sim, _ = _twin("simulate", "scenarios/quick.toml", "-o", str(real), "--set", "seed=4242",
-                         "--set", "effects.cogging_Nm=0.05", "--set", "effects.cogging_per_rev=12")
-        (real / "truth.h5").unlink()
-        t_diag, proc = _twin("diagnose", str(real), "--scenario", "scenarios/quick.toml",
-                             "-o", str(Path(tmp) / "diagnosis"))
-        res = json.loads((Path(tmp) / "diagnosis" / "diagnosis.json").read_text())
-        n_sims = len(list((Path(tmp) / "diagnosis" / "cache").glob("*/signature.npz")))
-        print(f"twin diagnose on the quick campaign, {os.cpu_count()} cores, fresh cache: "
-              f"{t_diag:.0f} s wall ({n_sims} campaigns simulated; the recording itself took "
-              f"{t_sim:.0f} s)")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=REPO / "runs" / "validate" / "diagnose-benchmark")
+    ap.add_argument("--record", action="store_true", help="store the figures in docs/validation.json")
+    ap.add_argument("--quick", action="store_true", help="also diagnose a recording of the quick campaign")
+    args = ap.parse_args()
+    workers = default_processes()
+    figures: dict[str, tuple[float | None, str]] = {}
+    if args.quick:
+        with tempfile.TemporaryDirectory() as tmp:
+            real = Path(tmp) / "real"
+            t_sim, _ = _twin("simulate", "scenarios/quick.toml", "-o", str(real), "--set", "seed=4242",
+                             "--set", "effects.cogging_Nm=0.05", "--set", "effects.cogging_per_rev=12")
+            (real / "truth.h5").unlink()
+            t_diag, _ = _twin("diagnose", str(real), "--scenario", "scenarios/quick.toml",
+                              "-o", str(Path(tmp) / "diagnosis"))
+            res = json.loads((Path(tmp) / "diagnosis" / "diagnosis.json").read_text())
+            n_sims = len(list((Path(tmp) / "diagnosis" / "cache").glob("*/signature.npz")))
         added = ", ".join(f"{a['effect']} {a['params']}" for a in res["added"]) or "none"
-        print(f"  verdict: {res['verdict']}; added: {added}; held-out gap "
+        print(f"twin diagnose on the quick campaign, {workers} processes, fresh cache: {t_diag:.0f} s wall "
+              f"({n_sims} campaigns simulated; the recording itself took {t_sim:.0f} s)\n"
+              f"  verdict: {res['verdict']}; added: {added}; held-out gap "
               f"{res['heldout_gap_before']:.0f} -> {res['heldout_gap_after']:.0f}")
-        t_bench, proc = _twin("diagnose-benchmark", "-o", str(Path(tmp) / "bench"))
-        b = json.loads((Path(tmp) / "bench" / "benchmark.json").read_text())
-        print(f"twin diagnose-benchmark ({b['n_cases']} cases): {t_bench:.0f} s wall "
-              f"(twin and candidates {b['wall_time_s']['twin_and_candidates']:.0f} s, recordings "
-              f"{b['wall_time_s']['recordings']:.0f} s, diagnoses {b['wall_time_s']['diagnoses']:.0f} s)")
-        for k in ("top1_accuracy", "median_heldout_shrink", "null_correct_fraction",
-                  "open_set_correct_fraction", "pair_both_top3_fraction"):
-            print(f"  {k}: {b[k]:.3f}")
-        print("  " + "\n  ".join(proc.stdout.strip().splitlines()))
+        figures["quick_diagnosis_s"] = (t_diag, f"{t_diag:.0f} s")
+    shutil.rmtree(args.out, ignore_errors=True)
+    args.out.mkdir(parents=True)
+    wall, proc = _twin("diagnose-benchmark", "-o", str(args.out), "--workers", str(workers), "--resim-seeds", "2")
+    b = json.loads((args.out / "benchmark.json").read_text())
+    t = b["wall_time_s"]
+    print(f"twin diagnose-benchmark ({b['n_cases']} cases, {workers} processes, empty cache): {wall:.0f} s wall "
+          f"(twin and candidates {t['twin_and_candidates']:.0f} s, recordings {t['recordings']:.0f} s, "
+          f"diagnoses {t['diagnoses']:.0f} s, re-simulations {t['resimulations']:.0f} s)")
+    print(kinds_table(b) + "\n" + misses_table(b))
+    figures.update(benchmark_figures(b, wall, workers))
+    for k, (_, text) in figures.items():
+        print(f"  {k}: {text}")
+    if args.record:
+        record("bench_diagnose", command=".venv/bin/python benchmarks/bench_diagnose.py --record",
+               scale=f"twin diagnose-benchmark, default plan (seed 2026, {b['n_cases']} cases, 8 twin seeds, "
+                     f"3 response seeds, --resim-seeds 2) from an empty cache on {workers} processes",
+               figures=figures, tables={"kinds": kinds_table(b), "misses": misses_table(b)})
 
 
 if __name__ == "__main__":

@@ -8,7 +8,9 @@ A benchmark run with ``--record`` stores its figures under its own name::
                     "figures": {"pca_t2_first_alarm_h": {"text": "182", "value": 182.0}, ...},
                     "tables": {"table3": "| method | ... |\\n|---|...|\\n..."}}}
 
-A doc quotes a figure as ``<!-- fig:bench_demo.pca_t2_first_alarm_h -->182<!-- /fig -->`` and a
+A test measures figures too: its ``quote`` fixture (tests/conftest.py) records them under the
+test file's name, with ``TWIN_RECORD=1`` (what ``make validate`` sets for the tests marked
+``quoted``). A doc quotes a figure as ``<!-- fig:bench_demo.pca_t2_first_alarm_h -->182<!-- /fig -->`` and a
 whole table between ``<!-- table:bench_table3.table3 -->`` and ``<!-- /table -->`` (HTML comments:
 invisible where the Markdown is rendered). ``python benchmarks/record.py`` (what ``make validate``
 runs last) rewrites every such span from the JSON; ``tests/test_quoted_figures.py`` fails when a
@@ -50,21 +52,24 @@ def load(path: Path = VALIDATION_JSON) -> dict:
 
 
 def record(bench: str, *, command: str, scale: str, figures: dict[str, tuple[float | None, str]],
-           tables: dict[str, str] | None = None, path: Path = VALIDATION_JSON) -> None:
+           tables: dict[str, str] | None = None, path: Path = VALIDATION_JSON, merge: bool = False) -> None:
     """Store the figures of benchmark ``bench`` (replacing its earlier ones).
 
     Args:
-        bench: the benchmark's name (its file's stem).
+        bench: the benchmark's name (its file's stem; a test file's for the figures its tests quote).
         command: the command that re-measures them.
         scale: what was run (campaign, scale, seeds), in words.
         figures: name -> (value in the unit the docs quote, the text the docs show).
         tables: name -> a Markdown table the docs show whole.
+        merge: keep the entry's other figures and tables (one test of a file records its own).
     """
     doc = load(path)
+    old = doc.get(bench, {}) if merge else {}
     doc[bench] = {"command": command, "scale": scale, "machine": machine(),
                   "load_average_1min": round(os.getloadavg()[0], 2),
-                  "figures": {k: {"value": v, "text": t} for k, (v, t) in figures.items()},
-                  "tables": dict(tables or {})}
+                  "figures": {**old.get("figures", {}),
+                              **{k: {"value": v, "text": t} for k, (v, t) in figures.items()}},
+                  "tables": {**old.get("tables", {}), **dict(tables or {})}}
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(dict(sorted(doc.items())), indent=1, ensure_ascii=False) + "\n")
     os.replace(tmp, path)

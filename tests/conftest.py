@@ -23,6 +23,56 @@ def run_twin(*args, check=True, env=None, **kw):
                           text=True, check=check, **kw)
 
 
+DIAGNOSE_BENCH = REPO / "scenarios" / "diagnose-bench.toml"
+
+
+def record_diagnose_bench(tmp_path, name, *sets):
+    """A recording of the diagnosis benchmark's scenario (seed 777, ``sets`` as `--set`) in
+    ``tmp_path / name``, its truth.h5 removed (the diagnosis must not need it)."""
+    d = tmp_path / name
+    proc = run_twin("simulate", str(DIAGNOSE_BENCH), "-o", str(d), "--workers", "1",
+                    "--set", "seed=777", *[x for s in sets for x in ("--set", s)])
+    assert proc.returncode == 0, proc.stderr
+    (d / "truth.h5").unlink()
+    return d
+
+
+class Quote:
+    """What a test measures and the docs quote: ``quote(name, value, text)`` a figure,
+    ``quote.table(name, markdown)`` a table. With the environment variable ``TWIN_RECORD`` set
+    (`make validate`, which runs the tests marked ``quoted``) they go into docs/validation.json
+    under ``test_<file stem>`` (benchmarks/record.py, merged with the file's other tests'
+    figures), else nowhere: the test's assertions are what `make test` checks."""
+
+    def __init__(self, node):
+        self.bench = node.path.stem
+        self.command = f"TWIN_RECORD=1 .venv/bin/python -m pytest -m quoted {node.path.relative_to(REPO)}"
+        self.scale = " ".join((node.function.__doc__ or node.name).split()).split(". ")[0]
+        self.on = bool(os.environ.get("TWIN_RECORD"))
+
+    def _record(self, figures, tables):
+        if not self.on:
+            return
+        import importlib.util
+
+        spec = importlib.util.spec_from_file_location("record", REPO / "benchmarks" / "record.py")
+        record = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(record)
+        record.record(self.bench, command=self.command, scale=self.scale, figures=figures, tables=tables,
+                      merge=True)
+
+    def __call__(self, name: str, value: float | None, text: str) -> None:
+        self._record({name: (value, text)}, {})
+
+    def table(self, name: str, markdown: str) -> None:
+        self._record({}, {name: markdown})
+
+
+@pytest.fixture
+def quote(request) -> Quote:
+    return Quote(request.node)
+
+
 def truncate_dataset(group, key: str, fraction: float) -> None:
     """Replace ``group[key]`` by its first ``fraction`` of rows, keeping its attributes (a
     recording cut short)."""
@@ -55,11 +105,12 @@ def demo_run(tmp_path_factory):
     return out, proc
 
 
-# The files whose session fixtures take minutes (the diagnosis benchmark, the parameter
-# responses, the gate's cold cache), run first: with two test processes (`make test`, pytest-xdist's loadfile) the
-# other process works through the short files meanwhile, instead of waiting at the end.
-LONG_FILES = ("test_diagnosis.py", "test_diagnosis_parameters.py", "test_gate.py", "test_calibrate.py",
-              "test_monitor.py", "test_import_watch.py")
+# The longest files (their total time in `make test`, longest first), run first: with two test
+# processes (`make test`, pytest-xdist's loadfile) the other process works through the short files
+# meanwhile, instead of one process finishing a long file alone at the end.
+LONG_FILES = ("test_calibrate.py", "test_gate.py", "test_phase2_backlash.py", "test_executors.py",
+              "test_sweep.py", "test_monitor.py", "test_plugin_kinds.py", "test_campaign.py",
+              "test_fuzz_import.py", "test_phase2_cli.py", "test_import_watch.py", "test_view.py")
 
 
 def pytest_collection_modifyitems(config, items):
