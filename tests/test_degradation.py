@@ -40,8 +40,11 @@ def _line_rms(hours: np.ndarray, y: np.ndarray) -> float:
     return float(np.sqrt(np.mean((y - design @ coef) ** 2)))
 
 
+@pytest.mark.quoted
 @pytest.mark.parametrize("filename", ["Up_FT.txt", "Down_FT.txt"])
-def test_check8_law_fits_xjtu_friction_trend(filename):
+def test_check8_law_fits_xjtu_friction_trend(filename, quote):
+    """Check 8: the wear law fitted to the real XJTU friction-torque trend leaves under 3 % RMS,
+    no more than a straight line (+0.2 %)."""
     if not XJTU_DIR.is_dir():
         pytest.skip(f"XJTU friction-torque data not found at {XJTU_DIR} (shared/ must sit beside the repo)")
     series = load_xjtu(XJTU_DIR / filename)
@@ -59,6 +62,9 @@ def test_check8_law_fits_xjtu_friction_trend(filename):
         f"scatter {fit.scatter_fraction:.2f} δ0, c0 {fit.no_load_fraction:.2f})"
     )
     assert direct == pytest.approx(fit.rms_residual, rel=1e-9)
+    screw = filename.split("_")[0].lower()
+    quote(f"xjtu_{screw}_law_rms_pct", 100 * fit.rms_residual, f"{100 * fit.rms_residual:.2f} %")
+    quote(f"xjtu_{screw}_line_rms_pct", 100 * line, f"{100 * line:.2f} %")
     assert fit.rms_residual < 0.03
     assert fit.rms_residual <= line + 0.002
     assert 0.0 <= fit.no_load_fraction <= 0.9
@@ -86,7 +92,10 @@ def test_load_xjtu_stage_spacing(tmp_path):
 # ---------------------------------------------------------------------------------------------
 
 
-def test_default_law_paper_shape():
+@pytest.mark.quoted
+def test_default_law_paper_shape(quote):
+    """The default law has the paper's shape: full preload until the onset (before 3000 h), under
+    10 % at 6000 h, 7–13 µm of backlash at 8000 h."""
     law = WearLaw()
     assert preload_fraction(0.0, law) == 1.0
     assert preload_fraction(law.onset_hours, law) == 1.0
@@ -106,6 +115,10 @@ def test_default_law_paper_shape():
     figures = {h: (float(preload_fraction(h, law)), float(backlash_um(h, law))) for h in (3000, 4000, 6000, 8000)}
     print("\n[default law] hours: (preload fraction, backlash µm)",
           {k: (round(a, 3), round(c, 2)) for k, (a, c) in figures.items()})
+    quote("preload_pct_3000_4000_6000_h", figures[3000][0], " / ".join(
+        f"{100 * figures[h][0]:.0f}" for h in (3000, 4000, 6000)) + " %")
+    quote("backlash_um_4000_6000_8000_h", figures[8000][1], " / ".join(
+        f"{figures[h][1]:.1f}" for h in (4000, 6000, 8000)) + " µm")
 
 
 def test_sharp_law_matches_single_ball_hertz():
