@@ -81,7 +81,10 @@ def imu_standstill(request):
     return t_acc, acc, t_gyr, gyr
 
 
-def test_check7_accelerometer_noise_density_and_rate(imu_standstill):
+@pytest.mark.quoted
+def test_check7_accelerometer_noise_density_and_rate(imu_standstill, quote):
+    """Check 7: the IMU accelerometer at rest, 60 s at 1613 Hz: its 1–100 Hz density within 10 %
+    of 7 µg/√Hz on every axis, gravity on z."""
     t_acc, acc, _, _ = imu_standstill
     rate = 1.0 / np.mean(np.diff(t_acc))
     density_ug = _band_density(acc, rate) / MICRO_G
@@ -92,10 +95,14 @@ def test_check7_accelerometer_noise_density_and_rate(imu_standstill):
     assert t_acc[-1] <= 60.0
     assert acc.shape == (t_acc.size, 3) and t_acc.size == pytest.approx(60 * 1613, abs=2)
     assert np.all(np.abs(density_ug / 7.0 - 1.0) < 0.10)
+    quote("imu_acc_density_ug_per_rthz", float(np.mean(density_ug)), f"{np.mean(density_ug):.1f} µg/√Hz")
     assert np.mean(acc[:, 2]) == pytest.approx(G, rel=1e-5)  # +1 g up, level and at rest
 
 
-def test_check7_gyroscope_noise_density_and_rate(imu_standstill):
+@pytest.mark.quoted
+def test_check7_gyroscope_noise_density_and_rate(imu_standstill, quote):
+    """Check 7: the IMU gyroscope at rest, 60 s at 1000 Hz: its 1–100 Hz density within 10 % of
+    35 µrad/s/√Hz on every axis."""
     _, _, t_gyr, gyr = imu_standstill
     rate = 1.0 / np.mean(np.diff(t_gyr))
     density_urad = _band_density(gyr, rate) / 1e-6
@@ -104,6 +111,8 @@ def test_check7_gyroscope_noise_density_and_rate(imu_standstill):
     assert rate == pytest.approx(1000.0, rel=1e-9)
     assert t_gyr.size == 60_000  # instants k/1000 s within the 60 s record
     assert np.all(np.abs(density_urad / 35.0 - 1.0) < 0.10)
+    quote("imu_gyro_density_urad_s_per_rthz", float(np.mean(density_urad)),
+          f"{np.mean(density_urad):.1f} µrad/s/√Hz")
 
 
 def test_check7_gravity_tilt_is_sensed():

@@ -269,8 +269,9 @@ def test_lead_quasi_static_default_world():
 # Check 2: backlash by the dial indicator
 
 
+@pytest.mark.quoted
 @pytest.mark.parametrize("b_um", [0.0, 5.0, 10.0, 20.0])
-def test_dial_indicator_measures_clearance(b_um):
+def test_dial_indicator_measures_clearance(b_um, quote):
     """Check 2: the simulated dial-indicator procedure (no reading noise, 10 repeats) returns the
     injected clearance within 0.5 µm plus the documented elastic term 2·F_rail/K_axial."""
     sim = Simulator(WORLD, DT_SLOW)
@@ -281,6 +282,7 @@ def test_dial_indicator_measures_clearance(b_um):
     print(f"\n[dial] b = {b_um:4.1f} µm: measured {res.backlash_um:.3f} µm, elastic "
           f"{res.elastic_um:.3f} µm, repeats {np.round(res.repeats_um, 2)}")
     assert abs(res.backlash_um - b_um) <= 0.5 + res.elastic_um
+    quote(f"dial_reads_um_b{b_um:g}", res.backlash_um, f"{res.backlash_um:.2f}".replace("-", "−"))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -347,7 +349,8 @@ def _axial_pitch_frequency(k_axial: float) -> float:
     return float(math.sqrt(w2[0]) / (2.0 * math.pi))
 
 
-def test_axial_natural_frequency_follows_preload():
+@pytest.mark.quoted
+def test_axial_natural_frequency_follows_preload(quote):
     """Check 3: the axial natural frequency (screw locked, carriage given 10 mm/s) is within 5 %
     of sqrt(K_axial/m)/2π at 100/50/10 % preload.
 
@@ -362,7 +365,7 @@ def test_axial_natural_frequency_follows_preload():
                  carriage=replace(AXIS.carriage, rail_friction=0.0))
     world = replace(WORLD, axis=ax, rails=_flat_rails(), screw=_no_screw_errors(WORLD.screw))
     sim = Simulator(world, DT_FAST)
-    freqs = {}
+    freqs, rows = {}, []
     for frac in PRELOAD_FRACTIONS:
         f_load = frac * F_NOM
         k = ax.screw.axial_stiffness(f_load)
@@ -370,6 +373,7 @@ def test_axial_natural_frequency_follows_preload():
         f_2dof = _axial_pitch_frequency(k)
         f_zc, f_fft = _ring_frequency(_ring(sim, f_load, 0.01), DT_FAST)
         freqs[frac] = f_zc
+        rows.append((k / 1e6, f_zc, f_expected))
         print(f"\n[natural freq] {frac:.0%}: K {k / 1e6:.2f} N/µm, sqrt(K/m)/2π {f_expected:.2f} Hz,"
               f" x-pitch model {f_2dof:.2f} Hz; measured zero crossings {f_zc:.2f} Hz, FFT "
               f"{f_fft:.2f} Hz ({(f_zc / f_expected - 1) * 100:+.2f} %)")
@@ -377,6 +381,8 @@ def test_axial_natural_frequency_follows_preload():
         assert abs(f_fft - f_expected) <= 0.05 * f_expected
         assert abs(f_zc - f_2dof) <= 0.005 * f_2dof
     assert freqs[1.0] > freqs[0.5] > freqs[0.1]
+    for i, name in enumerate(("axial_stiffness_N_per_um", "axial_mode_hz", "axial_sqrt_k_over_m_hz")):
+        quote(name, rows[0][i], " / ".join(f"{r[i]:.1f}" for r in rows))
     # Information: the same ring with the 12 N rail friction (MuJoCo frictionloss).
     ax_f = replace(ax, carriage=AXIS.carriage)
     sim_f = Simulator(replace(world, axis=ax_f), DT_FAST)
@@ -386,7 +392,8 @@ def test_axial_natural_frequency_follows_preload():
               f" {_ring_frequency(x, DT_FAST)[0]:.1f} Hz")
 
 
-def test_drag_torque_follows_preload():
+@pytest.mark.quoted
+def test_drag_torque_follows_preload(quote):
     """Check 3: the nut drag torque is linear in preload; apply_state writes it as the screw's
     frictionloss; the mean servo torque at constant speed (Phase I-like 400 mm/s moves) differs
     between 100 % and 10 % (and 50 %) preload by the drag difference within 10 %, and equals drag
@@ -416,14 +423,19 @@ def test_drag_torque_follows_preload():
               f"fwd {fwd:+.4f} rev {rev:+.4f} N·m; drag+viscous+rail {expected:.4f} N·m")
         assert abs(fwd - expected) <= 0.02 * expected
         assert abs(-rev - expected) <= 0.02 * expected
+    followed = []
     for frac in (0.1, 0.5):
         d_drag = s.drag_torque(F_NOM) - s.drag_torque(frac * F_NOM)
         d_fwd = torque[1.0][0] - torque[frac][0]
         d_rev = torque[frac][1] - torque[1.0][1]
+        followed += [abs(d_fwd - d_drag), abs(d_rev - d_drag)]
         print(f"[drag] 100 % − {frac:.0%}: drag difference {d_drag:.4f} N·m; measured fwd "
               f"{d_fwd:.4f} rev {d_rev:.4f} N·m")
         assert abs(d_fwd - d_drag) <= 0.1 * d_drag
         assert abs(d_rev - d_drag) <= 0.1 * d_drag
+    quote("drag_torque_Nm_100_to_10_pct", s.drag_torque(F_NOM),
+          f"{s.drag_torque(F_NOM):.3f} → {s.drag_torque(0.1 * F_NOM):.3f} N·m")
+    quote("drag_followed_mNm", 1e3 * max(followed), f"{1e3 * max(followed):.2f} mN·m")
 
 
 # ---------------------------------------------------------------------------------------------
