@@ -517,8 +517,9 @@ def test_rail_lookup_timing_is_step_independent():
 # Check 5: backlash shift between forward and reverse traces
 
 
+@pytest.mark.quoted
 @pytest.mark.parametrize("b_um", [5.0, 20.0])
-def test_backlash_shift_forward_reverse(b_um):
+def test_backlash_shift_forward_reverse(b_um, quote):
     """Check 5: default world (rails, cyclic lead error and ball pass as drawn), clearance b: the
     true trace x_true − (1+s)·x_cmd over the constant-speed parts of a 20 mm/s Phase II run
     (origin offset 1.3 mm) is shifted by b + 2·F_rail/K_axial between forward and reverse (the
@@ -570,6 +571,8 @@ def test_backlash_shift_forward_reverse(b_um):
     assert in_gap == 0.0
     assert abs(shift - b - elastic) <= 0.5e-6
     assert abs(shift - b) <= 0.5e-6
+    quote(f"backlash_shift_beyond_b_um_b{b_um:g}", (shift - b) * 1e6, f"{(shift - b) * 1e6:.2f}")
+    quote("backlash_elastic_um", elastic * 1e6, f"{elastic * 1e6:.2f}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -616,7 +619,8 @@ def phase1_contact():
             for name, (world, capture_s) in worlds.items()}
 
 
-def test_carriage_stays_on_driving_flank(phase2_passes, phase1_contact):
+@pytest.mark.quoted
+def test_carriage_stays_on_driving_flank(phase2_passes, phase1_contact, quote):
     """The cyclic lead error moves the flanks, so it no longer pushes the carriage into the gap;
     b = 10 µm, constant-speed parts (0.1 s / 0.05 s trimmed after reaching speed).
 
@@ -646,6 +650,8 @@ def test_carriage_stays_on_driving_flank(phase2_passes, phase1_contact):
               f"{force.min():.1f}..{force.max():.1f} N", end="")
         if v == 20.0:
             assert in_gap == 0.0 and force.min() > 0.0
+        if v == max(cfg.speeds_mm_s):
+            quote("in_gap_pct_phase2_fastest", 100 * in_gap, f"{100 * in_gap:.0f} %")
     print()
     for name, runs in phase1_contact.items():
         sim1, cond1, traj1 = runs[10e-6]
@@ -657,6 +663,8 @@ def test_carriage_stays_on_driving_flank(phase2_passes, phase1_contact):
               f"{in_gap:.3f}, max depth {depth * 1e9:+.0f} nm; b = 0: driving nut force "
               f"{f0.min():+.1f}..{f0.max():+.1f} N (negative {np.mean(f0 < 0):.3f} of the time)")
         assert (in_gap > 0.0) == (f0.min() < 0.0), name
+        if name == "default":
+            quote("in_gap_pct_phase1", 100 * in_gap, f"{100 * in_gap:.0f} %")
         if name == "flat rails, no cyclic":
             assert in_gap == 0.0 and f0.min() > 0.0
 
