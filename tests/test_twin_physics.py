@@ -213,7 +213,8 @@ def test_lead_quasi_static_no_cyclic_error():
     assert flank <= 1e-9  # only the compliance of the flank drive, F_nut/kp
 
 
-def test_lead_quasi_static_default_world():
+@pytest.mark.quoted
+def test_lead_quasi_static_default_world(quote):
     """Check 1(b). Default world (random rails, cyclic lead error + ball pass), 3 K.
 
     At rest the nut flanks carry the cyclic lead error too (lead_flank coordinate), so the nut
@@ -248,6 +249,7 @@ def test_lead_quasi_static_default_world():
     assert np.all(np.abs(err_nut) <= 0.1e-6)
     assert np.all(np.abs(err_com) <= 0.1e-6)
     assert np.abs(err_nut_no_cyclic).max() > 0.3e-6  # the cyclic error is there at rest
+    quote("lead_error_at_nut_nm", float(np.abs(err_nut).max() * 1e9), f"{np.abs(err_nut).max() * 1e9:.1g} nm")
 
     # In motion: the cyclic lead error and ball pass are reproduced.
     th_all = traj.qpos[:, IX.screw]
