@@ -1,3 +1,5 @@
+import functools
+import importlib.util
 import os
 import subprocess
 import sys
@@ -37,6 +39,21 @@ def record_diagnose_bench(tmp_path, name, *sets):
     return d
 
 
+@functools.cache
+def record_module():
+    """benchmarks/record.py, loaded once (the benchmarks folder is not a package)."""
+    spec = importlib.util.spec_from_file_location("record", REPO / "benchmarks" / "record.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def signed(x: float, digits: int = 2) -> str:
+    """A figure as the docs write it: ``digits`` decimals, a real minus sign, never −0.00."""
+    text = f"{x:.{digits}f}".replace("-", "−")
+    return text[1:] if text.startswith("−") and not text.strip("−0.") else text
+
+
 class Quote:
     """What a test measures and the docs quote: ``quote(name, value, text)`` a figure,
     ``quote.table(name, markdown)`` a table. With the environment variable ``TWIN_RECORD`` set
@@ -47,18 +64,14 @@ class Quote:
     def __init__(self, node):
         self.bench = node.path.stem
         self.command = f"TWIN_RECORD=1 .venv/bin/python -m pytest -m quoted {node.path.relative_to(REPO)}"
-        self.scale = " ".join((node.function.__doc__ or node.name).split()).split(". ")[0]
+        # the file's docstring: the same for every test of the file, whichever records last
+        self.scale = " ".join((node.module.__doc__ or self.bench).split()).split(". ")[0]
         self.on = bool(os.environ.get("TWIN_RECORD"))
 
     def _record(self, figures, tables):
         if not self.on:
             return
-        import importlib.util
-
-        spec = importlib.util.spec_from_file_location("record", REPO / "benchmarks" / "record.py")
-        record = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(record)
-        record.record(self.bench, command=self.command, scale=self.scale, figures=figures, tables=tables,
+        record_module().record(self.bench, command=self.command, scale=self.scale, figures=figures, tables=tables,
                       merge=True)
 
     def __call__(self, name: str, value: float | None, text: str) -> None:

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import REPO, run_twin
+from conftest import REPO, run_twin, signed
 
 from analysis.phase2.backlash import NON_POSITIONING, BacklashEstimator, weighted_sum
 from analysis.phase2.shifts import correlate_traces, shift_between
@@ -259,11 +259,6 @@ def test_eq9_never_prints_the_issues_nonsense(tmp_path_factory):
 # The CI gate on backlash-steps (100 mm/s, 10 runs, paper IMU noise, origins within ±2 mm)
 
 
-def _um(x: float) -> str:
-    """µm as the docs write them: two decimals, a real minus sign, no −0.00."""
-    return f"{x:.2f}".replace("-", "−").replace("−0.00", "0.00")
-
-
 @pytest.mark.quoted
 def test_check2_backlash_steps_shift_based(tmp_path_factory, quote):
     """The CI gate on backlash-steps: every session's change by shifts within max(1 µm, 10 %) of
@@ -285,7 +280,7 @@ def test_check2_backlash_steps_shift_based(tmp_path_factory, quote):
     assert len(doc["sessions"]) == 6
     assert not bad, f"sessions outside 1 µm / 10 %: {bad}"
     errors = [r["delta_backlash_um_shift"] - injected[r["session"]] for r in doc["sessions"][1:]]
-    quote("gate_errors_um", max(map(abs, errors)), ", ".join(_um(e) for e in errors))
+    quote("gate_errors_um", max(map(abs, errors)), ", ".join(signed(e) for e in errors))
 
 
 @pytest.mark.quoted
@@ -298,7 +293,7 @@ def test_check4_no_backlash_anywhere(tmp_path_factory, quote):
     est = [rec["delta_backlash_um_shift"] for rec in doc["sessions"]]
     print(f"\ncheck 4 (no backlash anywhere): estimates {np.round(est, 3)} µm")
     assert all(abs(v) <= 1.0 for v in est)
-    quote("no_backlash_range_um", max(map(abs, est)), f"{_um(min(est))} … {_um(max(est))}")
+    quote("no_backlash_range_um", max(map(abs, est)), f"{signed(min(est))} … {signed(max(est))}")
 
 
 def test_baseline_sessions_rezero_on_their_mean(tmp_path_factory):

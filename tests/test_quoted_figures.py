@@ -5,16 +5,13 @@ the JSON changed, fails here. ``python benchmarks/record.py`` rewrites the docs 
 
 from __future__ import annotations
 
-import importlib.util
 import re
 from pathlib import Path
 
 import pytest
+from conftest import REPO, record_module
 
-REPO = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("record", REPO / "benchmarks" / "record.py")
-record = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(record)
+record = record_module()
 
 DOC = record.load()
 FILES = record.quoting_files(REPO)

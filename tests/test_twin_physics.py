@@ -27,6 +27,7 @@ from dataclasses import replace
 import mujoco
 import numpy as np
 import pytest
+from conftest import signed
 from scipy import signal
 
 from twin.sim import campaign as cp
@@ -284,7 +285,7 @@ def test_dial_indicator_measures_clearance(b_um, quote):
     print(f"\n[dial] b = {b_um:4.1f} µm: measured {res.backlash_um:.3f} µm, elastic "
           f"{res.elastic_um:.3f} µm, repeats {np.round(res.repeats_um, 2)}")
     assert abs(res.backlash_um - b_um) <= 0.5 + res.elastic_um
-    quote(f"dial_reads_um_b{b_um:g}", res.backlash_um, f"{res.backlash_um:.2f}".replace("-", "−"))
+    quote(f"dial_reads_um_b{b_um:g}", res.backlash_um, signed(res.backlash_um))
 
 
 # ---------------------------------------------------------------------------------------------
