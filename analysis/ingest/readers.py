@@ -259,15 +259,17 @@ def _asammdf_quiet(path: Path):
     sys.unraisablehook = lambda u: None if _from_asammdf(u) else old_hook(u)
     log.addHandler(handler)
     log.propagate = False
-    err = None
+    err, failed = None, True
     try:
         yield handler
+        failed = False
     except ImportSpecError:
         raise
     except Exception as e:  # noqa: BLE001 - asammdf on a damaged file raises anything
         err = f"{path}: not a readable MDF file ({type(e).__name__}: {e})"
     finally:
-        gc.collect()
+        if failed:  # a half-built MDF4 is collected while the hook is in place (a read that
+            gc.collect()  # succeeded leaves none: a full collection per file would cost 50 ms+)
         sys.unraisablehook = old_hook
         log.removeHandler(handler)
         log.propagate = propagate
