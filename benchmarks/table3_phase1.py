@@ -71,7 +71,10 @@ def main() -> None:
             "| 2 in a row after the onset (h) | false alarms / healthy test | baseline alarms "
             "| paper's limits: first crossing, after the onset (h), false alarms |",
             "|---|---|---|---|---|---|---|---|"]
-    figures = {"onset_h": (onset, f"{onset:g}")}
+    sel = det["selected_features"]
+    figures = {"onset_h": (onset, f"{onset:g}"), "n_selected": (len(sel), f"{len(sel)}"),
+               "selected_features": (None, ", ".join(f"`{n}`" for n in sel)),
+               "time_detection_s": (round(t2 - t1, 1), f"{t2 - t1:.0f} s")}
     for m, r in det["methods"].items():
         s = scores[m]
         first = score_method(s["hours"], s["scores"], s["threshold"], nb, None)

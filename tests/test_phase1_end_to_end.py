@@ -46,7 +46,8 @@ def fault_run(campaigns):
     return out, details
 
 
-def test_fisher_selection_on_reference(campaigns, fault_run):
+@pytest.mark.quoted
+def test_fisher_selection_on_reference(campaigns, fault_run, quote):
     out, _ = fault_run
     sel = json.loads((out / "selection.json").read_text())
     names, scores = sel["selected"], sel["fisher_scores"]
@@ -65,6 +66,15 @@ def test_fisher_selection_on_reference(campaigns, fault_run):
     assert top in DIRECTIONS, f"top feature {top} has no documented direction"
     shift = (preload50.mean() - healthy.mean()) / healthy.std(ddof=1)
     assert np.sign(shift) == DIRECTIONS[top] and abs(shift) > 3
+    backlash = x[table.hours >= 200]
+    quote("fisher_selected", len(names), f"{len(names)}")
+    quote("fisher_cumulative_pct", round(100 * sel["cumulative_fraction"], 1),
+          f"{100 * sel['cumulative_fraction']:.1f} %")
+    quote("fisher_names", None, ", ".join(f"`{n}`" for n in names))
+    quote("fisher_top", None, f"`{top}` *{'falls' if DIRECTIONS[top] < 0 else 'rises'}*")
+    quote("fisher_top_by_condition", None,
+          f"{healthy.mean():.4g} ± {healthy.std(ddof=1):.2g} healthy, {preload50.mean():.4g} at 50 % preload, "
+          f"{backlash.mean():.4g} with backlash")
 
 
 def _print_table(title, details):

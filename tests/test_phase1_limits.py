@@ -29,7 +29,8 @@ def _one_blas_thread():
         yield
 
 
-def test_t2_f_limit_on_new_samples():
+@pytest.mark.quoted
+def test_t2_f_limit_on_new_samples(quote):
     rng = np.random.default_rng(10)
     alarms = alarms_paper = 0
     paper_limit = limits.t2_limit_paper(N, P, ALPHA)
@@ -43,11 +44,14 @@ def test_t2_f_limit_on_new_samples():
     rate, rate_paper = alarms / TRIALS, alarms_paper / TRIALS
     print(f"T^2 F limit (new observations), N={N}, a={P}: false-alarm rate {rate:.4f} over {TRIALS} "
           f"draws (alpha {ALPHA}); paper's Eq. 2 limit {paper_limit:.3f}: rate {rate_paper:.4f}")
+    quote("t2_f_limit_new_rate", rate, f"{rate:.4f}")
+    quote("t2_paper_limit_new_rate", rate_paper, f"{rate_paper:.4f}")
     assert abs(rate - ALPHA) <= 0.01
     assert rate_paper >= rate
 
 
-def test_t2_beta_limit_on_baseline_samples():
+@pytest.mark.quoted
+def test_t2_beta_limit_on_baseline_samples(quote):
     rng = np.random.default_rng(11)
     lim = limits.t2_limit_train(N, P, ALPHA)
     alarms = 0
@@ -56,10 +60,12 @@ def test_t2_beta_limit_on_baseline_samples():
         alarms += int(np.sum(PCAT2(variance=1.0).fit(X).score_samples(X) > lim))
     rate = alarms / (TRIALS * N)
     print(f"T^2 beta limit (baseline observations): rate {rate:.4f} over {TRIALS * N} points")
+    quote("t2_beta_limit_baseline_rate", rate, f"{rate:.4f}")
     assert abs(rate - ALPHA) <= 0.01
 
 
-def test_gmm_md_beta_limit_on_baseline_samples_is_exact():
+@pytest.mark.quoted
+def test_gmm_md_beta_limit_on_baseline_samples_is_exact(quote):
     rng = np.random.default_rng(12)
     alarms = 0
     for _ in range(TRIALS):
@@ -69,10 +75,12 @@ def test_gmm_md_beta_limit_on_baseline_samples_is_exact():
     rate = alarms / (TRIALS * N)
     print(f"GMM-MD beta limit on the baseline points, N={N}, a={P}: rate {rate:.4f} over "
           f"{TRIALS * N} points (alpha {ALPHA})")
+    quote("md_beta_limit_baseline_rate", rate, f"{rate:.4f}")
     assert abs(rate - ALPHA) <= 0.01
 
 
-def test_gmm_md_beta_limit_on_new_samples_measured():
+@pytest.mark.quoted
+def test_gmm_md_beta_limit_on_new_samples_measured(quote):
     """The paper applies the beta limit to new samples. There MD^2 (MLE covariance) = T^2 N/(N-1)
     with T^2 ~ a(N-1)(N+1)/(N(N-a)) F(a, N-a), so the actual rate is
     P(F > limit (N-a) / (a (N+1))), far above alpha with 15 baseline samples."""
@@ -87,11 +95,15 @@ def test_gmm_md_beta_limit_on_new_samples_measured():
     analytic = float(stats.f.sf(lim * (N - P) / (P * (N + 1)), P, N - P))
     print(f"GMM-MD beta limit on NEW points, N={N}, a={P}: measured rate {rate:.4f} over {TRIALS} "
           f"draws, analytical {analytic:.4f} (alpha {ALPHA})")
+    quote("md_beta_limit_new_rate", rate, f"{rate:.3f}")
+    quote("md_beta_limit_new_analytic", analytic, f"{analytic:.3f}")
+    quote("md_beta_limit_new_over_alpha", rate / ALPHA, f"{rate / ALPHA:.0f}")
     assert rate == pytest.approx(analytic, abs=0.015)
     assert rate > 3 * ALPHA
 
 
-def test_gmm_md_default_limit_on_new_samples_is_exact():
+@pytest.mark.quoted
+def test_gmm_md_default_limit_on_new_samples_is_exact(quote):
     """GMM-MD's default limit, a(N+1)/(N-a) F_{1-alpha}(a, N-a), on new samples: alpha."""
     rng = np.random.default_rng(14)
     alarms = 0
@@ -102,6 +114,7 @@ def test_gmm_md_default_limit_on_new_samples_is_exact():
         alarms += int(det.decision_function(X[N:])[0] > det.threshold_)
     rate = alarms / TRIALS
     print(f"GMM-MD F limit on NEW points, N={N}, a={P}: rate {rate:.4f} over {TRIALS} draws (alpha {ALPHA})")
+    quote("md_f_limit_new_rate", rate, f"{rate:.4f}")
     assert abs(rate - ALPHA) <= 0.01
 
 

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from analysis.phase2.prognosis import (
+    DEFAULT_Q,
     BacklashTrend,
     prognosis,
     prognosis_history,
@@ -27,17 +28,20 @@ TRUE_CROSSING = 8000.0
 RATE = 10e-6 / TRUE_CROSSING  # m/h
 
 
+@pytest.mark.quoted
 @pytest.mark.parametrize("noise_um", [0.5, 1.0])
-def test_check5_crossing_and_band(noise_um):
+def test_check5_crossing_and_band(noise_um, quote):
     truth = RATE * HOURS
-    within = inside = total = 0
+    within = inside = total = kept = 0
     worst = 0.0
     model = BacklashTrend()
     for seed in range(10):
         rng = np.random.default_rng(2000 + seed)
         z = truth + noise_um * 1e-6 * rng.standard_normal(HOURS.size)
         for i in np.flatnonzero(truth > 5e-6):
-            p = prognosis(model.fit(HOURS[:i + 1], z[:i + 1]))
+            tr = model.fit(HOURS[:i + 1], z[:i + 1])
+            kept += tr.process_noise == DEFAULT_Q
+            p = prognosis(tr)
             total += 1
             err = abs(p.crossing_hours - TRUE_CROSSING) / TRUE_CROSSING
             worst = max(worst, err)
@@ -46,6 +50,10 @@ def test_check5_crossing_and_band(noise_um):
     print(f"\ncheck 5, noise {noise_um} µm: crossing within 10 % in {within}/{total} cases "
           f"({100 * within / total:.1f} %, worst {100 * worst:.1f} %); truth inside the 95 % band "
           f"in {inside}/{total} ({100 * inside / total:.1f} %)")
+    quote(f"check5_within_10pct_noise_{noise_um:g}um", within / total, f"{100 * within / total:.1f} %")
+    quote(f"check5_inside_band_noise_{noise_um:g}um", inside / total, f"{100 * inside / total:.1f} %")
+    quote("check5_cases", total, f"{total}")
+    assert kept == total  # "auto" keeps the steady rate's q on a straight trend
     assert within / total >= 0.95
     assert inside / total >= 0.95
 
