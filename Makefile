@@ -45,7 +45,8 @@ bench-check: $(STAMP)
 # on the cache bench_diagnose.py leaves in runs/validate/diagnose-benchmark; the `quoted` tests
 # record the figures they measure (TWIN_RECORD=1, their `quote` fixture). CI runs this after
 # `make test`.
-VALIDATE := benchmarks/bench_diagnose.py benchmarks/bench_demo.py benchmarks/table3_phase1.py
+VALIDATE := benchmarks/bench_diagnose.py benchmarks/bench_demo.py benchmarks/table3_phase1.py \
+            benchmarks/sweep_tables.py
 validate: $(STAMP)
 	for b in $(VALIDATE); do $(PY) $$b --record || exit 1; done
 	TWIN_RECORD=1 TWIN_DIAGNOSE_BENCH_CACHE=runs/validate/diagnose-benchmark/cache \

@@ -80,7 +80,7 @@ def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_
     data["phase1"].update(sample_hours=[float(sample_hours)], captures_per_sample=int(n_captures))
     if session_hours is not None:
         data["phase2"].update(session_hours=[float(session_hours)], runs_per_session=int(n_runs))
-        data["dial_indicator"]["every_n_sessions"] = 100  # no dial test in the fit
+        data["dial_indicator"]["every_n_sessions"] = 0  # no dial test in the fit
     return data
 
 

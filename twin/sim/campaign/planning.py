@@ -60,6 +60,7 @@ def plan(s: Scenario) -> list[Unit]:
     if s.campaign.phase2:
         for i, h in enumerate(session_hours(s)):
             units.append(Unit("phase2", f"s{i:04d}", i, h))
-            if i % s.dial_indicator.every_n_sessions == 0:
+            n = s.dial_indicator.every_n_sessions
+            if n and i % n == 0:
                 units.append(Unit("dial", f"d{i:04d}", i, h))
     return units

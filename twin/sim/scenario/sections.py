@@ -269,7 +269,8 @@ class DialConfig(_Section):
     reading_noise_um: float = Field(1.5, ge=0, description="1-sigma error of a by-eye sub-gradation reading")
     step_um: float = Field(1.0, gt=0, description="step of the commanded position in the dial test, µm")
     repeats: int = Field(3, ge=1, description="repetitions of the dial test, averaged")
-    every_n_sessions: int = Field(1, ge=1, description="a dial test after every n-th Phase II session")
+    every_n_sessions: int = Field(1, ge=0, description="a dial test after every n-th Phase II session "
+                                  "(0: none)")
 
 
 class PauseConfig(_Section):
