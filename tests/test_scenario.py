@@ -91,3 +91,17 @@ def test_friction_constraint_keys():
         dof = m.joint(joint).dofadr[0]
         assert list(m.dof_solref[dof]) == pytest.approx([4e-4, 1.0])
         assert list(m.dof_solimp[dof][:2]) == pytest.approx([0.999, 0.999])
+
+
+def test_dial_tests_every_n_sessions_and_none():
+    """`dial_indicator.every_n_sessions`: a dial test after sessions 0, n, 2n, ...; 0: none (the
+    calibration's twin, which reads no dial)."""
+    from twin.sim.campaign.planning import plan
+
+    def dials(n: int) -> list[int]:
+        s = load(REPO / "scenarios/backlash-steps.toml", [f"dial_indicator.every_n_sessions={n}"])
+        return [u.index for u in plan(s) if u.kind == "dial"]
+
+    assert dials(1) == [0, 1, 2, 3, 4, 5]
+    assert dials(4) == [0, 4]
+    assert dials(0) == []
