@@ -199,7 +199,7 @@ def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str]
     from analysis.dataset.axis import axis_of
     from analysis.injected import injected_change_um
     from analysis.phase1 import pipeline
-    from analysis.phase2.backlash import campaign_backlash
+    from analysis.phase2.backlash.campaign import session_error_motions_task
     from twin.sim.campaign import simulate_campaign
     from twin.sim.scenario import load
 
@@ -211,11 +211,15 @@ def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str]
     meas = folder / "measurements.h5"
     if c.phase2_references:
         for ref in c.phase2_references:
-            with open_measurements(meas) as m:
-                axis = axis_of(m)
-                res = campaign_backlash(m, on_bad_run="raise", position_reference=ref,
-                                        map_sessions=mapper(prefix="session"))
-            ems = res.error_motions
+            with open_measurements(meas) as m:  # the error motions only: the checks estimate
+                axis, sessions = axis_of(m), m.phase2_sessions()
+            ems = []
+            for session, (em, why) in zip(sessions, mapper(prefix="session")(
+                    session_error_motions_task,
+                    [(str(meas.resolve()), s, "raise", {"position_reference": ref}) for s in sessions]), strict=True):
+                if em is None:
+                    raise GateError(f"gate cache: campaign {c.key}, session {session}: {why}")
+                ems.append(em)
             with open_truth(folder / "truth.h5") as t:
                 injected = injected_change_um(t, [e.session for e in ems])
             _save_error_motions(folder / f"phase2-{ref}.npz", ems, injected,
