@@ -10,6 +10,7 @@ import time
 
 import h5py
 import numpy as np
+import pytest
 from conftest import REPO, SMALL, run_twin
 
 from analysis.dataset import measurement_keys, open_measurements, open_truth, truth_mentions
@@ -199,7 +200,9 @@ def test_batched_campaigns_equal_campaigns_simulated_alone(tmp_path):
         simulate_campaigns_batched([ss[0], other], [tmp_path / "c0", tmp_path / "c1"])
 
 
-def test_one_rail_pass_keeps_the_paper_figures(tmp_path):
+@pytest.mark.validate  # a design decision's proof (30 s): `make validate`
+@pytest.mark.quoted
+def test_one_rail_pass_keeps_the_paper_figures(tmp_path, quote):
     """``scenarios/paper-rtf.toml`` simulates its Phase II sessions in one rollout pass
     (``phase2.rail_passes = 1``: rails looked up where the nut's flank contact puts the carriage,
     :func:`twin.sim.simulate.flank_contact_position`) instead of two (the fixed point). The IMU's
@@ -250,6 +253,10 @@ def test_one_rail_pass_keeps_the_paper_figures(tmp_path):
     assert max(travel) < 0.1e-6
     assert apart("delta_backlash_um_shift") < 0.05 and apart("delta_backlash_um_pitch") < 0.05
     assert gamma < 0.005
+    quote("one_rail_pass", None,
+          f"`twin backlash`'s change by shifts within {apart('delta_backlash_um_shift'):.3f} µm of two passes', "
+          f"by pitch within {apart('delta_backlash_um_pitch'):.3f} µm, the error-motion correlations within "
+          f"{gamma:.0e}, the travels within {max(travel) * 1e9:.0f} nm")
 
 
 def test_explicit_sample_hours_give_those_samples():

@@ -417,6 +417,7 @@ def test_eq9_on_the_imu_axis_where_d_is_l_minus_b(reversal_campaign, quote):
     quote("eq9_imu_slow_reversal_um", None, ", ".join(f"{est:+.2f}" for _, inj, est in rows if inj > 0))
 
 
+@pytest.mark.validate  # in `make test`, the gate's steps-imu-20mm_s check gates the same (test_gate.py)
 @pytest.mark.quoted
 def test_eq5_on_the_imu_axis_at_the_papers_slow_speed(tmp_path_factory, quote):
     """The CI gate on the IMU axis (issue 13, item 8), the paper's Phase II as it runs it: the
