@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -91,7 +92,8 @@ def cache(cold):
     return gate.ensure_cache(cold[0], "standard", log=lambda line: None)
 
 
-def test_cold_gate_passes_the_papers_methods_and_writes_junit(cold):
+@pytest.mark.quoted
+def test_cold_gate_passes_the_papers_methods_and_writes_junit(cold, quote):
     root, proc, seconds, junit = cold
     print(f"\n{proc.stdout}{proc.stderr}\ncold gate (build + checks): {seconds:.0f} s (loaded machine)")
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -101,6 +103,15 @@ def test_cold_gate_passes_the_papers_methods_and_writes_junit(cold):
         f"twin.gate.detection.pca_t2::{c.name}" for c in SUITE.detection}
     assert set(cases) == want
     assert not [k for k, tc in cases.items() if tc.find("failure") is not None]
+    rows = ["| check | `shift` (the paper's, default) | verdict |", "|---|---|---|"]
+    for c in SUITE.backlash:  # docs/ci-gate.md's table, from the figure line of each JUnit case
+        out = cases[f"twin.gate.backlash.shift::{c.name}"].findtext("system-out")
+        m = re.search(r"max \|error\| ([0-9.]+) µm .*closest to its tolerance: s\d+, ([-0-9.]+) µm for "
+                      r"([0-9.]+) µm injected, tolerance ([0-9.]+) µm", out)
+        assert m, out
+        rows.append(f"| `{c.name}` | max \\|error\\| {m[1]} µm (closest to its tolerance: the {m[3]} µm step "
+                    f"read as {m[2]}, tolerance {float(m[4]):g} µm) | pass |")
+    quote.table("shift_checks", "\n".join(rows) + "\n")
     folder = gate.cache_dir(root, SUITE)
     assert folder.name == f"standard-v{SUITE.version}-{gate.package_version()}"
     manifest = json.loads((folder / "manifest.json").read_text())
@@ -152,7 +163,8 @@ class Eq4(BacklashEstimator):
         return dataclasses.replace(r, delta_backlash_shift_m=v)
 
 
-def test_eq4_alone_fails_the_drift_check(cache):
+@pytest.mark.quoted
+def test_eq4_alone_fails_the_drift_check(cache, quote):
     """The drift check catches what it is there for: on the command axis, whose position_cmd
     drifts 0.25 ms against the IMU over the sessions, Eq. 4 reads 2·v·Δτ = 10 µm of it as
     backlash by the last session (within 2 µm: the campaign's noise and the drift's shape)."""
@@ -162,6 +174,8 @@ def test_eq4_alone_fails_the_drift_check(cache):
     assert not r.passed and r.error is None
     s, inj, est, _ = r.rows[-1]
     assert est - inj == pytest.approx(2 * 0.02 * 0.25e-3 * 1e6, abs=2.0)
+    worst = max(abs(e - i) for _, i, e, _ in r.rows)
+    quote("eq4_alone_drift_um", worst, f"{worst:.2f} µm")
 
 
 def test_biased_estimator_fails_exactly_the_shift_checks(cold, tmp_path):
