@@ -424,11 +424,11 @@ def test_eq5_on_the_imu_axis_at_the_papers_slow_speed(tmp_path_factory, quote):
     IMU-based position (no position_cmd read), the paper's 20 mm/s, Eq. 5 (each DOF's shift
     subtracted from E_XX's): backlash-steps with 40 runs per session recovers every change within
     max(1 µm, 10 %) (the gate's tolerance needs the averaging of 40 runs); 20 mm/s, because at
-    100 mm/s E_XX at the IMU is mostly rail-fixed and
-    its shift does not follow the backlash on an axis that follows the carriage (the 100 mm/s gate
-    above is the command axis's). Without Eq. 5 (Eq. 4 alone on the IMU axis) the rail-fixed DOFs
-    stay put and the estimate misses the 20 µm step by more than 10 µm: on an axis that follows
-    the carriage only E_XX's screw-locked content moves."""
+    100 mm/s E_XX at the IMU is mostly rail-fixed and its shift does not follow the backlash on
+    an axis that follows the carriage (the 100 mm/s gate above is the command axis's). Without
+    Eq. 5 (Eq. 4 alone on the IMU axis) the rail-fixed DOFs stay put and the estimate misses the
+    20 µm step by more than 10 µm: on an axis that follows the carriage only E_XX's screw-locked
+    content moves."""
     d = steps_campaign(tmp_path_factory, "phase2.speeds_mm_s=[20.0]", "phase2.runs_per_session=40")
     doc = backlash_json(d, "--no-plots", "--position-reference", "imu")
     injected = injected_change_um(d)
