@@ -46,15 +46,25 @@ def sweep(name: str, out: Path) -> float:
     return time.perf_counter() - t0
 
 
+def grid_table(df, rows: str, columns: str, score: str, corner: str, row_label, column_unit: str,
+               fmt: str) -> str:
+    """Markdown table of ``score``'s mean over the seeds (and any other axis) of ``df``, one row
+    per value of the swept key ``rows`` (labelled by ``row_label(value)``), one column per value
+    of ``columns`` (``"<value> <column_unit>"``); an empty cell is "-"."""
+    import pandas as pd
+
+    cell = df.groupby([rows, columns])[score].mean().unstack()
+    lines = [f"| {corner} | " + " | ".join(f"{c:g} {column_unit}" for c in cell.columns) + " |",
+             "|---|" + "---|" * len(cell.columns)]
+    for value, r in cell.iterrows():
+        lines.append(f"| {row_label(value)} | " + " | ".join("-" if pd.isna(x) else fmt.format(x) for x in r) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def backlash_tables(df) -> tuple[dict, dict]:
     """(figures, tables) of the backlash-recovery sweep's results ``df``."""
-    cell = df.groupby([WAVINESS, IMU_NOISE])["phase2.rms_error_um"].mean().unstack()
-    noises = list(cell.columns)
-    rows = ["| waviness \\ IMU noise | " + " | ".join(f"{n:g} µg/√Hz" for n in noises) + " |",
-            "|---|" + "---|" * len(noises)]
-    for w, r in cell.iterrows():
-        label = f"{w:g} µm" + (" (default)" if w == 0.5 else "")
-        rows.append(f"| {label} | " + " | ".join(f"{r[n]:.3f}" for n in noises) + " |")
+    table = grid_table(df, WAVINESS, IMU_NOISE, "phase2.rms_error_um", "waviness \\ IMU noise",
+                       lambda w: f"{w:g} µm" + (" (default)" if w == 0.5 else ""), "µg/√Hz", "{:.3f}")
     per_step = df.groupby(STEP)["phase2.rms_error_um"].mean()
     worst = df.loc[df["phase2.max_abs_error_um"].idxmax()]
     default = df[(df[WAVINESS] == 0.5) & (df[IMU_NOISE] == 7.0)]
@@ -68,17 +78,13 @@ def backlash_tables(df) -> tuple[dict, dict]:
         "backlash_largest_default_um": (float(default["phase2.max_abs_error_um"].max()),
                                         f"{default['phase2.max_abs_error_um'].max():.2f} µm"),
     }
-    return figures, {"backlash_recovery": "\n".join(rows) + "\n"}
+    return figures, {"backlash_recovery": table}
 
 
 def detection_tables(df) -> tuple[dict, dict]:
     """(figures, tables) of the detection sweep's results ``df``."""
-    delay = df.groupby([WEAR, TORQUE_NOISE])["phase1.pca_t2.delay_hours"].mean().unstack()
-    noises = list(delay.columns)
-    rows = ["| wear rate \\ torque noise | " + " | ".join(f"{n:g} N·m" for n in noises) + " |",
-            "|---|" + "---|" * len(noises)]
-    for w, r in delay.iterrows():
-        rows.append(f"| {w:g} µm/kh | " + " | ".join("-" if r[n] != r[n] else f"{r[n]:.0f}" for n in noises) + " |")
+    table = grid_table(df, WEAR, TORQUE_NOISE, "phase1.pca_t2.delay_hours", "wear rate \\ torque noise",
+                       lambda w: f"{w:g} µm/kh", "N·m", "{:.0f}")
     methods = ["| method | detected after the onset | mean delay (h) | campaigns with a false alarm |",
                "|---|---|---|---|"]
     for m, name in NAMES.items():
@@ -89,7 +95,7 @@ def detection_tables(df) -> tuple[dict, dict]:
         methods.append(f"| {name} | {int(det.sum())} / {len(df)} | {df[f'phase1.{m}.delay_hours'][det].mean():.0f} "
                        f"| {int(fa)} / {len(df)} |")
     figures = {"detection_campaigns": (len(df), f"{len(df)}")}
-    return figures, {"detection_delay": "\n".join(rows) + "\n", "detection_methods": "\n".join(methods) + "\n"}
+    return figures, {"detection_delay": table, "detection_methods": "\n".join(methods) + "\n"}
 
 
 def main() -> None:
