@@ -1,6 +1,10 @@
+import fcntl
 import functools
+import hashlib
 import importlib.util
+import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,12 +21,39 @@ TWIN = [sys.executable, "-m", "twin.cli"]
 SMALL = ["--set", "phase1.capture_s=2.0", "--set", "phase1.sample_interval_hours=250",
          "--set", "phase2.runs_per_session=2", "--set", "phase2.dwell_s=0.5",
          "--set", "phase2.speeds_mm_s=[100.0, 500.0]", "--set", "phase2.session_hours=[50.0, 550.0]"]
+# The reference data set, reduced: 5 samples per condition of 2 captures of 4 s (Fisher selection).
+REFERENCE_SMALL = ["--set", "phase1.captures_per_sample=2", "--set", "phase1.capture_s=4.0",
+                   "--set", "phase1.sample_interval_hours=20"]
+# Tiny Phase I campaigns: one 3-s capture per sample; the reference set at one sample per 40 h.
+TINY_PHASE1 = ["--set", "phase1.captures_per_sample=1", "--set", "phase1.capture_s=3.0"]
+REFERENCE_TINY = [*TINY_PHASE1, "--set", "phase1.sample_interval_hours=40"]
 
 
 def run_twin(*args, check=True, env=None, **kw):
     env = dict(os.environ, PYTHONPATH=str(REPO)) if env is None else env
     return subprocess.run([*TWIN, *map(str, args)], cwd=REPO, env=env, capture_output=True,
                           text=True, check=check, **kw)
+
+
+def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
+    """``twin simulate SCENARIO -o OUT ARGS...`` for a campaign several test files simulate alike:
+    simulated once per test run (the first test process to ask holds a file lock while the
+    others wait) into a store shared by the run's test processes, then copied to ``out``, so each
+    caller may write into its copy. The twin is deterministic (same scenario, same arguments,
+    same bytes: tests/test_campaign.py), so the copy is what its own simulation would give."""
+    base = tmp_path_factory.getbasetemp()
+    store = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "shared-campaigns"
+    store.mkdir(exist_ok=True)
+    key = hashlib.sha256(json.dumps([str(scenario), [str(a) for a in args]]).encode()).hexdigest()[:16]
+    master = store / key
+    with open(store / f"{key}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (store / f"{key}.done").exists():
+            shutil.rmtree(master, ignore_errors=True)
+            run_twin("simulate", scenario, "-o", master, *args)
+            (store / f"{key}.done").touch()
+    shutil.copytree(master, out)
+    return Path(out)
 
 
 DIAGNOSE_BENCH = REPO / "scenarios" / "diagnose-bench.toml"

@@ -18,14 +18,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from tests.conftest import REPO, run_twin
+from tests.conftest import REFERENCE_TINY, REPO, TINY_PHASE1, run_twin, simulate_shared
 from tests.fuzz_files import MUTATIONS, mutate
 from twin.cli import app
 
 # A tiny campaign with both phases: 1 capture of 3 s per sample (18 healthy, onset at 172 h) and
 # two Phase II sessions of 2 runs; its reference data set as in tests/test_phase1_cli.py.
-TINY = ["--set", "phase1.captures_per_sample=1", "--set", "phase1.capture_s=3.0"]
-BOTH = [*TINY, "--set", "campaign.phase2=true", "--set", "phase2.session_hours=[50.0, 200.0]",
+BOTH = [*TINY_PHASE1, "--set", "campaign.phase2=true", "--set", "phase2.session_hours=[50.0, 200.0]",
         "--set", "phase2.runs_per_session=2", "--set", "phase2.speeds_mm_s=[100.0, 500.0]",
         "--set", "phase2.dwell_s=0.5"]
 
@@ -34,8 +33,7 @@ BOTH = [*TINY, "--set", "campaign.phase2=true", "--set", "phase2.session_hours=[
 def sources(tmp_path_factory):
     root = tmp_path_factory.mktemp("fuzz")
     ref, camp = root / "ref", root / "camp"
-    run_twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", ref, *TINY,
-             "--set", "phase1.sample_interval_hours=40")
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", ref, *REFERENCE_TINY)
     run_twin("simulate", REPO / "scenarios/phase1-quick.toml", "-o", camp, *BOTH)
     return root, ref, camp / "measurements.h5"
 

@@ -23,10 +23,8 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.conftest import REPO, TWIN, run_twin
+from tests.conftest import REFERENCE_SMALL, REPO, TWIN, run_twin, simulate_shared
 
-REFERENCE_SMALL = ["--set", "phase1.captures_per_sample=2", "--set", "phase1.capture_s=4.0",
-                   "--set", "phase1.sample_interval_hours=20"]
 DEMO_LAB = ["--set", "campaign.total_hours=250", "--set", "phase2.session_hours=[100.0, 150.0, 250.0]",
             "--set", "phase2.runs_per_session=3", "--set", "sensors.imu_acc_fs_hz=1000.0",
             "--set", "sensors.imu_gyro_fs_hz=1000.0", "--set", "sensors.position_cmd_fs_hz=1000.0"]
@@ -89,7 +87,7 @@ def lab(tmp_path_factory):
 
     root = tmp_path_factory.mktemp("watch")
     ref, batch = root / "ref", root / "batch"
-    run_twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", ref, *REFERENCE_SMALL)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", ref, *REFERENCE_SMALL)
     run_twin("simulate", REPO / "scenarios/demo.toml", "-o", batch, *DEMO_LAB)
     spec = export(batch, root / "lab")
     run_twin("import", spec, "-o", root / "imported")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import REPO, SMALL, run_twin
+from tests.conftest import REFERENCE_TINY, REPO, SMALL, TINY_PHASE1, simulate_shared
 
 OPTIONAL = ("mujoco", "rerun", "dask", "distributed")
 BLOCKED = ("import sys\n"
@@ -94,7 +94,7 @@ def _venv_bin(venv: Path, name: str) -> Path:
 
 
 @pytest.mark.slow
-def test_wheel_installs_without_extras_then_with_sim(tmp_path, small_campaign):
+def test_wheel_installs_without_extras_then_with_sim(tmp_path, tmp_path_factory, small_campaign):
     """Build the wheel, install it without extras into a fresh virtualenv outside the checkout,
     run the analysis there, then add [sim] and simulate a shipped scenario by name."""
     src = tmp_path / "src"
@@ -124,10 +124,8 @@ def test_wheel_installs_without_extras_then_with_sim(tmp_path, small_campaign):
     assert r.returncode == 2
     assert one_line(r.stderr) == missing("simulate", "sim", "MuJoCo (the simulator)", "mujoco")
     # Phase I on a tiny campaign and its reference set, simulated by the checkout's environment.
-    tiny = ["--set", "phase1.captures_per_sample=1", "--set", "phase1.capture_s=3.0"]
-    run_twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", tmp_path / "ref", *tiny,
-             "--set", "phase1.sample_interval_hours=40")
-    run_twin("simulate", REPO / "scenarios/phase1-quick.toml", "-o", tmp_path / "camp", *tiny)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", tmp_path / "ref", *REFERENCE_TINY)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/phase1-quick.toml", tmp_path / "camp", *TINY_PHASE1)
     r = run("detect", tmp_path / "camp", "--reference", tmp_path / "ref", "-o", work / "p1",
             "--method", "pca_t2")
     assert r.returncode == 0, r.stderr[-2000:]

@@ -20,12 +20,8 @@ import numpy as np
 import pytest
 
 from analysis.base.files import write_json
-from tests.conftest import REPO, TWIN, run_twin
+from tests.conftest import DEMO_SMALL, REFERENCE_SMALL, REPO, TWIN, run_twin, simulate_shared
 
-REFERENCE_SMALL = ["--set", "phase1.captures_per_sample=2", "--set", "phase1.capture_s=4.0",
-                   "--set", "phase1.sample_interval_hours=20"]
-DEMO_SMALL = ["--set", "campaign.total_hours=250", "--set", "phase2.session_hours=[100.0, 150.0, 250.0]",
-              "--set", "phase2.runs_per_session=3"]
 ENV = dict(os.environ, PYTHONPATH=str(REPO), TWIN_WORKERS="1")
 
 
@@ -47,8 +43,8 @@ def _comparable(events):
 def replay(tmp_path_factory):
     root = tmp_path_factory.mktemp("monitor")
     ref, batch, live = root / "ref", root / "batch", root / "live"
-    run_twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", ref, *REFERENCE_SMALL)
-    run_twin("simulate", REPO / "scenarios/demo.toml", "-o", batch, *DEMO_SMALL)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", ref, *REFERENCE_SMALL)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/demo.toml", batch, *DEMO_SMALL)
     model = root / "phase1.model"
     run_twin("detect", batch, "--reference", ref, "-o", root / "detect", "--save-model", model)
     run_twin("backlash", batch, "-o", root / "backlash", "--no-plots")

@@ -9,19 +9,15 @@ import numpy as np
 import pytest
 
 from analysis.base import registry
-from tests.conftest import REPO, run_twin
-
-# Tiny campaigns: one 3-s capture per sample.
-TINY = ["--set", "phase1.captures_per_sample=1", "--set", "phase1.capture_s=3.0"]
+from tests.conftest import REFERENCE_TINY, REPO, TINY_PHASE1, run_twin, simulate_shared
 
 
 @pytest.fixture(scope="module")
 def dirs(tmp_path_factory):
     root = tmp_path_factory.mktemp("phase1cli")
     ref, camp = root / "ref", root / "camp"
-    run_twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", ref, *TINY,
-             "--set", "phase1.sample_interval_hours=40")
-    run_twin("simulate", REPO / "scenarios/phase1-quick.toml", "-o", camp, *TINY)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", ref, *REFERENCE_TINY)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/phase1-quick.toml", camp, *TINY_PHASE1)
     return root, ref, camp
 
 

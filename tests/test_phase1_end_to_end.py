@@ -18,10 +18,8 @@ import pytest
 from analysis.base import registry
 from analysis.dataset import open_truth
 from analysis.phase1 import detect, pipeline
-from tests.conftest import REPO, run_twin
+from tests.conftest import REFERENCE_SMALL, REPO, run_twin, simulate_shared
 
-REFERENCE_SMALL = ["--set", "phase1.captures_per_sample=2", "--set", "phase1.capture_s=4.0",
-                   "--set", "phase1.sample_interval_hours=20"]
 NO_WEAR = ["--set", "degradation.wear_rate_um_per_kh=0", "--set", "campaign.total_hours=420"]
 #: How the candidate top features respond to preload loss on the twin (README, check 3):
 #: -1 the feature falls as the preload falls, +1 it rises.
@@ -33,7 +31,7 @@ DIRECTIONS = {"corr_tr_torque_rev": -1, "corr_tr_torque_fwd": -1, "kurt_tr_torqu
 def campaigns(tmp_path_factory):
     root = tmp_path_factory.mktemp("phase1")
     ref, fault, healthy = root / "reference", root / "fault", root / "healthy"
-    run_twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", ref, *REFERENCE_SMALL)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", ref, *REFERENCE_SMALL)
     run_twin("simulate", REPO / "scenarios/phase1-quick.toml", "-o", fault)
     run_twin("simulate", REPO / "scenarios/phase1-quick.toml", "-o", healthy, *NO_WEAR)
     return {"reference": ref, "fault": fault, "healthy": healthy, "root": root}

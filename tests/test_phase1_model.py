@@ -12,21 +12,15 @@ import numpy as np
 import pytest
 
 from analysis.phase1.model_file import FORMAT_VERSION, Phase1Model
-from tests.conftest import REPO, run_twin
-
-REFERENCE_SMALL = ["--set", "phase1.captures_per_sample=2", "--set", "phase1.capture_s=4.0",
-                   "--set", "phase1.sample_interval_hours=20"]
-#: The demo campaign, reduced: 25 Phase I samples (onset 172 h), three Phase II sessions of 3 runs.
-DEMO_SMALL = ["--set", "campaign.total_hours=250", "--set", "phase2.session_hours=[100.0, 150.0, 250.0]",
-              "--set", "phase2.runs_per_session=3"]
+from tests.conftest import DEMO_SMALL, REFERENCE_SMALL, REPO, run_twin, simulate_shared
 
 
 @pytest.fixture(scope="module")
 def fitted(tmp_path_factory):
     root = tmp_path_factory.mktemp("model")
     ref, demo = root / "ref", root / "demo"
-    run_twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", ref, *REFERENCE_SMALL)
-    run_twin("simulate", REPO / "scenarios/demo.toml", "-o", demo, *DEMO_SMALL)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", ref, *REFERENCE_SMALL)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/demo.toml", demo, *DEMO_SMALL)
     model = root / "phase1.model"
     run_twin("detect", demo, "--reference", ref, "-o", root / "fit", "--save-model", model)
     return root, demo, model

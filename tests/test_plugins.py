@@ -20,7 +20,7 @@ import textwrap
 
 import pandas as pd
 import pytest
-from conftest import REPO, TWIN
+from conftest import REFERENCE_TINY, REPO, TWIN, simulate_shared
 
 from analysis.base import registry
 
@@ -114,8 +114,7 @@ def campaign(tmp_path_factory):
     root = tmp_path_factory.mktemp("plugins")
     sets = [a for kv in POINT for a in ("--set", kv)]
     twin("simulate", REPO / "scenarios/demo.toml", "-o", root / "camp", *sets)
-    twin("simulate", REPO / "scenarios/paper-reference.toml", "-o", root / "ref",
-         *[a for kv in REFERENCE for a in ("--set", kv)])
+    simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", root / "ref", *REFERENCE_TINY)
     return root
 
 
