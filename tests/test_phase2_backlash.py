@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import REPO, run_twin, signed
+from conftest import REPO, run_twin, signed, simulate_shared
 
 from analysis.phase2.backlash import NON_POSITIONING, BacklashEstimator, weighted_sum
 from analysis.phase2.shifts import correlate_traces, shift_between
@@ -24,12 +24,13 @@ _JSON: dict = {}
 
 
 def steps_campaign(tmp_path_factory, *overrides: str):
-    """backlash-steps simulated with ``--set`` overrides, once per test session (shared with
-    test_phase2_cli.py)."""
+    """backlash-steps simulated with ``--set`` overrides: once per test run (shared with
+    test_phase2_cli.py and test_trend_keeps_up.py, :func:`conftest.simulate_shared`), one copy per
+    test process."""
     key = tuple(overrides)
     if key not in _CAMPAIGNS:
-        out = tmp_path_factory.mktemp("steps")
-        run_twin("simulate", STEPS, "-o", out, *[a for o in overrides for a in ("--set", o)])
+        out = tmp_path_factory.mktemp("steps") / "campaign"
+        simulate_shared(tmp_path_factory, STEPS, out, *[a for o in overrides for a in ("--set", o)])
         _CAMPAIGNS[key] = out
     return _CAMPAIGNS[key]
 
