@@ -46,9 +46,11 @@ bench-check: $(STAMP)
 # record the figures they measure (TWIN_RECORD=1, their `quote` fixture). CI runs this after
 # `make test`.
 VALIDATE := benchmarks/bench_diagnose.py benchmarks/bench_demo.py benchmarks/table3_phase1.py \
-            benchmarks/sweep_tables.py
+            benchmarks/sweep_tables.py benchmarks/fig13_paper.py benchmarks/bench_phase1.py \
+            benchmarks/bench_phase2_backlash.py
 validate: $(STAMP)
 	for b in $(VALIDATE); do $(PY) $$b --record || exit 1; done
+	TWIN_WORKERS=1 $(PY) benchmarks/bench_monitor.py --record
 	TWIN_RECORD=1 TWIN_DIAGNOSE_BENCH_CACHE=runs/validate/diagnose-benchmark/cache \
 	  $(PY) -m pytest -q -m "(validate or quoted) and not slow" --durations=10
 	$(PY) benchmarks/record.py

@@ -6,7 +6,9 @@ command and its children (``resource.getrusage(RUSAGE_CHILDREN)``, the largest s
 
 With ``--record`` (what ``make validate`` runs) the figures the README quotes are stored in
 docs/validation.json (:mod:`record`): the demo's PCA-T² detection hour and the injected onset,
-the largest backlash error against the injected change and against the lost motion, the wall time.
+the largest backlash error against the injected change and against the lost motion, the wall time;
+then ``twin view`` on the demo's output: the recording's size, the time to write it (the
+command's own figure) and the whole command's wall time, start-up included.
 
 Usage: .venv/bin/python benchmarks/bench_demo.py [--record]
 """
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import subprocess
 import sys
@@ -58,6 +61,15 @@ def main() -> None:
         tables = demo_tables(sc)
         print(tables["phase1"], tables["phase2"], sep="\n\n")
         prog = sc["phase2"].get("prognosis") or {}
+        t0 = time.perf_counter()
+        view = subprocess.run([sys.executable, "-m", "twin.cli", "view", str(out)], cwd=REPO, env=env,
+                              capture_output=True, text=True)
+        view_wall = time.perf_counter() - t0
+        said = " ".join(view.stdout.split())
+        m = re.search(r"wrote \S+ \(([0-9.]+) MB\) in ([0-9.]+) s", said)
+        if view.returncode != 0 or not m:
+            sys.exit(f"twin view failed ({view.returncode}):\n{view.stdout[-2000:]}{view.stderr[-3000:]}")
+        print(f"twin view on the demo: {m[1]} MB written in {m[2]} s; the command {view_wall:.1f} s wall")
         if "--record" in sys.argv[1:]:
             record("bench_demo", command=".venv/bin/python benchmarks/bench_demo.py --record",
                    scale="twin demo (scenarios/demo.toml), all local cores", figures={
@@ -70,6 +82,9 @@ def main() -> None:
                        "peak_rss_gb": (round(peak_mb / 1024, 2), f"{peak_mb / 1024:.2f}"),
                        "output_mb": (round(size_mb), f"{size_mb:.0f}"),
                        "processes": (procs, f"{procs}"),
+                       "view_mb": (float(m[1]), m[1]),
+                       "view_write_s": (float(m[2]), m[2]),
+                       "view_wall_s": (round(view_wall, 1), f"{view_wall:.1f}"),
                        "predicted_crossing_h": (prog.get("predicted_crossing_hours"),
                                                 _num(prog.get("predicted_crossing_hours"), "{:.0f}")),
                        "true_crossing_h": (prog.get("true_crossing_hours"),

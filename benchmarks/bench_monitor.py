@@ -12,7 +12,10 @@
    campaign's captures under new sequence numbers, so the disk holds them once), the resident
    memory of the process printed every ``N/10`` captures.
 
-Run: TWIN_WORKERS=1 .venv/bin/python benchmarks/bench_monitor.py [--out DIR] [--soak N]
+``--record`` (``make validate``) stores the figures docs/monitoring.md and docs/validation.md quote
+in docs/validation.json.
+
+Run: TWIN_WORKERS=1 .venv/bin/python benchmarks/bench_monitor.py [--out DIR] [--soak N] [--record]
 """
 
 from __future__ import annotations
@@ -69,6 +72,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--soak", type=int, default=10_000)
+    ap.add_argument("--record", action="store_true", help="store the figures in docs/validation.json")
     a = ap.parse_args()
     out = a.out or Path(tempfile.mkdtemp(prefix="bench-monitor-"))
     ref, camp, model = out / "ref", out / "campaign", out / "phase1.model"
@@ -128,6 +132,7 @@ def main() -> None:
     n_cap = units[0]["captures_in_sample"]
     step = max(1, a.soak // 10)
     t0 = time.perf_counter()
+    rows = []
     print(f"soak: {a.soak} captures; resident memory (MB) every {step}:")
     for i in range(a.soak):
         u = units[i % len(units)]
@@ -137,8 +142,27 @@ def main() -> None:
         mon.step()
         if (i + 1) % step == 0:
             el = time.perf_counter() - t0
-            print(f"  {i + 1:6d} captures  {rss_mb():7.1f} MB  {el:7.0f} s  ({el / (i + 1):.3f} s per capture)")
-    print(f"events: {mon.state.n_events}, log {(out / 'soak-state/events.jsonl').stat().st_size / 1e6:.1f} MB")
+            rows.append((i + 1, rss_mb(), el))
+            print(f"  {i + 1:6d} captures  {rows[-1][1]:7.1f} MB  {el:7.0f} s  ({el / (i + 1):.3f} s per capture)")
+    log_mb = (out / "soak-state/events.jsonl").stat().st_size / 1e6
+    print(f"events: {mon.state.n_events}, log {log_mb:.1f} MB")
+    if a.record:
+        sys.path.insert(0, str(REPO / "benchmarks"))
+        from record import record
+
+        (n1, rss1, el1), (n, rss, el) = rows[0], rows[-1]
+        figures = {"capture_median_s": statistics.median(per_capture), "capture_p95_s": pct(per_capture, 0.95),
+                   "capture_max_s": max(per_capture), "sample_median_s": statistics.median(per_sample),
+                   "sample_p95_s": pct(per_sample, 0.95), "sample_max_s": max(per_sample),
+                   "per_capture_first_s": el1 / n1, "per_capture_all_s": el / n}
+        record("bench_monitor", command="TWIN_WORKERS=1 .venv/bin/python benchmarks/bench_monitor.py --record",
+               scale=f"{len(units)} captures of 10 s at 10 kHz ({len(per_sample)} samples), soak of {n} captures",
+               figures={**{k: (round(v, 3), f"{v:.3f}") for k, v in figures.items()},
+                        "soak_captures": (n, f"{n:,}".replace(",", " ")),
+                        "soak_first_captures": (n1, f"{n1:,}".replace(",", " ")),
+                        "rss_first_mb": (round(rss1, 1), f"{rss1:.1f}"), "rss_last_mb": (round(rss, 1), f"{rss:.1f}"),
+                        "soak_s": (round(el), f"{el:.0f}"), "events": (mon.state.n_events, f"{mon.state.n_events}"),
+                        "log_mb": (round(log_mb, 1), f"{log_mb:.1f}")})
 
 
 if __name__ == "__main__":

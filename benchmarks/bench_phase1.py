@@ -7,7 +7,8 @@
   samples of 2 x 4 s) with a reduced reference set (15 samples of 2 x 4 s), as a subprocess.
 
 Simulation (not timed) goes to a temporary directory. Run: make bench (or
-.venv/bin/python benchmarks/bench_phase1.py).
+.venv/bin/python benchmarks/bench_phase1.py); ``--record`` stores the figures docs/validation.md
+quotes in docs/validation.json (``make validate``).
 """
 
 from __future__ import annotations
@@ -25,6 +26,9 @@ sys.path.insert(0, str(REPO))
 from threadpoolctl import threadpool_limits
 
 from analysis.phase1.pipeline import extract
+
+sys.path.insert(0, str(REPO / "benchmarks"))
+from record import record  # noqa: E402
 
 TWIN = [sys.executable, "-m", "twin.cli"]
 ENV = dict(os.environ, PYTHONPATH=str(REPO))
@@ -62,6 +66,13 @@ def main() -> None:
         wall = twin("detect", camp, "--reference", ref, "-o", tmp / "out")
         print(f"twin detect on the quick Phase I campaign (24 samples, 6 methods, reference of 15 "
               f"samples): {wall:.1f} s wall")
+        if "--record" in sys.argv[1:]:
+            record("bench_phase1", command=".venv/bin/python benchmarks/bench_phase1.py --record",
+                   scale="scenarios/phase1-quick.toml (4-s captures), the same with 10-s captures up to 60 h, "
+                         "paper-reference reduced to 15 samples of 2 × 4 s", figures={
+                       "extract_4s_per_s": (round(r4, 1), f"{r4:.0f}"),
+                       "extract_10s_per_s": (round(r10, 1), f"{r10:.0f}"),
+                       "detect_wall_s": (round(wall, 1), f"{wall:.1f}")})
 
 
 if __name__ == "__main__":

@@ -8,7 +8,10 @@ against the reference, 12 autocorrelations for the pitch, Eqs. 4–9). Also the 
 (``--set phase2.speeds_mm_s=[20.0]``), whose traces are 5x longer in time but the same length in
 position.
 
-Usage: .venv/bin/python benchmarks/bench_phase2_backlash.py [CAMPAIGN_DIR]
+``--record`` (``make validate``) stores the figures docs/validation.md quotes in
+docs/validation.json.
+
+Usage: .venv/bin/python benchmarks/bench_phase2_backlash.py [CAMPAIGN_DIR] [--record]
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ from analysis.dataset import open_measurements
 from analysis.phase2.backlash import BacklashEstimator
 from analysis.phase2.error_motions import session_error_motions
 
+sys.path.insert(0, str(REPO / "benchmarks"))
+from record import record  # noqa: E402
+
 
 def campaign(tmp: Path) -> Path:
     out = tmp / "steps"
@@ -44,7 +50,8 @@ def campaign(tmp: Path) -> Path:
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
-        d = Path(sys.argv[1]) if len(sys.argv) > 1 else campaign(Path(tmp))
+        given = [a for a in sys.argv[1:] if not a.startswith("--")]
+        d = Path(given[0]) if given else campaign(Path(tmp))
         with open_measurements(d / "measurements.h5") as m:
             names = m.phase2_sessions()
             t_em, ems = [], []
@@ -69,6 +76,15 @@ def main() -> None:
               f"max {np.max(t_em):.2f}), {np.mean(t_em) / runs:.3f} s per run")
         print(f"  backlash estimate per session: {np.mean(t_est):.2f} s (min {np.min(t_est):.2f}, "
               f"max {np.max(t_est):.2f}); fit on the reference {t_fit:.2f} s")
+        if "--record" in sys.argv[1:] and not given:
+            record("bench_phase2_backlash", command=".venv/bin/python benchmarks/bench_phase2_backlash.py --record",
+                   scale=f"scenarios/backlash-steps.toml: {len(names)} sessions of {runs} runs at 100 mm/s, one core",
+                   figures={
+                       "estimate_s": (round(float(np.mean(t_est)), 2),
+                                      f"{np.min(t_est):.2f}–{np.max(t_est):.2f}"),
+                       "fit_s": (round(t_fit, 2), f"{t_fit:.2f}"),
+                       "error_motions_s": (round(float(np.mean(t_em)), 2), f"{np.mean(t_em):.2f}"),
+                       "slow_grid_samples": (n, f"{n:,}")})
 
 
 if __name__ == "__main__":

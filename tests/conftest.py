@@ -10,11 +10,15 @@ import sys
 from pathlib import Path
 
 import pytest
+from threadpoolctl import threadpool_limits
 
 # Each test process has a core of its own (pytest-xdist, one per core): a command under test
 # runs its work in its own process (analysis.base.executors.default_processes) unless the test asks for
 # --workers; the parallel paths are tested with explicit --workers / --scheduler.
 os.environ.setdefault("TWIN_WORKERS", "1")
+# ... and one BLAS thread in the test process itself, as in the commands (twin.cli.main) and their
+# workers: the other core is the other test process's, and OpenBLAS's idle threads spin.
+threadpool_limits(1)
 REPO = Path(__file__).resolve().parents[1]
 TWIN = [sys.executable, "-m", "twin.cli"]
 # A small but complete campaign: every kind of unit, a few seconds of simulation.

@@ -818,7 +818,8 @@ def phase1_runs():
     return sim, runs
 
 
-def test_phase1_spectral_lines(phase1_runs):
+@pytest.mark.quoted
+def test_phase1_spectral_lines(phase1_runs, quote):
     """Check 6: at 400 mm/s the torque and both nut accelerometers' x axes show the lead-error
     lines at 40, 80, 120 Hz and the ball-pass line (~362 Hz) at least 10× above the median PSD
     5-15 Hz around them, at 100, 50 and 10 % preload (mean periodogram of the constant-speed
@@ -827,19 +828,25 @@ def test_phase1_spectral_lines(phase1_runs):
     omega = SCEN.phase1.speed_mm_s * 1e-3 / R
     f_bp = float(geo.ball_pass_frequency_hz(SCEN.phase1.speed_mm_s * 1e-3, WORLD.screw))
     lines = _LINES + (f_bp,)
+    every = []
     for frac, sig in runs.items():
         for name, x in (("torque", sig["torque"]), ("acc1 x", sig["acc1"][:, 0]),
                         ("acc2 x", sig["acc2"][:, 0])):
             f, p, n = _cruise_psd(x.astype(float), sig["speed"], sig["fs_hz"], omega)
             ratios = [_line_ratio(f, p, f0) for f0 in lines]
+            every += ratios
             print(f"\n[phase1 lines] {frac:.0%} {name}: " + ", ".join(
                 f"{f0:.0f} Hz ×{r:.0f}" for f0, r in zip(lines, ratios, strict=True)) + f" ({n} runs)", end="")
             assert n >= 4
             assert min(ratios) >= 10.0, (name, frac, dict(zip(lines, ratios, strict=True)))
     print()
+    quote("phase1_lines", None, f"40/80/120 Hz and ball-pass ({f_bp:.0f} Hz) lines {min(every):.0f}–"
+          f"{max(every):.0f}× above their neighbourhood (torque and both nut accelerometers' x, at 100, "
+          "50 and 10 % preload)")
 
 
-def test_phase1_trends_with_preload(phase1_runs):
+@pytest.mark.quoted
+def test_phase1_trends_with_preload(phase1_runs, quote):
     """Check 6, trends as the preload falls 100 → 50 → 10 % (observed and asserted):
 
     - the axial resonance falls: (i) the ring-down after the stops, in the dwell parts of the
@@ -884,6 +891,10 @@ def test_phase1_trends_with_preload(phase1_runs):
     assert psd120[0] < psd120[1] < psd120[2]
     assert max(psd40) <= 1.15 * min(psd40)
     assert psd_bp[0] > psd_bp[1] > psd_bp[2]
+    quote("phase1_trends", None, f"from 100 to 10 % preload the axial resonance falls (ring-down {ring[0]:.1f} → "
+          f"{ring[2]:.1f} Hz, linearised mode {modal[0]:.1f} → {modal[2]:.1f} Hz), the 120 Hz acceleration "
+          f"line's power grows by {(psd120[2] / psd120[0] - 1) * 100:.0f} % and the ball-pass line's falls to "
+          f"{psd_bp[2] / psd_bp[0] * 100:.0f} %")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -23,9 +23,15 @@ __all__ = ["GROUPS", "app", "gate_recording", "main"]
 
 
 def main() -> None:
+    from threadpoolctl import threadpool_limits
+
     from analysis.base.executors import ExecutorError, default_processes, keep_freed_memory
 
     keep_freed_memory()
+    # One BLAS and OpenMP thread, as in the worker processes: the commands' parallelism is their
+    # worker processes (--workers); with one worker the work runs here, where OpenBLAS's extra
+    # threads only spin between its many small products (docs/validation.md, "Simulation speed").
+    threadpool_limits(1)
     try:
         default_processes()  # a bad TWIN_WORKERS is refused before any work
     except ExecutorError as exc:
