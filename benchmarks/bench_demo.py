@@ -65,7 +65,7 @@ def main() -> None:
         view = subprocess.run([sys.executable, "-m", "twin.cli", "view", str(out)], cwd=REPO, env=env,
                               capture_output=True, text=True)
         view_wall = time.perf_counter() - t0
-        said = " ".join(view.stdout.split())
+        said = " ".join((view.stdout + view.stderr).split())
         m = re.search(r"wrote \S+ \(([0-9.]+) MB\) in ([0-9.]+) s", said)
         if view.returncode != 0 or not m:
             sys.exit(f"twin view failed ({view.returncode}):\n{view.stdout[-2000:]}{view.stderr[-3000:]}")

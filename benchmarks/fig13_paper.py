@@ -106,6 +106,7 @@ def main() -> None:
     prog, prog_b = doc["prognosis"], doc_b["prognosis"]
     true_cross = raw["prognosis"]["true_crossing_hours"]
     inside = prog_b["band_hours"][0] <= true_cross <= prog_b["band_hours"][1]
+    inside_raw = prog["band_hours"][0] <= true_cross <= prog["band_hours"][1]
     figures = {
         "sessions": (len(raw["sessions"]), f"{len(raw['sessions'])}"),
         "simulate_cpu_min": (round(sim_cpu / 60, 1), f"{sim_cpu / 60:.1f}"),
@@ -114,7 +115,8 @@ def main() -> None:
                       f"shifts {near['estimated_delta_um']:.1f}, smoothed {near['smoothed_um']:.1f} µm"),
         "prognosis": (prog["crossing_hours"], f"the prognosis at {prog['at_hours']:.0f} h puts the 10 µm crossing "
                       f"at {prog['crossing_hours']:.0f} h (95 % band {prog['band_hours'][0]:.0f}–"
-                      f"{prog['band_hours'][1]:.0f} h) against the injected {true_cross:.0f} h"),
+                      f"{prog['band_hours'][1]:.0f} h) against the injected {true_cross:.0f} h, "
+                      f"{'inside' if inside_raw else 'outside'} the band"),
         "baseline": (None, f"the mean error becomes {' / '.join(base_means)} µm in the four periods of the table, "
                      f"{near_b['estimated_delta_um']:.1f} µm (smoothed {near_b['smoothed_um']:.1f}) at "
                      f"{near['hours']:.0f} h, and the crossing {prog_b['crossing_hours']:.0f} h (band "
