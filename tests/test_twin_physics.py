@@ -445,8 +445,9 @@ def test_drag_torque_follows_preload(quote):
 # Check 4: rail waviness through the truck spacing
 
 
+@pytest.mark.quoted
 @pytest.mark.parametrize("wavelength", [0.2, 0.05])
-def test_rail_waviness_through_truck_spacing(wavelength):
+def test_rail_waviness_through_truck_spacing(wavelength, quote):
     """Check 4: one vertical sinusoid (1 µm) on both rails; at 20 mm/s the carriage's z and pitch
     are the geometric values A·cos(πa/λ)·sin(kx) and −(2A/a)·sin(πa/λ)·cos(kx) (gains of
     truck_filter_gains), fitted against the true x over the constant-speed part: amplitude within
@@ -474,6 +475,9 @@ def test_rail_waviness_through_truck_spacing(wavelength):
     assert abs(p_amp - amp * g_a) <= 0.05 * amp * g_a
     assert abs(z_s - amp * math.cos(arg)) <= 0.05 * amp * g_s
     assert abs(p_c + 2.0 * amp / a * math.sin(arg)) <= 0.05 * amp * g_a
+    dz, dp = abs(z_amp / (amp * g_s) - 1), abs(p_amp / (amp * g_a) - 1)
+    quote(f"rail_waviness_{wavelength * 1e3:.0f}mm", max(dz, dp),
+          f"{dz:.0e} and {dp:.0e} of their values (λ = {wavelength * 1e3:.0f} mm)")
 
 
 def _pitch_registration(dt: float, v: float = 0.02, wavelength: float = 0.05):
