@@ -28,6 +28,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 from record import record  # noqa: E402
+from record import text as _num  # noqa: E402
 
 from analysis.base.executors import default_processes  # noqa: E402
 
@@ -90,16 +91,6 @@ def main() -> None:
                        "true_crossing_h": (prog.get("true_crossing_hours"),
                                            _num(prog.get("true_crossing_hours"), "{:.0f}"))},
                    tables=tables)
-
-
-def _num(v, fmt: str = "{:.2f}") -> str:
-    """A figure as the tables print it: − for a minus, – for none."""
-    if v is None:
-        return "–"
-    text = fmt.format(v)
-    if float(text) == 0.0:  # no "−0.0"
-        text = fmt.format(0.0)
-    return text.replace("-", "−")
 
 
 def demo_tables(sc: dict) -> dict[str, str]:

@@ -33,6 +33,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+from record import record  # noqa: E402
+
 TWIN = [sys.executable, "-m", "twin.cli"]
 
 
@@ -147,9 +150,6 @@ def main() -> None:
     log_mb = (out / "soak-state/events.jsonl").stat().st_size / 1e6
     print(f"events: {mon.state.n_events}, log {log_mb:.1f} MB")
     if a.record:
-        sys.path.insert(0, str(REPO / "benchmarks"))
-        from record import record
-
         (n1, rss1, el1), (n, rss, el) = rows[0], rows[-1]
         figures = {"capture_median_s": statistics.median(per_capture), "capture_p95_s": pct(per_capture, 0.95),
                    "capture_max_s": max(per_capture), "sample_median_s": statistics.median(per_sample),

@@ -51,6 +51,8 @@ def campaign(tmp: Path) -> Path:
 def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         given = [a for a in sys.argv[1:] if not a.startswith("--")]
+        if given and "--record" in sys.argv[1:]:
+            sys.exit("--record stores the figures of the shipped backlash-steps campaign: give no CAMPAIGN_DIR")
         d = Path(given[0]) if given else campaign(Path(tmp))
         with open_measurements(d / "measurements.h5") as m:
             names = m.phase2_sessions()
@@ -76,7 +78,7 @@ def main() -> None:
               f"max {np.max(t_em):.2f}), {np.mean(t_em) / runs:.3f} s per run")
         print(f"  backlash estimate per session: {np.mean(t_est):.2f} s (min {np.min(t_est):.2f}, "
               f"max {np.max(t_est):.2f}); fit on the reference {t_fit:.2f} s")
-        if "--record" in sys.argv[1:] and not given:
+        if "--record" in sys.argv[1:]:
             record("bench_phase2_backlash", command=".venv/bin/python benchmarks/bench_phase2_backlash.py --record",
                    scale=f"scenarios/backlash-steps.toml: {len(names)} sessions of {runs} runs at 100 mm/s, one core",
                    figures={

@@ -8,9 +8,8 @@ Scored against ``truth.h5`` (:func:`analysis.scoring.score_phase2`): per period 
 the error of the change by shifts and the change by pitch (mean ± sd), the session nearest
 8000 h, the prognosis's 10 µm crossing against the injected one, the observed pitch; the CPU
 time of each command (its processes and theirs, ``resource.getrusage(RUSAGE_CHILDREN)``).
-Copies the Fig. 13 PNG ``twin backlash`` draws to docs/figures/fig13-paper-rtf.png.
-
-``--record`` (``make validate``) stores the figures and the table in docs/validation.json.
+``--record`` (``make validate``) stores the figures and the table in docs/validation.json and
+copies the Fig. 13 PNG ``twin backlash`` draws to docs/figures/fig13-paper-rtf.png.
 
 Usage: .venv/bin/python benchmarks/fig13_paper.py [--out DIR] [--workers N] [--record]
 """
@@ -33,7 +32,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
-from record import record  # noqa: E402
+from record import record, text  # noqa: E402
 
 from analysis.dataset import open_truth  # noqa: E402
 from analysis.scoring import score_phase2  # noqa: E402
@@ -54,13 +53,9 @@ def twin(*args) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def signed(x: float, digits: int) -> str:
-    return f"{x:+.{digits}f}".replace("-", "−")
-
-
 def mean_sd(values: list[float], digits: int) -> str:
     v = np.asarray([x for x in values if x is not None], dtype=float)
-    return f"{signed(float(v.mean()), digits)} ± {v.std(ddof=1):.{digits}f}"
+    return f"{text(float(v.mean()), f'{{:+.{digits}f}}')} ± {v.std(ddof=1):.{digits}f}"
 
 
 def in_period(hours: float, lo: float, hi: float | None) -> bool:
@@ -85,8 +80,9 @@ def main() -> None:
         doc = json.loads((out / "backlash/backlash.json").read_text())
         doc_b = json.loads((out / "backlash-baseline/backlash.json").read_text())
         pitches = [r["observed_pitch_mm"] for r in doc["sessions"] if r.get("observed_pitch_mm") is not None]
-        (REPO / "docs/figures").mkdir(exist_ok=True)
-        shutil.copyfile(out / "backlash/fig13_backlash.png", REPO / "docs/figures/fig13-paper-rtf.png")
+        if a.record:
+            (REPO / "docs/figures").mkdir(exist_ok=True)
+            shutil.copyfile(out / "backlash/fig13_backlash.png", REPO / "docs/figures/fig13-paper-rtf.png")
 
     rows = ["| hours | sessions | injected Δbacklash (µm) | by shifts − injected (µm), mean ± sd | "
             "by pitch (µm), mean ± sd |", "|---|---|---|---|---|"]
@@ -99,7 +95,7 @@ def main() -> None:
         rows.append(f"| {lo:.0f}–{end} | {len(ses)} | {span} | {mean_sd([r['error_um'] for r in ses], 2)} | "
                     f"{mean_sd([r['pitch_estimated_delta_um'] for r in ses], 1)} |")
         b = [r["error_um"] for r in base["sessions"] if in_period(r["hours"], lo, hi)]
-        base_means.append(signed(float(np.mean(b)), 2))
+        base_means.append(text(float(np.mean(b)), "{:+.2f}"))
     table = "\n".join(rows) + "\n"
     near = min(raw["sessions"], key=lambda r: abs(r["hours"] - 8000.0))
     near_b = next(r for r in base["sessions"] if r["session"] == near["session"])

@@ -47,6 +47,17 @@ def machine() -> str:
     return f"{model}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
+def text(v: float | None, fmt: str = "{:.2f}") -> str:
+    """A figure as the docs write it: ``fmt`` (e.g. ``"{:+.2f}"`` for a sign), a real minus
+    sign (−), never −0.00, and – for a figure that does not exist (None)."""
+    if v is None:
+        return "–"
+    out = fmt.format(v)
+    if float(out) == 0.0:
+        out = fmt.format(0.0)
+    return out.replace("-", "−")
+
+
 def load(path: Path = VALIDATION_JSON) -> dict:
     return json.loads(path.read_text()) if path.is_file() else {}
 

@@ -84,9 +84,9 @@ def record_module():
 
 
 def signed(x: float, digits: int = 2) -> str:
-    """A figure as the docs write it: ``digits`` decimals, a real minus sign, never −0.00."""
-    text = f"{x:.{digits}f}".replace("-", "−")
-    return text[1:] if text.startswith("−") and not text.strip("−0.") else text
+    """A figure as the docs write it: ``digits`` decimals, a real minus sign, never −0.00
+    (benchmarks/record.py's ``text``, the benchmarks' formatter)."""
+    return record_module().text(x, f"{{:.{digits}f}}")
 
 
 class Quote:
