@@ -47,7 +47,8 @@ bench-check: $(STAMP)
 # `make test`.
 VALIDATE := benchmarks/bench_diagnose.py benchmarks/bench_demo.py benchmarks/table3_phase1.py \
             benchmarks/sweep_tables.py benchmarks/fig13_paper.py benchmarks/bench_phase1.py \
-            benchmarks/bench_phase2_backlash.py
+            benchmarks/bench_phase2_backlash.py benchmarks/bench_rail_passes.py \
+            benchmarks/bench_phase2_error_motions.py
 validate: $(STAMP)
 	for b in $(VALIDATE); do $(PY) $$b --record || exit 1; done
 	TWIN_WORKERS=1 $(PY) benchmarks/bench_monitor.py --record

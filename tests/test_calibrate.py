@@ -489,3 +489,78 @@ def test_the_twin_seeds_draw_the_calibrated_values_from_their_joint_distribution
     assert rec["keys"] == ["axis.carriage_mass_kg", "sensors.torque_noise_Nm"]
     assert rec["log"][0][0] == pytest.approx(0.01) and rec["log"][0][1] == 0.0
     assert math.sqrt(rec["log"][1][1]) == pytest.approx(math.log(0.0042 / 0.0038) / (2 * 1.6448536269514722))
+
+
+def test_a_fitted_parameter_that_moves_with_a_kept_one_is_kept_too(tmp_path_factory, tmp_path, monkeypatch):
+    """Layer (c) on a linear stand-in for the twin (each statistic the log of its parameter, plus
+    a seed's scatter of 0.01), where the vertical trucks barely move their statistic (kept at
+    the default: not informed) and the velocity loop's statistic moves 30 times more with the
+    vertical trucks than with the loop: the loop's own interval is narrow, but the trucks' prior
+    span puts it at a factor of thousands, so the loop is not told apart and is kept at its
+    default; the others are fitted to within 5 % of the truth, inside their intervals, and the calibrated values'
+    joint distribution, which `twin diagnose` draws its twin seeds from, has no 90 % range
+    wider than the widest prior span (the loop drawn a factor 2.5e6 either side made the
+    twin run away)."""
+    from conftest import REFERENCE_TINY, simulate_shared
+
+    import twin.harness.calibration.physical as physical
+    from twin.harness.calibration.values import FITTED, MAX_SPAN, PRIOR_FACTOR, Z90
+    from twin.sim.config import get_dotted
+    from twin.sim.scenario import from_dict, load
+
+    rec = simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", tmp_path / "rec", *REFERENCE_TINY)
+    base = load(REPO / "scenarios/paper-reference.toml")
+    keys = [k for k, _, _ in FITTED]
+    p0 = np.log([float(get_dotted(base.model_dump(mode="json"), k)) for k in keys])
+    a = np.eye(len(keys))
+    vert, loop = keys.index("axis.truck_stiffness_vertical_N_per_um"), keys.index("axis.velocity_bandwidth_hz")
+    a[vert, vert] = 0.002
+    a[loop, vert] = 30.0
+    truth = p0 + 0.2 * np.sin(np.arange(len(keys)) + 1.0)  # within 22 % of the defaults
+    truth[[vert, loop]] = p0[[vert, loop]]
+
+    def statistics(logp: np.ndarray, seed: int | None) -> np.ndarray:
+        scatter = 0.0 if seed is None else np.random.default_rng(seed).normal(0.0, 0.01, len(keys))
+        return a @ (logp - p0) + scatter
+
+    def evaluate(payloads, cache_dir):
+        out = []
+        for p in payloads:
+            data = json.loads(p)
+            logp = np.log([float(get_dotted(data, k)) for k in keys])
+            out.append([statistics(logp, int(data["seed"])).tolist(), [0.005] * len(keys), {}])
+        return out
+
+    monkeypatch.setattr(physical, "evaluate", evaluate)
+    monkeypatch.setattr(physical, "_statistics", lambda *args: (statistics(truth, 12345), np.full(len(keys), 0.01)))
+    fit = physical.fit_physical(from_dict(base.model_dump(mode="json")), rec, tmp_path / "cache", None, 1,
+                                progress=lambda text: None)
+    fitted = {v.key: v for v in fit.values}
+    assert "axis.velocity_bandwidth_hz" not in fitted and "axis.truck_stiffness_vertical_N_per_um" not in fitted
+    assert "not told apart from truck_stiffness_vertical_N_per_um" in fit.skipped["axis.velocity_bandwidth_hz"]
+    assert set(fitted) == set(keys) - {keys[vert], keys[loop]}
+    for k, v in fitted.items():
+        assert math.log(v.value) == pytest.approx(truth[keys.index(k)], abs=0.05), k
+        assert v.low < math.exp(truth[keys.index(k)]) < v.high and v.high / v.value <= MAX_SPAN, k
+    widest = max(PRIOR_FACTOR.values())
+    cov = fit.covariance
+    assert set(cov["keys"]) == set(keys)
+    assert np.all(Z90 * np.sqrt(np.diag(cov["log"])) <= math.log(widest) + 1e-9)
+
+
+def test_diagnose_refuses_a_calibration_that_would_draw_the_twin_far_from_the_machine(tmp_path):
+    """A scenario whose [calibration] covariance gives the velocity loop a log variance of 60
+    (a 90 % range of a factor 3.6e5 either side, as a calibration before the kept parameters'
+    span counted could write) is refused before the recording is read, naming the file, the
+    key, the factor and the limit: drawn that far, the twin's servo runs away."""
+    text = (REPO / "scenarios" / "foreign-16mm.toml").read_text()
+    text += ('\n[calibration]\nversion = 11\ncovariance = { keys = ["axis.velocity_bandwidth_hz", '
+             '"axis.carriage_mass_kg"], log = [[60.5, 0.0], [0.0, 0.01]] }\n')
+    (tmp_path / "axis.toml").write_text(text)
+    r = run_twin("diagnose", tmp_path, "--scenario", tmp_path / "axis.toml", "-o", tmp_path / "out", check=False)
+    said = " ".join(r.stderr.split())
+    assert r.returncode == 2, r.stderr
+    assert (f"--scenario {tmp_path / 'axis.toml'}: the [calibration] covariance would draw "
+            "axis.velocity_bandwidth_hz a factor 3.6e+05 either side") in said
+    assert "expected at most 10" in said and "carriage_mass_kg" not in said
+    assert not (tmp_path / "out").exists()

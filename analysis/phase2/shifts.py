@@ -96,9 +96,12 @@ def correlate_traces(trace: np.ndarray, reference: np.ndarray, dx_m: float,
         return lags + (x0_trace_m - x0_reference_m), c
     n_fft = next_fast_len(a.size + b.size - 1, real=True)
     spec = np.fft.rfft(a, n_fft) * np.conj(np.fft.rfft(b, n_fft))
-    circ = np.fft.irfft(spec, up * n_fft) * (up / norm)
-    k = np.arange(-(b.size - 1) * up, (a.size - 1) * up + 1)
-    return k * (dx_m / up) + (x0_trace_m - x0_reference_m), circ[k % (up * n_fft)]
+    circ = np.fft.irfft(spec, up * n_fft)
+    # the negative lags wrap to the end of the circular correlation: its two ends, in lag order
+    neg, pos = (b.size - 1) * up, (a.size - 1) * up + 1
+    c = np.concatenate((circ[circ.size - neg:], circ[:pos]))
+    c *= up / norm
+    return np.arange(-neg, pos) * (dx_m / up) + (x0_trace_m - x0_reference_m), c
 
 
 def _fit_peak(lags: np.ndarray, c: np.ndarray, i: int, fit_fraction: float) -> tuple[float, float]:

@@ -248,6 +248,7 @@ def diagnose(
         _fail(f"--budget-minutes {budget_minutes:g}: expected a positive number of minutes (the time "
               "the diagnosis may take)")
     from analysis.dataset import DatasetError
+    from twin.harness.calibration.uncertainty import check_drawable
     from twin.harness.diagnosis.ensemble import check_response_seeds
     from twin.harness.diagnosis.library import check_kinds, resolve_library
     from twin.harness.diagnosis.runner import run_diagnosis
@@ -256,8 +257,9 @@ def diagnose(
         s = load(scenario, overrides)
     except ScenarioError as exc:
         _fail(str(exc))
-    try:  # an option out of range is refused before the recording is read
+    try:  # an option out of range, or a calibration drawn too wide, is refused before the recording is read
         check_response_seeds(response_seeds, seeds)
+        check_drawable(s.calibration, f"--scenario {scenario}")
     except ValueError as exc:
         _fail(str(exc))
     try:

@@ -312,44 +312,67 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 return np.full((free.size, free.size), np.inf)
             return jinv @ cov_stat @ jinv.T
 
-        cov = deltas(J)
-        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+        def marginal(J: np.ndarray, free: np.ndarray):
+            """(the delta method's covariance of log p of the parameters ``free``; their standard
+            deviations; the same with the span of the parameters kept at their start added, the
+            intervals being marginal, not conditional on the kept values; a = -J_ff^-1 J_fk, how
+            the fitted ones move with the kept ones in the linearised fit (J_fk from the first
+            Jacobian); the kept ones' prior covariance (PRIOR_FACTOR); the kept indices)."""
+            cov = deltas(J)
+            sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+            kept = np.array([j for j in range(len(keys)) if j not in set(free.tolist())], dtype=int)
+            prior = np.diag([(math.log(PRIOR_FACTOR[keys[j]]) / Z90) ** 2 for j in kept])
+            if not kept.size:
+                return cov, sd, sd, np.zeros((free.size, 0)), prior, kept
+            j_fk = j0[np.ix_(free, kept)] * se[free][:, None]
+            try:
+                a = -np.linalg.solve(J, j_fk)
+            except np.linalg.LinAlgError:
+                a = np.full((free.size, kept.size), np.inf)
+            return cov, sd, np.sqrt(sd ** 2 + (a ** 2) @ np.diag(prior)), a, prior, kept
+
+        cov, sd, sd_all, a, prior, kept = marginal(J, free)
         # Jointly not told apart: a parameter whose 90 % interval spans more than MAX_SPAN either
-        # side (its statistic moves with another parameter as much as with it) is kept at its
-        # start, the widest first, and the others fitted again without it.
-        while free.size > 1 and not T90 * float(np.max(sd)) <= math.log(MAX_SPAN):
-            w = int(np.argmax(sd))
+        # side is kept at its start, the widest first, and the others fitted again without it.
+        # Its interval counts what it owes to the parameters kept at their start (their prior
+        # span through -J_ff^-1 J_fk): a statistic that moves with a kept parameter as much as
+        # with its own does not tell the two apart either.
+        while free.size and not T90 * float(np.max(sd_all)) <= math.log(MAX_SPAN):
+            w = int(np.argmax(sd_all))
             j = int(free[w])
-            others = [keys[k].split(".")[-1] for k in free if k != j]
-            skipped[keys[j]] = (f"not told apart jointly: its 90 % interval would span a factor "
-                                f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side (its statistic, the "
-                                f"recording's {FITTED[use[j]][1].replace('_', ' ')}, moves with "
-                                f"{', '.join(others)} as well): kept at {start[j]:.6g}")
+            stat_name = FITTED[use[j]][1].replace("_", " ")
+            if T90 * float(sd[w]) <= math.log(MAX_SPAN):
+                moved = [keys[k].split(".")[-1] for k in kept[np.argsort(-np.abs(a[w]))][:2]]
+                skipped[keys[j]] = (f"not told apart from {', '.join(moved)} (kept at the twin's default): "
+                                    f"its statistic, the recording's {stat_name}, moves with them as well, and "
+                                    f"their span would put its 90 % interval at a factor "
+                                    f"{math.exp(min(T90 * float(sd_all[w]), 50.0)):.3g} either side: kept at "
+                                    f"{start[j]:.6g}")
+            else:
+                others = [keys[k].split(".")[-1] for k in free if k != j]
+                why = (f"moves with {', '.join(others)} as well" if others else
+                       "does not pin it down")
+                skipped[keys[j]] = (f"not told apart jointly: its 90 % interval would span a factor "
+                                    f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side (its statistic, the "
+                                    f"recording's {stat_name}, {why}): kept at {start[j]:.6g}")
             progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
             free = np.delete(free, w)
             rows = free
+            if not free.size:
+                xs, fun = x0.copy(), np.zeros(0)
+                break
             xs, fun = solve(xs)
             J = jac(xs, free, final=True) * se[free][:, None]
-            cov = deltas(J)
-            sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    # The parameters kept at their start are uncertain by their prior span (PRIOR_FACTOR): the
-    # fitted ones move with them by −J_ff⁻¹·J_fk (the linearised fit; J_fk from the first
-    # Jacobian), which the delta method adds in quadrature (the intervals are marginal, not
-    # conditional on the kept values).
-    kept = np.array([j for j in range(len(keys)) if j not in set(free.tolist())], dtype=int)
+            cov, sd, sd_all, a, prior, kept = marginal(J, free)
+        sd = sd_all
+    else:
+        kept = np.arange(len(keys))
     widened = ""
     # The joint distribution of log p over the fitted and the kept parameters (the fitted ones'
     # part scaled so a Gaussian's 90 % range is the stated interval): what `twin diagnose` draws
     # its twin seeds' parameters from (:mod:`twin.harness.calibration.uncertainty`).
     joint = cov * (T90 / Z90) ** 2 if free.size else np.zeros((0, 0))
     if free.size and kept.size:
-        prior = np.diag([(math.log(PRIOR_FACTOR[keys[j]]) / Z90) ** 2 for j in kept])
-        j_fk = j0[np.ix_(free, kept)] * se[free][:, None]
-        try:
-            a = -np.linalg.solve(J, j_fk)
-        except np.linalg.LinAlgError:
-            a = np.full((free.size, kept.size), np.inf)
-        sd = np.sqrt(sd ** 2 + (a ** 2) @ np.diag(prior))
         joint = np.block([[joint + a @ prior @ a.T, a @ prior], [(a @ prior).T, prior]])
         widened = ("; the interval includes the span of " + ", ".join(keys[j].split(".")[-1] for j in kept)
                    + ", kept at the twin's default")

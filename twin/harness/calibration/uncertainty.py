@@ -53,6 +53,32 @@ def joint_covariance(fitted: dict | None, sensors: list[Value], excluded: set[st
     return {"keys": keys, "log": cov.tolist()}
 
 
+#: Largest factor either side of its value (at 90 %) a calibrated value may be drawn from: the
+#: layer (c) fit searches within a factor 10 of its start, and a draw beyond it (a velocity loop
+#: many times the servo's rate) can make the twin's servo unstable.
+MAX_DRAW_FACTOR = 10.0
+
+
+def check_drawable(calibration: dict | None, where: str) -> None:
+    """Raise ValueError naming ``where`` (the scenario), the key and its factor when
+    ``calibration``'s covariance would draw a value from more than :data:`MAX_DRAW_FACTOR`
+    either side of it at 90 % (a calibration written before such values were kept at their
+    default); nothing is drawn from a scenario without a covariance."""
+    cov = (calibration or {}).get("covariance")
+    if not cov:
+        return
+    half = Z90 * np.sqrt(np.clip(np.diag(np.asarray(cov["log"], float)), 0.0, None))  # 90 % half-range, log
+    wide = [(k, float(np.exp(min(h, 700.0)))) for k, h in zip(cov["keys"], half, strict=True)
+            if not h <= math.log(MAX_DRAW_FACTOR)]
+    if wide:
+        named = ", ".join(f"{k} a factor {f:.3g}" for k, f in wide)
+        raise ValueError(
+            f"{where}: the [calibration] covariance would draw {named} either side of the calibrated value "
+            f"(90 % range; expected at most {MAX_DRAW_FACTOR:g}): a twin drawn that far from the machine can run "
+            "away; calibrate the recording again (`twin calibrate` keeps a value it cannot tell apart at the "
+            "twin's default) or remove the covariance entry")
+
+
 def draw_calibrated(data: dict, calibration: dict | None, seed: int) -> dict:
     """Scenario ``data`` (a scenario's JSON dict, changed in place and returned) with every key
     of ``calibration``'s ``covariance`` (the scenario's ``[calibration]`` table) drawn from the
@@ -72,4 +98,4 @@ def draw_calibrated(data: dict, calibration: dict | None, seed: int) -> dict:
     return data
 
 
-__all__ = ["DRAW_STREAM", "draw_calibrated", "joint_covariance"]
+__all__ = ["DRAW_STREAM", "MAX_DRAW_FACTOR", "check_drawable", "draw_calibrated", "joint_covariance"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 
-CALIBRATE_VERSION = 11
+CALIBRATE_VERSION = 12
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -23,8 +23,9 @@ SPREAD_SEEDS = 8
 FIT_SEEDS = 2
 #: Standard errors a parameter's statistic must move for a factor 2 of it to be fitted.
 MIN_SEEN = 3.0
-#: A fitted parameter's 90 % interval must lie within this factor either side of its value;
-#: wider, it is not told apart from the others (kept at its start, the rest fitted again).
+#: A fitted parameter's 90 % interval, with what it owes to the parameters kept at their start,
+#: must lie within this factor either side of its value; wider, it is not told apart from the
+#: others (kept at its start, the rest fitted again).
 MAX_SPAN = 2.0
 #: Step of the finite differences in log(parameter).
 LOG_STEP = 0.03

@@ -41,6 +41,7 @@ from analysis.base.files import write_json
 from analysis.diagnosis import attribution
 from analysis.diagnosis.gap_report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, signature
+from twin.harness.calibration.uncertainty import check_drawable
 from twin.harness.diagnosis.budget import prepare_subset
 from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS
@@ -61,6 +62,7 @@ def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> di
     cal = nominal.calibration
     if not cal:
         return None
+    check_drawable(cal, f"scenario {nominal.name!r}")
     values = [{"key": k, **v} for k, v in cal.items() if isinstance(v, dict) and k != "covariance"]
     names = set(library or []) | (set(PARAMETERS) if library is None and "parameter" in check_kinds(kinds) else set())
     fitted = [v["key"] for v in values if v.get("source") == "fitted"]
