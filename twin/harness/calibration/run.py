@@ -11,7 +11,7 @@ from pathlib import Path
 from analysis.base.executors import default_processes
 from analysis.base.files import write_json, write_text
 from twin.harness.calibration.physical import fit_physical
-from twin.harness.calibration.sensors import corrected_sensor_values, sensor_values
+from twin.harness.calibration.sensors import corrected_sensor_values, floors_beyond_span, sensor_values
 from twin.harness.calibration.uncertainty import joint_covariance
 from twin.harness.calibration.values import CALIBRATE_VERSION, NOT_INFORMED, CalibrationError, _progress, flagged_keys
 from twin.sim.config import set_dotted
@@ -45,6 +45,12 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     base = _load_text(text_a)
     progress("layer b: the sensor chain from the rests")
     measured, sens_notes = sensor_values(recording, base)
+    # a floor far above its instrument's kind is left for the diagnosis to name (with the keys
+    # read on the same spectra), as a channel `twin check` flags is
+    beyond = floors_beyond_span(measured, base)
+    for key, why in beyond.items():
+        measured.pop(key, None)
+        progress(f"layer b: {key} kept at the scenario's value: {why}")
     data = base.model_dump(mode="json")
     for key, v in measured.items():
         set_dotted(data, key, float(f"{v.value:.6g}"), source="calibrate")
@@ -59,7 +65,7 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     values = sens + fit.values
     defaults = {k: why for k, why in NOT_INFORMED.items()}
     defaults.update(fit.skipped)
-    flagged = flagged_keys(check)
+    flagged = {**beyond, **flagged_keys(check)}
     values = [v for v in values if v.key not in flagged]
     defaults.update(flagged)
     covariance = joint_covariance(fit.covariance, [v for v in sens if v.key not in flagged], set(flagged))

@@ -11,7 +11,7 @@ import numpy as np
 
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
-from twin.harness.calibration.values import FIT_CAPTURES, SENSOR_KEYS, T90, Z90, Value
+from twin.harness.calibration.values import FIT_CAPTURES, FLOOR_SPAN, FLOORS, SENSOR_KEYS, T90, Z90, Value
 from twin.sim.scenario import Scenario
 
 # ---------------------------------------------------------------------------------------------
@@ -38,6 +38,32 @@ def sensor_values(recording: Path, base: Scenario) -> tuple[dict[str, Measured],
                      + (" (a sensitivity error or local gravity: check the IMU's unit and sensitivity)"
                         if abs(g - 1) > 0.003 else ""))
     return {k: v for k, v in meas.items() if k in SENSOR_KEYS}, notes
+
+
+def floors_beyond_span(measured: dict[str, Measured], base: Scenario) -> dict[str, str]:
+    """{key: why it keeps the scenario's value} for each noise floor of ``measured`` (layer b,
+    scenario keys) more than :data:`FLOOR_SPAN` times the scenario ``base``'s, and the keys
+    measured on the same spectra (:data:`FLOORS`): a noisier channel than its instrument's kind,
+    left for `twin diagnose` to name rather than taken into the twin."""
+    from twin.sim.config import get_dotted
+
+    data = base.model_dump(mode="json")
+    out: dict[str, str] = {}
+    for key, partners in FLOORS.items():
+        v = measured.get(key)
+        ref = float(get_dotted(data, key))
+        if v is None or not ref > 0 or not v.value > FLOOR_SPAN * ref:
+            continue
+        name = key.split(".")[-1]
+        why = (f"the recording's floor measures {v.value:.4g} ({v.unit}), {v.value / ref:.3g} times the "
+               f"scenario's {ref:g} (more than {FLOOR_SPAN:g}): a channel noisier than its instrument's kind "
+               "(cable, connector, amplifier?); kept at the scenario's so that twin diagnose names the excess. "
+               f"If the instrument is this noisy, set {name} to its data sheet's floor and calibrate again")
+        out[key] = why
+        for p in partners:
+            if p in measured:
+                out[p] = f"measured on the same rests as {name}, whose floor is not taken in: {why}"
+    return out
 
 
 def corrected_sensor_values(measured: dict[str, Measured], set_to: dict[str, float],

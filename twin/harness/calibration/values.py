@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 
-CALIBRATE_VERSION = 12
+CALIBRATE_VERSION = 13
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -77,6 +77,17 @@ NOT_INFORMED = {
 SENSOR_KEYS = ("sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_hz",
                "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz",
                "sensors.nut_acc_noise_ug_per_rthz", "sensors.torque_noise_Nm")
+#: The noise floors of layer (b), each with the keys measured on the same rests' spectra (its
+#: bandwidth): a floor above FLOOR_SPAN × the scenario's is not taken into the twin, nor those.
+FLOORS = {"sensors.imu_acc_noise_ug_per_rthz": ("sensors.imu_acc_bandwidth_hz",),
+          "sensors.imu_gyro_noise_urad_s_per_rthz": ("sensors.imu_gyro_bandwidth_hz",),
+          "sensors.nut_acc_noise_ug_per_rthz": (), "sensors.torque_noise_Nm": ()}
+#: A measured noise floor more than this factor above the scenario's (the twin's default: the
+#: paper's instruments, their data sheets) is an instrument noisier than its kind, or noise added
+#: on its way (cable, connector, amplifier): kept out of the twin, so that `twin diagnose`
+#: names it. Instruments of a kind differ by less (the calibrate benchmark draws the axes' floors
+#: within a factor 2 of the twin's).
+FLOOR_SPAN = 3.0
 
 
 #: The channels each calibrated key is fitted or measured on: a key whose channel `twin check`
