@@ -91,6 +91,14 @@ def _calibration_table(record: dict) -> str:
     return "\n".join(lines)
 
 
+#: Sensor keys of the scenario an owner's ``/@axis`` gives (the instrument's data sheet): key ->
+#: its dotted ``/@axis`` path.
+DATASHEET = {"imu_acc_bandwidth_hz": "sensors.imu_accelerometer.bandwidth_hz",
+             "imu_acc_noise_ug_per_rthz": "sensors.imu_accelerometer.noise_ug_per_rthz",
+             "imu_gyro_bandwidth_hz": "sensors.imu_gyroscope.bandwidth_hz",
+             "imu_gyro_noise_urad_s_per_rthz": "sensors.imu_gyroscope.noise_urad_s_per_rthz"}
+
+
 def scenario_text(recording: str | os.PathLike, name: str | None = None, *,
                   calibrated: dict[str, tuple[Any, str, str]] | None = None,
                   defaults: dict[str, str] | None = None,
@@ -134,10 +142,7 @@ def scenario_text(recording: str | os.PathLike, name: str | None = None, *,
         for ch in ("imu_acc", "imu_gyro", "position_cmd"):
             if ch in p2["fs_hz"]:
                 sens.add(f"{ch}_fs_hz", p2["fs_hz"][ch], MEASURED)
-    for key, path in (("imu_acc_bandwidth_hz", "sensors.imu_accelerometer.bandwidth_hz"),
-                      ("imu_acc_noise_ug_per_rthz", "sensors.imu_accelerometer.noise_ug_per_rthz"),
-                      ("imu_gyro_bandwidth_hz", "sensors.imu_gyroscope.bandwidth_hz"),
-                      ("imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyroscope.noise_urad_s_per_rthz")):
+    for key, path in DATASHEET.items():
         v = axis.get(path)
         sens.add(key, float(v) if v is not None else getattr(d_sens, key), AXIS if v is not None else DEFAULT)
     for key, value in d_sens.model_dump().items():

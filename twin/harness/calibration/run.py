@@ -11,7 +11,12 @@ from pathlib import Path
 from analysis.base.executors import default_processes
 from analysis.base.files import write_json, write_text
 from twin.harness.calibration.physical import fit_physical
-from twin.harness.calibration.sensors import corrected_sensor_values, floors_beyond_span, sensor_values
+from twin.harness.calibration.sensors import (
+    corrected_sensor_values,
+    datasheet_keys,
+    floors_beyond_span,
+    sensor_values,
+)
 from twin.harness.calibration.uncertainty import joint_covariance
 from twin.harness.calibration.values import CALIBRATE_VERSION, NOT_INFORMED, CalibrationError, _progress, flagged_keys
 from twin.sim.config import set_dotted
@@ -47,7 +52,7 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     measured, sens_notes = sensor_values(recording, base)
     # a floor far above its instrument's kind is left for the diagnosis to name (with the keys
     # read on the same spectra), as a channel `twin check` flags is
-    beyond = floors_beyond_span(measured, base)
+    beyond = floors_beyond_span(measured, base, datasheet_keys(recording))
     for key, why in beyond.items():
         measured.pop(key, None)
         progress(f"layer b: {key} kept at the scenario's value: {why}")

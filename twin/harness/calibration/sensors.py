@@ -11,7 +11,16 @@ import numpy as np
 
 from analysis.calibration.sensor_chain import Measured, measure_instruments
 from analysis.dataset import open_measurements
-from twin.harness.calibration.values import FIT_CAPTURES, FLOOR_SPAN, FLOORS, SENSOR_KEYS, T90, Z90, Value
+from twin.harness.calibration.values import (
+    FIT_CAPTURES,
+    FLOOR_SPAN,
+    FLOOR_SPAN_DATASHEET,
+    FLOORS,
+    SENSOR_KEYS,
+    T90,
+    Z90,
+    Value,
+)
 from twin.sim.scenario import Scenario
 
 # ---------------------------------------------------------------------------------------------
@@ -40,11 +49,25 @@ def sensor_values(recording: Path, base: Scenario) -> tuple[dict[str, Measured],
     return {k: v for k, v in meas.items() if k in SENSOR_KEYS}, notes
 
 
-def floors_beyond_span(measured: dict[str, Measured], base: Scenario) -> dict[str, str]:
+def datasheet_keys(recording: Path) -> set[str]:
+    """The sensor keys (``sensors.…``) whose value the recording's ``/@axis`` gives (the
+    instrument's data sheet: :data:`twin.sim.scenario_init.DATASHEET`)."""
+    from analysis.dataset.axis import axis_of
+    from twin.sim.scenario_init import DATASHEET
+
+    with open_measurements(recording / "measurements.h5") as m:
+        axis = axis_of(m)
+        return {f"sensors.{k}" for k, path in DATASHEET.items() if axis.get(path) is not None}
+
+
+def floors_beyond_span(measured: dict[str, Measured], base: Scenario,
+                       datasheet: set[str] = frozenset()) -> dict[str, str]:
     """{key: why it keeps the scenario's value} for each noise floor of ``measured`` (layer b,
-    scenario keys) more than :data:`FLOOR_SPAN` times the scenario ``base``'s, and the keys
-    measured on the same spectra (:data:`FLOORS`): a noisier channel than its instrument's kind,
-    left for `twin diagnose` to name rather than taken into the twin."""
+    scenario keys) more than :data:`FLOOR_SPAN` times the scenario ``base``'s
+    (:data:`FLOOR_SPAN_DATASHEET` for the keys in ``datasheet``, whose scenario value is the
+    instrument's data sheet), and the keys measured on the same spectra (:data:`FLOORS`): a
+    noisier channel than its instrument, left for `twin diagnose` to name rather than taken
+    into the twin."""
     from twin.sim.config import get_dotted
 
     data = base.model_dump(mode="json")
@@ -52,11 +75,14 @@ def floors_beyond_span(measured: dict[str, Measured], base: Scenario) -> dict[st
     for key, partners in FLOORS.items():
         v = measured.get(key)
         ref = float(get_dotted(data, key))
-        if v is None or not ref > 0 or not v.value > FLOOR_SPAN * ref:
+        sheet = key in datasheet
+        span = FLOOR_SPAN_DATASHEET if sheet else FLOOR_SPAN
+        if v is None or not ref > 0 or not v.value > span * ref:
             continue
         name = key.split(".")[-1]
+        what = "the instrument's data sheet (/@axis)" if sheet else "the twin's default instrument"
         why = (f"the recording's floor measures {v.value:.4g} ({v.unit}), {v.value / ref:.3g} times the "
-               f"scenario's {ref:g} (more than {FLOOR_SPAN:g}): a channel noisier than its instrument's kind "
+               f"scenario's {ref:g}, {what} (more than {span:g}): a channel noisier than its instrument "
                "(cable, connector, amplifier?); kept at the scenario's so that twin diagnose names the excess. "
                f"If the instrument is this noisy, set {name} to its data sheet's floor and calibrate again")
         out[key] = why

@@ -82,12 +82,15 @@ SENSOR_KEYS = ("sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_h
 FLOORS = {"sensors.imu_acc_noise_ug_per_rthz": ("sensors.imu_acc_bandwidth_hz",),
           "sensors.imu_gyro_noise_urad_s_per_rthz": ("sensors.imu_gyro_bandwidth_hz",),
           "sensors.nut_acc_noise_ug_per_rthz": (), "sensors.torque_noise_Nm": ()}
-#: A measured noise floor more than this factor above the scenario's (the twin's default: the
-#: paper's instruments, their data sheets) is an instrument noisier than its kind, or noise added
-#: on its way (cable, connector, amplifier): kept out of the twin, so that `twin diagnose`
-#: names it. Instruments of a kind differ by less (the calibrate benchmark draws the axes' floors
-#: within a factor 2 of the twin's).
+#: A measured noise floor more than this factor above the scenario's, when the scenario's is
+#: the twin's default (the paper's instruments), is an instrument noisier than its kind, or noise
+#: added on its way (cable, connector, amplifier): kept out of the twin, so that `twin diagnose`
+#: names it. Instruments of a kind differ by less (the calibrate benchmark draws the axes'
+#: floors within a factor 2 of the twin's).
 FLOOR_SPAN = 3.0
+#: The same factor when the scenario's floor is the instrument's own data sheet (the recording's
+#: ``/@axis``): units scatter around a data sheet's typical density by much less.
+FLOOR_SPAN_DATASHEET = 1.5
 
 
 #: The channels each calibrated key is fitted or measured on: a key whose channel `twin check`
