@@ -607,3 +607,9 @@ def test_a_floor_far_above_its_instruments_kind_is_left_for_the_diagnosis(tmp_pa
     rec = simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", tmp_path / "rec", *REFERENCE_TINY)
     assert datasheet_keys(rec) == {"sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_hz",
                                    "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz"}
+    # the written scenario keeps the data sheet's floor and says why beside it
+    from twin.sim.scenario_init import scenario_text
+
+    text, _ = scenario_text(rec, defaults=out)
+    line = next(ln for ln in text.splitlines() if ln.startswith("imu_gyro_noise_urad_s_per_rthz"))
+    assert "# axis description: kept: the recording's floor measures 207 (µrad/s/√Hz)" in line

@@ -61,6 +61,8 @@ class _Table:
             value, source, note = self.calibrated[full]
         elif full in self.defaults and source == DEFAULT:
             note = "the recording cannot inform it: " + self.defaults[full]
+        elif full in self.defaults:  # e.g. a data sheet's floor the calibration did not replace, and why
+            note = (f"{note}; " if note else "") + "kept: " + self.defaults[full]
         if not note and source == DEFAULT and self.section is not None and key in self.section.model_fields:
             note = self.section.model_fields[key].description or ""
         self.rows.append((key, value, source + (f": {note}" if note else "")))
