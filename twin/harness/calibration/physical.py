@@ -312,7 +312,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 return np.full((free.size, free.size), np.inf)
             return jinv @ cov_stat @ jinv.T
 
-        def marginal(J: np.ndarray, free: np.ndarray):
+        def marginal(J: np.ndarray):
             """(the delta method's covariance of log p of the parameters ``free``; their standard
             deviations; the same with the span of the parameters kept at their start added, the
             intervals being marginal, not conditional on the kept values; a = -J_ff^-1 J_fk, how
@@ -331,7 +331,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 a = np.full((free.size, kept.size), np.inf)
             return cov, sd, np.sqrt(sd ** 2 + (a ** 2) @ np.diag(prior)), a, prior, kept
 
-        cov, sd, sd_all, a, prior, kept = marginal(J, free)
+        cov, sd, sd_all, a, prior, kept = marginal(J)
         # Jointly not told apart: a parameter whose 90 % interval spans more than MAX_SPAN either
         # side is kept at its start, the widest first, and the others fitted again without it.
         # Its interval counts what it owes to the parameters kept at their start (their prior
@@ -363,7 +363,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 break
             xs, fun = solve(xs)
             J = jac(xs, free, final=True) * se[free][:, None]
-            cov, sd, sd_all, a, prior, kept = marginal(J, free)
+            cov, sd, sd_all, a, prior, kept = marginal(J)
         sd = sd_all
     else:
         kept = np.arange(len(keys))
