@@ -372,13 +372,15 @@ def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose
 
 
 def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers: int = 2,
-                  diagnose: bool = False, seeds: int = 4, resume: bool = True,
+                  diagnose: bool = False, seeds: int = 4, resume: bool = True, first: int = 0,
                   progress: Callable[[str], None] = lambda t: print(t, flush=True)) -> dict:
     """Draw ``cases`` foreign axes from ``seed``, take each through the round trip
     (:func:`run_case`), write ``OUT/calibrate-benchmark.json`` and return it. With ``resume``, a
     case whose ``OUT/case-NNN/entry.json`` has the same :func:`case_key` is taken from it (a
     long benchmark can be stopped and run again; the code's other changes are not in the key:
-    ``resume=False`` after them)."""
+    ``resume=False`` after them). Cases before ``first`` are not run, only taken when kept (one
+    benchmark split between processes or machines: each runs its own range into its own
+    directory; the entries copied into one directory and run again give the whole summary)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -394,6 +396,8 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
         entry = json.loads(kept.read_text()) if resume and kept.exists() else {}
         if entry.get("key") == key:
             progress(f"case {i} ({kind}): kept from {kept} (the same draw, options and versions)")
+        elif i < first:
+            continue
         else:
             entry = {**run_case(i, s, out, workers, diagnose, seeds, progress, kind, *additions[i]), "key": key}
             write_json(kept, entry, nan_as_null=True)
