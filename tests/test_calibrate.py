@@ -420,6 +420,65 @@ def test_calibrate_benchmark_meets_its_targets(tmp_path):
     assert sm["several_all_named"] >= 0.80 and sm["several_nothing_else"] >= 0.95
 
 
+def test_the_recorded_calibrate_benchmark_is_this_codes():
+    """The benchmark's cases recorded in benchmarks/results/calibrate-benchmark (its figures in
+    docs/calibration.md) are what the current code measures: each entry's key is the one the
+    code gives its draw (the benchmark's, the calibration's and the diagnosis's versions, the
+    options), and the recorded summary and table are those of the kept entries. A raised
+    ``CALIBRATE_VERSION`` fails here until the cases are run again or dropped
+    (``benchmarks/calibrate_benchmark.py --record``)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("calibrate_benchmark", REPO / "benchmarks" / "calibrate_benchmark.py")
+    cb = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cb)
+    keys = cb.current_keys()
+    entries = cb.kept_entries()
+    stale = [e["case"] for e in entries if e["key"] != keys[e["case"]]]
+    assert not stale, f"recorded cases {stale} were measured by another version: run them again or drop them"
+    doc = json.loads((REPO / "docs" / "validation.json").read_text()).get("calibrate_benchmark")
+    if not entries:
+        assert doc is None or doc["figures"]["cases"]["value"] == 0
+        return
+    assert {k: v["text"] for k, v in doc["figures"].items()} == {k: t for k, (_v, t) in cb.figures(entries).items()}
+    assert doc["tables"]["cases"] == cb.case_table(entries)
+
+
+def test_calibrate_benchmark_split_between_runs_and_recorded_is_taken_not_run(tmp_path, monkeypatch):
+    """The bookkeeping of a benchmark too long for one sitting: ``--first K`` runs only the cases
+    from K on; a case finished in one run's directory or recorded in ``--kept`` with the same key
+    is taken, not run again; a recorded entry with another key (another version) is run again."""
+    from twin.harness.calibration import benchmark as bm
+
+    ran: list[int] = []
+
+    def fake_case(i, s, out, workers, diagnose, seeds, progress, kind="null", effects=None, artefacts=None):
+        ran.append(i)
+        return {"case": i, "kind": kind, "effects": effects or {}, "artefacts": artefacts or {},
+                "formats": ["csv", "mat"], "calibrate_s": 1.0,
+                "routine": {"phase1.speed_mm_s": {"error": 0.0, "within": True}},
+                "parameters": {"axis.carriage_mass_kg": {"inside": i % 2 == 0}}}
+
+    monkeypatch.setattr(bm, "run_case", fake_case)
+    monkeypatch.setattr(bm, "ROUTINE_KEYS", ("phase1.speed_mm_s",))
+    quiet = dict(workers=1, progress=lambda _t: None)
+    a = bm.run_benchmark(tmp_path / "a", cases=4, first=0, **quiet)
+    assert ran == [0, 1, 2, 3] and a["summary"]["cases"] == 4
+    ran.clear()
+    b = bm.run_benchmark(tmp_path / "b", cases=4, first=2, **quiet)
+    assert ran == [2, 3] and b["summary"]["cases"] == 2
+    ran.clear()
+    kept = tmp_path / "kept"
+    kept.mkdir()
+    for i in (0, 1):
+        (kept / f"case-{i:03d}.json").write_text((tmp_path / "a" / f"case-{i:03d}" / "entry.json").read_text())
+    stale = json.loads((kept / "case-001.json").read_text())
+    (kept / "case-001.json").write_text(json.dumps({**stale, "key": "another version"}))
+    merged = bm.run_benchmark(tmp_path / "b", cases=4, kept_dir=kept, **quiet)
+    assert ran == [1]  # 0 recorded, 2 and 3 finished in b, 1 recorded by another version
+    assert merged["summary"] == a["summary"]
+
+
 def test_a_flagged_channel_keeps_its_defaults():
     """Nothing is fitted to a channel `twin check` flags: a clipped torque keeps the drive's
     parameters fitted on it and the torque's noise at the twin's defaults, named."""

@@ -47,6 +47,9 @@ def calibrate_benchmark(
     first: int = typer.Option(0, "--first", min=0, help=(
         "run only the cases from this index on (those before it are taken from OUT when kept): "
         "a benchmark split between processes or machines")),
+    kept: Path | None = typer.Option(None, "--kept", help=(
+        "a directory of recorded case entries (case-NNN.json, e.g. benchmarks/results/calibrate-benchmark): "
+        "a case recorded there with the same draw, options and versions is taken, not run")),
 ) -> None:
     """The round trip of `twin calibrate`, blind: foreign axes drawn from a seed, simulated, written
     out as a lab's files (CSV, TDMS, MAT, MDF in turn), imported, calibrated (and diagnosed),
@@ -58,7 +61,7 @@ def calibrate_benchmark(
 
     _writable_dir(out)
     doc = run_benchmark(out, cases=cases, seed=seed, workers=workers or default_processes(), diagnose=diagnose,
-                        seeds=seeds, resume=not fresh, first=first,
+                        seeds=seeds, resume=not fresh, first=first, kept_dir=kept,
                         progress=lambda t: console.print(t, markup=False, highlight=False))
     sm = doc["summary"]
     table = Table(title=f"calibrate-benchmark: {sm['cases']} foreign axes (seed {seed})", title_justify="left")

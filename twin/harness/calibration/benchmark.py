@@ -238,6 +238,9 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     shutil.rmtree(d, ignore_errors=True)
     d.mkdir(parents=True)
     f1, f2 = FORMATS[i % len(FORMATS)]
+    added = ", ".join([*effects, *artefacts]) or "nothing added"
+    step = lambda t: progress(f"case {i} ({kind}): {t}")  # noqa: E731 - a line per step, for a log
+    step(f"simulating the axis (lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg; {added})")
     t0 = time.perf_counter()
     simulate_campaign(with_effects(s, effects), d / "twin", workers=1)
     if artefacts:
@@ -246,9 +249,11 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     spec = export(d / "twin", d / "lab", phase1_format=f1, phase2_format=f2)
     run_import(spec, output=d / "campaign")
     t_sim = time.perf_counter() - t0
+    step(f"written out as {f1}/{f2} and imported ({t_sim:.0f} s); calibrating")
     # as the owner's `twin calibrate` does: what `twin check` flags is not fitted (errors forced)
     check = check_record(require_clean_recording(d / "campaign", True, "twin calibrate"), True)
-    rec = calibrate(d / "campaign", d / "axis.toml", workers=workers, progress=lambda _t: None, check=check)
+    rec = calibrate(d / "campaign", d / "axis.toml", workers=workers, progress=lambda t: step(f"calibrate: {t}"),
+                    check=check)
     cal = load(d / "axis.toml")
     entry = {"case": i, "kind": kind, "effects": effects, "artefacts": artefacts,
              "formats": [f1, f2], "scenario": json.loads(s.to_json()),
@@ -257,6 +262,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     if diagnose:
         from twin.harness.diagnosis.runner import run_diagnosis
 
+        step(f"calibrated ({rec['seconds']:.0f} s); diagnosing against the calibrated twin ({seeds} twin seeds)")
         t1 = time.perf_counter()
         try:
             res = run_diagnosis(d / "campaign", cal, d / "diagnosis", seeds=seeds, workers=workers,
@@ -268,7 +274,6 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
                                   "seconds": time.perf_counter() - t1}
     r_ok = sum(v["within"] for v in entry["routine"].values())
     p_ok = sum(v["inside"] for v in entry["parameters"].values())
-    added = ", ".join([*effects, *artefacts]) or "nothing added"
     dg = entry.get("diagnosis")
     if "diagnosis_error" in entry:
         progress(f"case {i}: the diagnosis failed: {entry['diagnosis_error']}")
@@ -293,6 +298,7 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
 
     d = out / f"case-{entry['case']:03d}"
     added = [*entry["effects"], *entry["artefacts"]]
+    progress(f"case {entry['case']}: the oracle: diagnosing against the axis as drawn ({', '.join(added)} only)")
     t0 = time.perf_counter()
     res = run_diagnosis(d / "campaign", s, d / "oracle", seeds=seeds, workers=workers, plots=False,
                         response_seeds=1, resim_seeds=0, library=added)
@@ -373,6 +379,7 @@ def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose
 
 def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers: int = 2,
                   diagnose: bool = False, seeds: int = 4, resume: bool = True, first: int = 0,
+                  kept_dir: str | Path | None = None,
                   progress: Callable[[str], None] = lambda t: print(t, flush=True)) -> dict:
     """Draw ``cases`` foreign axes from ``seed``, take each through the round trip
     (:func:`run_case`), write ``OUT/calibrate-benchmark.json`` and return it. With ``resume``, a
@@ -380,7 +387,9 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     long benchmark can be stopped and run again; the code's other changes are not in the key:
     ``resume=False`` after them). Cases before ``first`` are not run, only taken when kept (one
     benchmark split between processes or machines: each runs its own range into its own
-    directory; the entries copied into one directory and run again give the whole summary)."""
+    directory; the entries copied into one directory and run again give the whole summary). A
+    case not kept in ``OUT`` is taken from ``kept_dir/case-NNN.json`` when that entry has the same
+    key (the entries a benchmark recorded: ``benchmarks/calibrate_benchmark.py``)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -394,6 +403,13 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
         key = case_key(s, kind, *additions[i], diagnose=diagnose, seeds=seeds)
         kept = out / f"case-{i:03d}" / "entry.json"
         entry = json.loads(kept.read_text()) if resume and kept.exists() else {}
+        recorded = Path(kept_dir) / f"case-{i:03d}.json" if kept_dir is not None else None
+        if entry.get("key") != key and recorded is not None and recorded.exists():
+            entry = json.loads(recorded.read_text())
+            if entry.get("key") == key:
+                kept.parent.mkdir(parents=True, exist_ok=True)
+                write_json(kept, entry, nan_as_null=True)
+                kept = recorded
         if entry.get("key") == key:
             progress(f"case {i} ({kind}): kept from {kept} (the same draw, options and versions)")
         elif i < first:
