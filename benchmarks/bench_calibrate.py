@@ -19,7 +19,7 @@ with ``--workers W``, and prints:
 ``--scenario foreign-16mm`` takes that axis's whole campaign instead (the round trip's recording).
 
 Run: .venv/bin/python benchmarks/bench_calibrate.py [--workers 2] [--out DIR] [--budget-minutes B]
-[--scenario NAME]
+[--scenario NAME] [--record]
 """
 
 from __future__ import annotations
@@ -39,6 +39,9 @@ from mujoco import rollout
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+from record import record, text  # noqa: E402
 
 from twin.harness.calibration import calibrate  # noqa: E402
 from twin.sim import campaign as cp  # noqa: E402
@@ -68,6 +71,8 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None, help="keep the recording and the calibration here")
     ap.add_argument("--budget-minutes", type=float, default=None, help="calibrate with this budget")
     ap.add_argument("--scenario", default=None, help="a scenario's whole campaign (default: the paper's, cut)")
+    ap.add_argument("--record", action="store_true", help="store the figures in docs/validation.json "
+                    "(the paper's campaign, no budget, only)")
     args = ap.parse_args()
     out = args.out or Path(tempfile.mkdtemp(prefix="bench-calibrate-"))
     shutil.rmtree(out, ignore_errors=True)
@@ -82,7 +87,8 @@ def main() -> None:
         s = from_dict(d)
         first_session = first
     bare = bare_steps_per_s(s)
-    print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; bare stepping "
+    load_avg = os.getloadavg()[0]  # at the start: other work then slows every step
+    print(f"machine: {os.cpu_count()} cores, load average {load_avg:.1f}; bare stepping "
           f"{bare:,.0f} steps/s (mujoco {mujoco.__version__})", flush=True)
     t0 = time.perf_counter()
     simulate_campaign(s, out / "campaign", workers=args.workers)
@@ -99,6 +105,17 @@ def main() -> None:
     if args.budget_minutes:
         print(f"budget {args.budget_minutes:g} min: the calibration took {wall / 60 / args.budget_minutes:.2f} of it "
               f"(goal at most 1.2); {rec.get('stopped') or 'the fit converged'}")
+    if args.record and not (args.scenario or args.budget_minutes):
+        record("bench_calibrate", command=".venv/bin/python benchmarks/bench_calibrate.py --workers 2 --record",
+               scale=(f"scenarios/paper-rtf.toml cut after its first Phase I sample and Phase II session, "
+                      f"{args.workers} workers"),
+               figures={"calibrate_min": (round(wall / 60, 2), text(wall / 60, "{:.1f}")),
+                        "estimated_min": (None if est is None else round(est / 60, 2),
+                                          text(None if est is None else est / 60, "{:.1f}")),
+                        "simulations": (float(rec["simulations"]), str(rec["simulations"])),
+                        "simulate_min": (round(t_sim / 60, 2), text(t_sim / 60, "{:.1f}")),
+                        "bare_steps_per_s": (round(bare), f"{bare:,.0f}".replace(",", " ")),
+                        "load_average": (round(load_avg, 1), text(load_avg, "{:.1f}"))})
     print(json.dumps({"calibrate_s": wall, "estimated_s": est, "simulations": rec["simulations"],
                       "budget_s": rec.get("budget_s"), "stopped": rec.get("stopped"),
                       "bare_steps_per_s": bare, "workers": args.workers, "load_average": os.getloadavg()[0]}))
