@@ -49,7 +49,8 @@ from twin.harness.calibration.benchmark import (  # noqa: E402
 RESULTS = REPO / "benchmarks" / "results" / "calibrate-benchmark"
 #: The benchmark as the docs state it (the CLI's defaults with ``--diagnose``).
 CASES, SEED, DIAGNOSE, TWIN_SEEDS = 24, 2026, True, 6
-COMMAND = "twin calibrate-benchmark -o OUT --cases 24 --diagnose --workers 1 [--first K]"
+COMMAND = ("twin calibrate-benchmark -o OUT --cases 24 --diagnose --workers 1 [--first K], then "
+           ".venv/bin/python benchmarks/calibrate_benchmark.py --record OUT [OUT ...]")
 
 
 def current_keys(cases: int = CASES, seed: int = SEED) -> list[str]:
@@ -124,8 +125,8 @@ def figures(entries: list[dict]) -> dict[str, tuple[float | None, str]]:
     out: dict[str, tuple[float | None, str]] = {
         "cases": (float(len(entries)), str(len(entries))),
         "case_list": (None, ", ".join(str(e["case"]) for e in entries) or "none"),
-        "routine_within": (sm["routine_within"], percent(sm["routine_within"])),
-        "parameters_inside": (sm["parameters_inside"], percent(sm["parameters_inside"])),
+        "routine_within": (routine := sm["routine_within"] if entries else None, percent(routine)),
+        "parameters_inside": (inside := sm["parameters_inside"] if entries else None, percent(inside)),
         "parameter_pairs": (float(sm["parameter_pairs"]), str(sm["parameter_pairs"])),
         "calibrate_s_median": (sm["calibrate_s_median"], text(sm["calibrate_s_median"], "{:.0f}")),
     }

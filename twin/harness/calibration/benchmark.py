@@ -318,7 +318,7 @@ def summarise(cases: list[dict]) -> dict:
     for c in cases:
         for k, v in c["parameters"].items():
             per_key.setdefault(k, []).append(v["inside"])
-    worst = {k: max((c["routine"][k]["error"] or 0.0) for c in cases) for k in ROUTINE_KEYS}
+    worst = {k: max(((c["routine"][k]["error"] or 0.0) for c in cases), default=None) for k in ROUTINE_KEYS}
     out = {"cases": len(cases),
            "routine_within": sum(v["within"] for v in routine) / max(len(routine), 1),
            "routine_worst_error": worst,
