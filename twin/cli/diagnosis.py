@@ -86,7 +86,8 @@ def calibrate_benchmark(
     if sm.get("diagnosis_failed"):
         table.add_row("diagnosis failed (cases)", ", ".join(map(str, sm["diagnosis_failed"])))
     table.add_row("formats", ", ".join(sm["formats_used"]))
-    table.add_row("calibration, median", f"{sm['calibrate_s_median']:.0f} s")
+    if sm["calibrate_s_median"] is not None:
+        table.add_row("calibration, median", f"{sm['calibrate_s_median']:.0f} s")
     Console(width=max(100, Console().width)).print(table)
     console.print(f"wrote {out / 'calibrate-benchmark.json'} ({doc['seconds'] / 60:.1f} min)")
 

@@ -398,20 +398,21 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     additions = [draw_additions(add_rng, CASE_KINDS[i % len(CASE_KINDS)]) for i in range(cases)]
     t0 = time.perf_counter()
     done: list[dict] = []
+    doc = {"version": BENCH_VERSION, "seed": seed, "workers": workers, "diagnose": diagnose, "cases_drawn": cases,
+           "seconds": 0.0, "summary": summarise(done), "cases": done}
     for i, s in enumerate(scenarios):
         kind = CASE_KINDS[i % len(CASE_KINDS)]
         key = case_key(s, kind, *additions[i], diagnose=diagnose, seeds=seeds)
         kept = out / f"case-{i:03d}" / "entry.json"
-        entry = json.loads(kept.read_text()) if resume and kept.exists() else {}
+        entry, source = (json.loads(kept.read_text()), kept) if resume and kept.exists() else ({}, None)
         recorded = Path(kept_dir) / f"case-{i:03d}.json" if kept_dir is not None else None
         if entry.get("key") != key and recorded is not None and recorded.exists():
-            entry = json.loads(recorded.read_text())
-            if entry.get("key") == key:
+            entry, source = json.loads(recorded.read_text()), recorded
+            if entry.get("key") == key:  # into OUT too: OUT alone then holds the whole benchmark
                 kept.parent.mkdir(parents=True, exist_ok=True)
                 write_json(kept, entry, nan_as_null=True)
-                kept = recorded
         if entry.get("key") == key:
-            progress(f"case {i} ({kind}): kept from {kept} (the same draw, options and versions)")
+            progress(f"case {i} ({kind}): kept from {source} (the same draw, options and versions)")
         elif i < first:
             continue
         else:
