@@ -550,20 +550,19 @@ def test_the_twin_seeds_draw_the_calibrated_values_from_their_joint_distribution
     assert math.sqrt(rec["log"][1][1]) == pytest.approx(math.log(0.0042 / 0.0038) / (2 * 1.6448536269514722))
 
 
-def test_a_fitted_parameter_that_moves_with_a_kept_one_is_kept_too(tmp_path_factory, tmp_path, monkeypatch):
-    """Layer (c) on a linear stand-in for the twin (each statistic the log of its parameter, plus
-    a seed's scatter of 0.01), where the vertical trucks barely move their statistic (kept at
-    the default: not informed) and the velocity loop's statistic moves 30 times more with the
-    vertical trucks than with the loop: the loop's own interval is narrow, but the trucks' prior
-    span puts it at a factor of thousands, so the loop is not told apart and is kept at its
-    default; the others are fitted to within 5 % of the truth, inside their intervals, and the calibrated values'
-    joint distribution, which `twin diagnose` draws its twin seeds from, has no 90 % range
-    wider than the widest prior span (the loop drawn a factor 2.5e6 either side made the
-    twin run away)."""
+def _linear_twin(tmp_path_factory, tmp_path, monkeypatch, clock: list[float] | None = None):
+    """Layer (c)'s twin replaced by a linear stand-in: each statistic the log of its parameter,
+    plus a seed's scatter of 0.01, except that the vertical trucks barely move their statistic
+    (not informed) and the velocity loop's statistic moves 30 times more with the vertical
+    trucks than with the loop. With ``clock``, a fake clock that each twin evaluation advances
+    by one second (the budget's arithmetic without timing anything). Returns (a function of the
+    budget in s that runs the fit, the keys, the true log values, the trucks' and the loop's index)."""
+    import types
+
     from conftest import REFERENCE_TINY, simulate_shared
 
     import twin.harness.calibration.physical as physical
-    from twin.harness.calibration.values import FITTED, MAX_SPAN, PRIOR_FACTOR, Z90
+    from twin.harness.calibration.values import FITTED
     from twin.sim.config import get_dotted
     from twin.sim.scenario import from_dict, load
 
@@ -588,12 +587,35 @@ def test_a_fitted_parameter_that_moves_with_a_kept_one_is_kept_too(tmp_path_fact
             data = json.loads(p)
             logp = np.log([float(get_dotted(data, k)) for k in keys])
             out.append([statistics(logp, int(data["seed"])).tolist(), [0.005] * len(keys), {}])
+            if clock is not None:
+                clock[0] += 1.0
         return out
 
     monkeypatch.setattr(physical, "evaluate", evaluate)
     monkeypatch.setattr(physical, "_statistics", lambda *args: (statistics(truth, 12345), np.full(len(keys), 0.01)))
-    fit = physical.fit_physical(from_dict(base.model_dump(mode="json")), rec, tmp_path / "cache", None, 1,
-                                progress=lambda text: None)
+    if clock is not None:
+        monkeypatch.setattr(physical, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+
+    def fit(budget_s: float | None, progress=lambda text: None):
+        return physical.fit_physical(from_dict(base.model_dump(mode="json")), rec, tmp_path / "cache", budget_s, 1,
+                                     progress=progress)
+
+    return fit, keys, truth, vert, loop
+
+
+def test_a_fitted_parameter_that_moves_with_a_kept_one_is_kept_too(tmp_path_factory, tmp_path, monkeypatch):
+    """Layer (c) on a linear stand-in for the twin (:func:`_linear_twin`), where the vertical
+    trucks are kept at the default (not informed) and the velocity loop's statistic moves 30
+    times more with the vertical trucks than with the loop: the loop's own interval is narrow,
+    but the trucks' prior span puts it at a factor of thousands, so the loop is not told apart
+    and is kept at its default; the others are fitted to within 5 % of the truth, inside their
+    intervals, and the calibrated values' joint distribution, which `twin diagnose` draws its
+    twin seeds from, has no 90 % range wider than the widest prior span (the loop drawn a
+    factor 2.5e6 either side made the twin run away)."""
+    from twin.harness.calibration.values import MAX_SPAN, PRIOR_FACTOR, Z90
+
+    run_fit, keys, truth, vert, loop = _linear_twin(tmp_path_factory, tmp_path, monkeypatch)
+    fit = run_fit(None)
     fitted = {v.key: v for v in fit.values}
     assert "axis.velocity_bandwidth_hz" not in fitted and "axis.truck_stiffness_vertical_N_per_um" not in fitted
     assert "not told apart from truck_stiffness_vertical_N_per_um" in fit.skipped["axis.velocity_bandwidth_hz"]
@@ -605,6 +627,34 @@ def test_a_fitted_parameter_that_moves_with_a_kept_one_is_kept_too(tmp_path_fact
     cov = fit.covariance
     assert set(cov["keys"]) == set(keys)
     assert np.all(Z90 * np.sqrt(np.diag(cov["log"])) <= math.log(widest) + 1e-9)
+
+
+def test_a_budget_holds_when_a_parameter_is_found_not_told_apart(tmp_path_factory, tmp_path, monkeypatch):
+    """`--budget-minutes` holds through the refits: when a parameter is found not told apart
+    after the deadline leaves no time to fit the others again, they move by the linearised fit
+    instead, and the fit says so. On the linear stand-in with a fake clock (a second per twin
+    evaluation): unbudgeted, the loop's refit runs after the fit; with a budget that ends
+    30 s after the loop is found not told apart, the calibration ends within the budget with
+    no refit begun, says why, keeps the loop, and the others land where the refit puts them,
+    within 1 % (the stand-in is linear)."""
+    clock = [0.0]
+    run_fit, keys, truth, vert, loop = _linear_twin(tmp_path_factory, tmp_path, monkeypatch, clock)
+    said: list[tuple[float, str]] = []
+    free_fit = run_fit(None, lambda text: said.append((clock[0], text)))
+    found = next(t for t, text in said if "velocity_bandwidth_hz not told apart jointly" in text)
+    assert "fitted again without it" in said[[t for t, _ in said].index(found)][1]
+    assert clock[0] > found + 30.0  # the refit (a step and two Jacobians)
+    (tmp_path / "cache").rename(tmp_path / "cache-free")
+    budget = found + 30.0
+    clock[0] = 0.0
+    fit = run_fit(budget)
+    assert clock[0] <= budget, (clock[0], budget)
+    assert "axis.velocity_bandwidth_hz" in fit.skipped and fit.stopped is not None
+    assert "left no time to fit the others again after axis.velocity_bandwidth_hz" in fit.stopped
+    free_values = {v.key: v.value for v in free_fit.values}
+    for v in fit.values:
+        assert v.value == pytest.approx(free_values[v.key], rel=0.01), v.key
+        assert v.low < v.value < v.high
 
 
 def test_diagnose_refuses_a_calibration_that_would_draw_the_twin_far_from_the_machine(tmp_path):

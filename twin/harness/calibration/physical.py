@@ -184,7 +184,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     total = elapsed + full
     deadline = None if budget_s is None else t0 + budget_s - spent_s
     progress(f"layer c: {len(keys)} parameters jointly; one twin evaluation {unit_s:.1f} s: the calibration "
-             f"takes at most {total / 60:.1f} min" + ("" if budget_s is None or total <= budget_s else
+             f"takes at most {total / 60:.1f} min, and a fit again for every parameter found not told apart"
+             + ("" if budget_s is None or total <= budget_s else
                                                        f"; the fit stops at the budget ({budget_s / 60:g} min)"))
     if budget_s is not None and elapsed + least > budget_s:
         raise CalibrationError(
@@ -355,14 +356,35 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 skipped[keys[j]] = (f"not told apart jointly: its 90 % interval would span a factor "
                                     f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side (its statistic, the "
                                     f"recording's {stat_name}, {why}): kept at {start[j]:.6g}")
-            progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
             free = np.delete(free, w)
             rows = free
             if not free.size:
                 xs, fun = x0.copy(), np.zeros(0)
                 break
-            xs, fun = solve(xs)
-            J = jac(xs, free, final=True) * se[free][:, None]
+            if deadline is not None and time.perf_counter() + cost_s(2 * (free.size + 1)) + reserve_s > deadline:
+                # No time left to fit the rest again before the budget's deadline: the linearised
+                # fit instead. The kept parameter back at its start moves the others' statistics
+                # by J[:, w]·Δ; the others move by -J_ff⁻¹·J[:, w]·Δ to answer it, and their
+                # Jacobian is J without the kept one's row and column.
+                keep = np.delete(np.arange(J.shape[0]), w)
+                step = x0[j] - xs[j]
+                xs = xs.copy()
+                xs[j] = x0[j]
+                try:
+                    xs[free] = np.clip(xs[free] - np.linalg.solve(J[np.ix_(keep, keep)], J[keep, w]) * step,
+                                       lo[free], hi[free])
+                except np.linalg.LinAlgError:
+                    pass  # the others keep their values
+                J = J[np.ix_(keep, keep)]
+                fun = np.delete(fun, w)
+                stopped.append(f"the budget's deadline left no time to fit the others again after {keys[j]} was "
+                               "kept at its default: they were moved by the linearised fit instead; a larger "
+                               "--budget-minutes fits them again")
+                progress(f"layer c: {keys[j]} not told apart jointly; {stopped[-1]}")
+            else:
+                progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
+                xs, fun = solve(xs)
+                J = jac(xs, free, final=True) * se[free][:, None]
             cov, sd, sd_all, a, prior, kept = marginal(J)
         sd = sd_all
     else:
