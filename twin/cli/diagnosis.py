@@ -62,7 +62,7 @@ def calibrate_benchmark(
     _writable_dir(out)
     doc = run_benchmark(out, cases=cases, seed=seed, workers=workers or default_processes(), diagnose=diagnose,
                         seeds=seeds, resume=not fresh, first=first, kept_dir=kept,
-                        progress=lambda t: console.print(t, markup=False, highlight=False))
+                        progress=lambda t: console.print(t, markup=False, highlight=False, soft_wrap=True))
     sm = doc["summary"]
     table = Table(title=f"calibrate-benchmark: {sm['cases']} foreign axes (seed {seed})", title_justify="left")
     table.add_column("figure")
