@@ -396,6 +396,11 @@ def test_calibrate_bad_input(tmp_path):
     assert r.returncode == 2 and "is a directory; expected a scenario file path" in " ".join(r.stderr.split())
     r = run_twin("calibrate", tmp_path, "-o", tmp_path / "a.toml", "--budget-minutes", "0", check=False)
     assert r.returncode == 2 and "--budget-minutes 0: expected a positive number of minutes" in r.stderr
+    r = run_twin("calibrate-benchmark", "-o", tmp_path / "b", "--cases", "4", "--first", "4", check=False)
+    assert r.returncode == 2 and "--first 4: expected an index below --cases 4 (the cases are 0 to 3)" in " ".join(
+        r.stderr.split())
+    r = run_twin("calibrate-benchmark", "-o", tmp_path / "b", "--kept", tmp_path / "none", check=False)
+    assert r.returncode == 2 and f"--kept {tmp_path / 'none'}: not a directory" in " ".join(r.stderr.split())
 
 
 @pytest.mark.slow

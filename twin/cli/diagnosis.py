@@ -60,6 +60,10 @@ def calibrate_benchmark(
     from twin.harness.calibration.benchmark import run_benchmark
 
     _writable_dir(out)
+    if first >= cases:
+        _fail(f"--first {first}: expected an index below --cases {cases} (the cases are 0 to {cases - 1})")
+    if kept is not None and not kept.is_dir():
+        _fail(f"--kept {kept}: not a directory; expected one holding recorded case entries (case-NNN.json)")
     doc = run_benchmark(out, cases=cases, seed=seed, workers=workers or default_processes(), diagnose=diagnose,
                         seeds=seeds, resume=not fresh, first=first, kept_dir=kept,
                         progress=lambda t: console.print(t, markup=False, highlight=False, soft_wrap=True))
