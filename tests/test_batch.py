@@ -23,35 +23,3 @@ def test_batched_conditions_equal_single_runs():
         np.testing.assert_array_equal(single.sens, b.sens)
     # and the states really differ: backlash shows in the carriage position
     assert np.abs(batch[0].qpos[:, 1] - batch[2].qpos[:, 1] - 0.002).max() > 1e-6
-
-
-def test_a_rollout_takes_one_thread_unless_told_and_threads_change_nothing(monkeypatch):
-    """The cores are the worker processes' (``--workers``): one ``mujoco.rollout`` call runs on one
-    thread by default whatever the machine (a ``--workers 1`` command used to take two cores), and
-    the trajectories are the same on any number of threads."""
-    import os
-
-    from twin.sim.simulate import simulator
-
-    threads: list[int] = []
-    real = simulator.rollout.rollout
-
-    def counted(models, datas, *args, **kw):
-        threads.append(len(datas))
-        return real(models, datas, *args, **kw)
-
-    monkeypatch.setattr(simulator.rollout, "rollout", counted)
-    monkeypatch.setattr(os, "cpu_count", lambda: 8)
-    s = Scenario()
-    sim = Simulator(cp.make_world(s), 2e-4)
-    p2 = s.phase2.model_copy(update={"dwell_s": 0.2, "speeds_mm_s": [100.0], "end_mm": 60.0})
-    cmd = command_profile(phase2_moves(p2), sim.fs, lead_in=0.2)
-    conds = [cp.condition_at(s, h, 0.0) for h in (100.0, 7000.0, 8000.0)]
-    one = sim.run_batch(conds, cmd, passes=1)
-    assert threads and set(threads) == {1}
-    threads.clear()
-    three = sim.run_batch(conds, cmd, passes=1, nthread=3)
-    assert set(threads) == {3}
-    for a, b in zip(one, three, strict=True):
-        np.testing.assert_array_equal(a.qpos, b.qpos)
-        np.testing.assert_array_equal(a.sens, b.sens)

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from dataclasses import dataclass, replace
 
 import mujoco
@@ -235,12 +236,6 @@ def flank_contact_position(sim: Simulator, cond: Condition, cmd: Profile, x_cmd:
             - 0.5 * cond.mech.backlash * held_sign(push, before) - push / k)
 
 
-#: Threads of one ``mujoco.rollout`` call by default: one. The cores are the worker processes'
-#: (``--workers``, ``TWIN_WORKERS``): a rollout that took every core made a ``--workers 1``
-#: command use two on a 2-core machine, and a pool of N processes run N × cores threads.
-ROLLOUT_THREADS = 1
-
-
 def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int = 2,
              nthread: int | None = None, contact_guess: bool = False) -> list[Trajectory]:
     """Roll out several (simulator, condition) pairs under one command in one
@@ -249,8 +244,7 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     The simulators may hold different worlds (rails, effects, servo, sensors: anything but the
     model's structure, see :meth:`Simulator.structure`); the models of different conditions
     differ only in float fields (see :func:`twin.sim.model.apply_state`), so they batch; ``nthread``
-    threads share the work (the GIL is released; default :data:`ROLLOUT_THREADS`, and the same
-    trajectories on any number). A simulator's own model serves its first
+    threads share the work (the GIL is released). A simulator's own model serves its first
     item, copies the others. Each item's trajectory is the one a rollout of it alone gives.
 
     Row k of a trajectory is the state at t_k = k·dt, before step k, which is also when
@@ -289,7 +283,7 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
         s0s.append(initial_state(model, x0 + flank0 - zn * pose[3], theta0, flank0, pose))
         x_rails.append(flank_contact_position(sim, cond, cmd, xc, direction[0]) if contact_guess
                        else stretch * xc - 0.5 * cond.mech.backlash * direction)
-    nthread = min(len(items), nthread or ROLLOUT_THREADS)
+    nthread = nthread or min(len(items), os.cpu_count() or 1)
     datas = [first.data] + [mujoco.MjData(first.model) for _ in range(nthread - 1)]
     nq, nv = first.model.nq, first.model.nv
     # Let the small transient of the analytic rest pose (the x–pitch coupling of the nut,
