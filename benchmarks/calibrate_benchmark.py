@@ -1,6 +1,7 @@
 """The figures of ``twin calibrate-benchmark`` (issue 30, item 3), recorded from its runs.
 
-The benchmark takes about 10 minutes a case on one core (its 24 cases about 4 hours): longer
+The benchmark takes about 35 minutes a case on one core beside a second such process (measured:
+cases 0, 1, 12, 13 of version 14): longer
 than a CI run or a working session, so it is run by hand, in parts if need be, and this script
 records what the parts measured::
 
@@ -29,8 +30,6 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
@@ -41,8 +40,7 @@ from analysis.base.files import write_json  # noqa: E402
 from twin.harness.calibration.benchmark import (  # noqa: E402
     CASE_KINDS,
     case_key,
-    draw_additions,
-    draw_case,
+    draws,
     summarise,
 )
 
@@ -55,10 +53,7 @@ COMMAND = ("twin calibrate-benchmark -o OUT --cases 24 --diagnose --workers 1 [-
 
 def current_keys(cases: int = CASES, seed: int = SEED) -> list[str]:
     """The key of each case's draw under the current code (as ``run_benchmark`` computes it)."""
-    rng = np.random.default_rng(seed)
-    scenarios = [draw_case(rng, i) for i in range(cases)]
-    add_rng = np.random.default_rng([seed, 1])
-    additions = [draw_additions(add_rng, CASE_KINDS[i % len(CASE_KINDS)]) for i in range(cases)]
+    scenarios, additions = draws(cases, seed)
     return [case_key(s, CASE_KINDS[i % len(CASE_KINDS)], *additions[i], diagnose=DIAGNOSE, seeds=TWIN_SEEDS)
             for i, s in enumerate(scenarios)]
 

@@ -377,6 +377,15 @@ def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
+def draws(cases: int, seed: int) -> tuple[list[Scenario], list[tuple[dict, dict]]]:
+    """The ``cases`` foreign axes drawn from ``seed`` (:func:`draw_case`) and what is added to
+    each (:func:`draw_additions`, from the stream ``[seed, 1]``)."""
+    rng = np.random.default_rng(seed)
+    scenarios = [draw_case(rng, i) for i in range(cases)]
+    add_rng = np.random.default_rng([seed, 1])
+    return scenarios, [draw_additions(add_rng, CASE_KINDS[i % len(CASE_KINDS)]) for i in range(cases)]
+
+
 def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers: int = 2,
                   diagnose: bool = False, seeds: int = 4, resume: bool = True, first: int = 0,
                   kept_dir: str | Path | None = None,
@@ -392,10 +401,7 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     key (the entries a benchmark recorded: ``benchmarks/calibrate_benchmark.py``)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(seed)
-    scenarios = [draw_case(rng, i) for i in range(cases)]
-    add_rng = np.random.default_rng([seed, 1])
-    additions = [draw_additions(add_rng, CASE_KINDS[i % len(CASE_KINDS)]) for i in range(cases)]
+    scenarios, additions = draws(cases, seed)
     t0 = time.perf_counter()
     done: list[dict] = []
     doc = {"version": BENCH_VERSION, "seed": seed, "workers": workers, "diagnose": diagnose, "cases_drawn": cases,
@@ -433,5 +439,5 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     return doc
 
 
-__all__ = ["CASE_KINDS", "case_key", "draw_additions", "draw_case", "run_benchmark", "run_oracle", "score_case",
-           "score_diagnosis", "summarise"]
+__all__ = ["CASE_KINDS", "case_key", "draw_additions", "draw_case", "draws", "run_benchmark", "run_oracle",
+           "score_case", "score_diagnosis", "summarise"]
