@@ -1,6 +1,7 @@
 """The blind benchmark of the sim-to-real gap diagnosis (issue 6, issue 15) and `twin diagnose`
-against every candidate on its cache: marker ``validate`` (`make validate`, which CI runs after
-`make test`), the twin's seeds and the candidates' grids being most of a quarter of an hour.
+against every candidate on its cache: marker ``validate`` (`make validate`, run by hand: CI's
+`make validate-ci` leaves this file out), the twin's seeds and the candidates' grids being most
+of a quarter of an hour on a fast 2-core machine.
 
 One session fixture runs ``twin diagnose-benchmark`` (86 cases on scenarios/diagnose-bench.toml,
 diagnosed against the candidates of the three kinds, ``--resim-seeds 0``). With the environment
