@@ -449,6 +449,27 @@ def test_the_recorded_calibrate_benchmark_is_this_codes():
     assert doc["tables"]["cases"] == cb.case_table(entries)
 
 
+def test_a_routine_value_fitted_through_the_servo_is_held_to_its_interval_beside_0p1_percent(monkeypatch):
+    """The summary reads the routine twice: strictly within 0.1 %, and within 0.1 % or, for a
+    value fitted through the servo (its parameter entry ``fitted``), inside its 90 % interval;
+    a measured value outside 0.1 % fails both, whatever an interval says."""
+    from twin.harness.calibration import benchmark as bm
+
+    monkeypatch.setattr(bm, "ROUTINE_KEYS", ("phase1.accel_mm_s2", "phase2.accel_mm_s2"))
+
+    def case(err_acc: float, inside: bool, source: str = "fitted") -> dict:
+        return {"case": 0, "kind": "null", "formats": ["csv"], "calibrate_s": 1.0,
+                "routine": {"phase1.accel_mm_s2": {"error": err_acc, "within": err_acc <= 1e-3},
+                            "phase2.accel_mm_s2": {"error": 0.0, "within": True}},
+                "parameters": {"phase1.accel_mm_s2": {"inside": inside, "source": source, "value": 100.0,
+                                                      "low": 97.0, "high": 104.0}}}
+
+    sm = bm.summarise([case(0.02, True), case(0.02, False), case(0.0005, False), case(0.02, True, "measured")])
+    assert sm["routine_within"] == pytest.approx(5 / 8)
+    assert sm["routine_within_resolution"] == pytest.approx(6 / 8)
+    assert sm["routine_fitted_halfwidth_max"] == pytest.approx(0.035)
+
+
 def test_calibrate_benchmark_split_between_runs_and_recorded_is_taken_not_run(tmp_path, monkeypatch):
     """The bookkeeping of a benchmark too long for one sitting: ``--first K`` runs only the cases
     from K on; a case finished in one run's directory or recorded in ``--kept`` with the same key

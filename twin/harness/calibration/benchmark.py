@@ -319,8 +319,21 @@ def summarise(cases: list[dict]) -> dict:
         for k, v in c["parameters"].items():
             per_key.setdefault(k, []).append(v["inside"])
     worst = {k: max(((c["routine"][k]["error"] or 0.0) for c in cases), default=None) for k in ROUTINE_KEYS}
+    # a routine value fitted through the servo (Phase I's acceleration and dwell, read on the motor
+    # speed alone: no command is recorded) is known to its 90 % interval, which is the channel's
+    # resolution here (the ramps of a few captures); within 0.1 % or inside that interval
+    resolved, halfwidth = [], []
+    for c in cases:
+        for k, v in c["routine"].items():
+            p = c["parameters"].get(k)
+            fitted = p is not None and p.get("source") == "fitted"
+            resolved.append(bool(v["within"] or (fitted and p["inside"])))
+            if fitted:
+                halfwidth.append(0.5 * (p["high"] - p["low"]) / abs(p["value"]))
     out = {"cases": len(cases),
            "routine_within": sum(v["within"] for v in routine) / max(len(routine), 1),
+           "routine_within_resolution": sum(resolved) / max(len(resolved), 1),
+           "routine_fitted_halfwidth_max": max(halfwidth, default=None),
            "routine_worst_error": worst,
            "parameters_inside": sum(v["inside"] for v in params) / max(len(params), 1),
            "parameter_pairs": len(params),
