@@ -119,6 +119,10 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         if not np.isfinite(real[i]):
             skipped[key] = (
                 NO_POSITION_LOOP if stat == "position_response" and not runs else
+                f"the recording's {stat.replace('_', ' ')} cannot be measured: the servo's gain from the command "
+                f"to the IMU needs runs of at least 2 s with motion and an IMU rate above twice "
+                f"{UPPER_BAND_HZ[1] if stat == 'position_response' else VELOCITY_BAND_HZ[1]:g} Hz"
+                if stat in ("loop_response", "position_response") and runs else
                 "the ripple's order is above half the IMU accelerometer's bandwidth at every Phase II speed, or "
                 "no cruise spans 4 of its periods" if stat == "ripple" and runs else
                 f"the recording's {stat.replace('_', ' ')} cannot be measured (no ramp, or no cruise of 4 "
