@@ -43,7 +43,7 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 
 from record import record, text  # noqa: E402
 
-from twin.harness.calibration import calibrate  # noqa: E402
+from twin.harness.calibration import CALIBRATE_VERSION, calibrate  # noqa: E402
 from twin.sim import campaign as cp  # noqa: E402
 from twin.sim.campaign import simulate_campaign  # noqa: E402
 from twin.sim.scenario import from_dict, load  # noqa: E402
@@ -108,7 +108,7 @@ def main() -> None:
     if args.record and not (args.scenario or args.budget_minutes):
         record("bench_calibrate", command=".venv/bin/python benchmarks/bench_calibrate.py --workers 2 --record",
                scale=(f"scenarios/paper-rtf.toml cut after its first Phase I sample and Phase II session, "
-                      f"{args.workers} workers"),
+                      f"{args.workers} workers, CALIBRATE_VERSION {CALIBRATE_VERSION}"),
                figures={"calibrate_min": (round(wall / 60, 2), text(wall / 60, "{:.1f}")),
                         "estimated_min": (None if est is None else round(est / 60, 2),
                                           text(None if est is None else est / 60, "{:.1f}")),

@@ -496,6 +496,16 @@ def test_the_recorded_calibrate_benchmark_is_this_codes():
     assert doc["tables"]["cases"] == cb.case_table(entries)
 
 
+def test_the_recorded_paper_size_calibration_time_is_this_codes():
+    """The paper-size calibration's time in docs/calibration.md (``benchmarks/bench_calibrate.py
+    --record``) was measured by the current calibration: a raised ``CALIBRATE_VERSION`` (which
+    changes what is fitted and so the time) fails here until it is measured again."""
+    from twin.harness.calibration import CALIBRATE_VERSION
+
+    doc = json.loads((REPO / "docs" / "validation.json").read_text())["bench_calibrate"]
+    assert doc["scale"].endswith(f"CALIBRATE_VERSION {CALIBRATE_VERSION}"), doc["scale"]
+
+
 def test_a_routine_value_fitted_through_the_servo_is_held_to_its_interval_beside_0p1_percent(monkeypatch):
     """The summary reads the routine twice: strictly within 0.1 %, and within 0.1 % or, for a
     value fitted through the servo (its parameter entry ``fitted``), inside its 90 % interval;
