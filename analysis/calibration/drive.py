@@ -224,9 +224,9 @@ HIGHPASS_HZ = 2.0
 #: The bands of the loops' statistics, Hz. Around the velocity loop's crossover (30-60 Hz) the
 #: gain of :func:`imu_command_gain` rises monotonically with the velocity loop's bandwidth (and
 #: less with the position loop's); the ratio of the gain above it (60-100 Hz) to the gain there
-#: (:func:`imu_command_rolloff`) falls monotonically with the position loop's bandwidth. Measured
-#: on the twin with each loop ×0.6 and ×1.5 on four axes of the calibrate benchmark; at 10-30 Hz
-#: the gain is not monotonic in the loops, and at 2-10 Hz both loops move it alike.
+#: (:func:`imu_command_rolloff`) falls monotonically with the position loop's bandwidth
+#: (tests/test_calibrate.py checks both on the twin); at 10-30 Hz the gain need not be monotonic
+#: in the loops, and at 2-10 Hz both loops move it alike.
 VELOCITY_BAND_HZ = (30.0, 60.0)
 UPPER_BAND_HZ = (60.0, 100.0)
 
