@@ -107,8 +107,6 @@ def case_table(entries: list[dict]) -> str:
             named, right = f"failed: {e.get('diagnosis_error', '–')[:80]}", "no"
         else:
             named, right = (", ".join(dg["added"]) or "nothing"), ("yes" if dg["correct"] else "no")
-            if dg.get("absorbed"):
-                named += f" ({', '.join(dg['absorbed'])} absorbed by calibrate)"
         oracle = "–" if e["kind"] == "null" else ("yes" if e.get("oracle", {}).get("names_all") else "no")
         axis = f"{ax['lead_mm']:g} mm, {ax['carriage_mass_kg']:g} kg"
         rows.append(f"| {e['case']} | {e['kind']} | {added} | {axis} | {'/'.join(e['formats'])} | "
@@ -136,7 +134,6 @@ def figures(entries: list[dict]) -> dict[str, tuple[float | None, str]]:
                       ("several_nothing_else", "several")):
         v = sm.get(key)
         out[key] = (v, f"{percent(v)} of {n.get(kind, 0)}")
-    out["effect_absorbed"] = (float(sm.get("effect_absorbed", 0)), str(sm.get("effect_absorbed", 0)))
     for key in ("effect_named_first_where_visible", "artefact_named_first_where_visible",
                 "several_all_named_where_visible"):
         v = sm.get(key)

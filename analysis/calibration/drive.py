@@ -32,12 +32,9 @@ The velocity loop's bandwidth shows in the motor speed's overshoot where a ramp 
 proportional-integral loop lets the speed overshoot the new set point by an amount that falls
 as its crossover rises (G. Ellis, "Control System Design Guide", 4th ed., ch. 6: the step response
 of a PI velocity loop); :func:`speed_overshoot` reads it. Where the recording has IMU runs with
-their command, the gain from the commanded to the IMU's axial acceleration in two bands
-(:func:`imu_command_gain`) shows both loops far more precisely: near the velocity loop's crossover
-its gain rises monotonically with the loop's bandwidth, and below it the position loop's tracking
-sets it. (The RMS of the IMU's axial acceleration around each start and stop also moves with the
-velocity loop, but not monotonically: a slow loop and a fast one ring alike, and a fit through it
-can land on the wrong one.)
+their command, the carriage's axial acceleration around each start and stop
+(:func:`imu_reversal`) shows the same loop far more precisely: the jerk of a start excites the
+carriage on the loop-stiffened screw, and how it rings is set by the loop's crossover.
 """
 
 from __future__ import annotations
@@ -216,58 +213,33 @@ def _axial_on_command(run) -> tuple[float, np.ndarray, np.ndarray]:
     return fs, acc, x
 
 
-#: High-pass of the IMU's and the command's acceleration before :func:`imu_command_gain`, Hz
-#: (gravity and drift out).
-HIGHPASS_HZ = 2.0
+#: Half width of the window around each start and stop of :func:`imu_reversal`, s.
+REVERSAL_WINDOW_S = 0.02
+#: High-pass of the IMU's acceleration before :func:`imu_reversal`, Hz (gravity and drift out).
+REVERSAL_HIGHPASS_HZ = 2.0
 
 
-#: The bands of the loops' statistics, Hz. Around the velocity loop's crossover (30-60 Hz) the
-#: gain of :func:`imu_command_gain` rises monotonically with the velocity loop's bandwidth (and
-#: less with the position loop's); the ratio of the gain above it (60-100 Hz) to the gain there
-#: (:func:`imu_command_rolloff`) falls monotonically with the position loop's bandwidth
-#: (tests/test_calibrate.py checks both on the twin); at 10-30 Hz the gain need not be monotonic
-#: in the loops, and at 2-10 Hz both loops move it alike.
-VELOCITY_BAND_HZ = (30.0, 60.0)
-UPPER_BAND_HZ = (60.0, 100.0)
-
-
-def imu_command_gain(run, low_hz: float, high_hz: float) -> float:
-    """The servo's tracking gain in a band: the mean over ``low_hz``–``high_hz`` of |H(f)|, H the
-    frequency response from the commanded acceleration (``position_cmd`` interpolated to the IMU's
-    clock, differentiated twice) to the IMU's axial acceleration (``imu_acc`` column x), both
-    high-passed at :data:`HIGHPASS_HZ` (zero phase; H is unchanged by a filter both
-    pass), estimated as H1 = P_xy / P_xx with Welch's averaged periodograms of 1-s segments
-    (J. S. Bendat and A. G. Piersol, "Random Data", 4th ed., ch. 9). A cascaded position and
-    velocity loop tracks its command with |H| near 1 well below its bandwidths and a gain that
-    the loops' bandwidths set around them (G. Ellis, "Control System Design Guide", 4th ed.,
-    ch. 17); unlike the phase, the gain does not move with a time offset between the IMU's clock
-    and the controller's. Dimensionless; NaN without ``position_cmd``, without motion, or when a
-    run is shorter than two segments or the band holds no bin."""
+def imu_reversal(run) -> float:
+    """Log10 of the RMS (m/s²) of the IMU's axial acceleration, high-passed at
+    :data:`REVERSAL_HIGHPASS_HZ` (zero phase), within ±:data:`REVERSAL_WINDOW_S` of every start
+    and stop of the commanded motion (``position_cmd`` interpolated to the IMU's clock, moving
+    where its speed exceeds 0.1 mm/s) of a Phase II run. NaN without ``position_cmd`` or motion."""
     if getattr(run, "position_cmd", None) is None:
         return float("nan")
     fs, acc, x = _axial_on_command(run)
-    n = int(round(fs))
-    if acc.size < 2 * n or high_hz >= 0.5 * fs:
+    if acc.size < 64:
         return float("nan")
-    cmd = np.gradient(np.gradient(x, 1.0 / fs), 1.0 / fs)
-    if not np.any(cmd):
+    moving = np.abs(np.gradient(x, 1.0 / fs)) > 1e-4
+    edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
+    if edges.size == 0:
         return float("nan")
-    sos = signal.butter(4, HIGHPASS_HZ, "highpass", fs=fs, output="sos")
-    cmd, acc = signal.sosfiltfilt(sos, cmd), signal.sosfiltfilt(sos, acc)
-    f, pxy = signal.csd(cmd, acc, fs=fs, nperseg=n)
-    _, pxx = signal.welch(cmd, fs=fs, nperseg=n)
-    band = (f >= low_hz) & (f < high_hz) & (pxx > 0)
-    if not band.any():
-        return float("nan")
-    return float(np.mean(np.abs(pxy[band] / pxx[band])))
-
-
-def imu_command_rolloff(run) -> float:
-    """The ratio of :func:`imu_command_gain` over :data:`UPPER_BAND_HZ` to the gain over
-    :data:`VELOCITY_BAND_HZ` (the position loop's statistic): how the servo's tracking rolls off
-    above the velocity loop's crossover, which a faster position loop lowers. Dimensionless; NaN
-    where either gain is (the upper band needs an IMU rate above 200 Hz)."""
-    return imu_command_gain(run, *UPPER_BAND_HZ) / imu_command_gain(run, *VELOCITY_BAND_HZ)
+    w = max(1, int(round(REVERSAL_WINDOW_S * fs)))
+    near = np.zeros(acc.size, bool)
+    for e in edges:
+        near[max(0, e - w):e + w + 1] = True
+    sos = signal.butter(4, REVERSAL_HIGHPASS_HZ, "highpass", fs=fs, output="sos")
+    hp = signal.sosfiltfilt(sos, acc)
+    return float(np.log10(np.sqrt(np.mean(hp[near] ** 2)) + 1e-15))
 
 
 #: Lower end of the band :func:`imu_yaw_mode` looks in, Hz (below it, the motion's own content).

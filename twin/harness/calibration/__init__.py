@@ -9,9 +9,8 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
    inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl. Econometrics
    8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the torque's rigid-body
    fit J and c_v, the drag over the cruise, the ripple at its order, the carriage's vertical and
-   lateral suspension modes on the nut accelerometers, the servo's tracking gain from the
-   commanded to the IMU's axial acceleration in the Phase II runs and its roll-off) and the
-   routine fit's acceleration are computed on the
+   lateral suspension modes on the nut accelerometers, the IMU's axial acceleration around the
+   starts and stops of the Phase II runs) and the routine fit's acceleration are computed on the
    recording's first Phase I sample and on the twin simulated with the same layout and one seed
    (common random numbers: every evaluation draws the same noise), and
    ``scipy.optimize.least_squares`` (trust-region reflective, bounds a factor of 10 either side of
@@ -25,14 +24,13 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
    J⁻ᵀ: one regression gives J and c_v, and a machine's draw moves them together).
 
 Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters (each
-responds mostly to one: J to the mass, the cruise's drag to the rails' friction, c_v to the viscous
-drag, the ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, a
-suspension mode's frequency to the trucks' stiffness in its direction and the mass, the tracking
-gain around the velocity loop's crossover, or the speed's overshoot, to the velocity loop's
-bandwidth, the gain's roll-off above it to the position loop's), the problem is square and small
-(10 unknowns), and with common random numbers the residual is deterministic, so a Gauss–Newton
-method converges in a few Jacobians where a Bayesian optimiser would need tens of evaluations; its
-Jacobian is also what the intervals need.
+responds mostly to one: J to the mass, the cruise's drag to the rails' friction, c_v to the viscous drag, the
+ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, a suspension mode's
+frequency to the trucks' stiffness in its direction and the mass, the IMU's ringing around the
+starts and stops, or the speed's overshoot, to the velocity loop's bandwidth), the problem is
+square and small (9 unknowns), and with common random numbers the residual is deterministic, so a
+Gauss–Newton method converges in a few Jacobians where a Bayesian optimiser would need tens of
+evaluations; its Jacobian is also what the intervals need.
 
 What the recording cannot inform keeps the twin's default and says why (:data:`NOT_INFORMED`).
 

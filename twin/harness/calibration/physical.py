@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize
 
-from analysis.calibration.drive import UPPER_BAND_HZ, VELOCITY_BAND_HZ
 from analysis.calibration.sensor_chain import Measured
 from analysis.dataset import open_measurements
 from twin.harness.calibration.sensors import corrected_sensor_values
@@ -29,7 +28,6 @@ from twin.harness.calibration.values import (
     MAX_JACOBIANS,
     MAX_SPAN,
     MIN_SEEN,
-    NO_POSITION_LOOP,
     PRIOR_FACTOR,
     SPREAD_SEEDS,
     T90,
@@ -118,11 +116,6 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     for i, (key, stat, _) in enumerate(FITTED):
         if not np.isfinite(real[i]):
             skipped[key] = (
-                NO_POSITION_LOOP if stat == "position_response" and not runs else
-                f"the recording's {stat.replace('_', ' ')} cannot be measured: the servo's gain from the command "
-                f"to the IMU needs runs of at least 2 s with motion and an IMU rate above twice "
-                f"{UPPER_BAND_HZ[1] if stat == 'position_response' else VELOCITY_BAND_HZ[1]:g} Hz"
-                if stat in ("loop_response", "position_response") and runs else
                 "the ripple's order is above half the IMU accelerometer's bandwidth at every Phase II speed, or "
                 "no cruise spans 4 of its periods" if stat == "ripple" and runs else
                 f"the recording's {stat.replace('_', ' ')} cannot be measured (no ramp, or no cruise of 4 "
@@ -414,14 +407,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         if stat in ("accel", "dwell"):
             note = f"fitted through the twin's servo to the moves of {len(caps)} Phase I captures"
         elif stat == "loop_response" and runs:
-            note = (f"fitted jointly to the gain from the commanded to the IMU's axial acceleration at "
-                    f"{VELOCITY_BAND_HZ[0]:g}-{VELOCITY_BAND_HZ[1]:g} Hz in {len(runs)} Phase II runs at "
-                    f"{session_h:g} h")
-        elif stat == "position_response":
-            note = (f"fitted jointly to the ratio of the gain from the commanded to the IMU's axial acceleration "
-                    f"at {UPPER_BAND_HZ[0]:g}-{UPPER_BAND_HZ[1]:g} Hz to its gain at {VELOCITY_BAND_HZ[0]:g}-"
-                    f"{VELOCITY_BAND_HZ[1]:g} Hz"
-                    + (f" in {len(runs)} Phase II runs at {session_h:g} h" if runs else ""))
+            note = (f"fitted jointly to the IMU's axial acceleration around the starts and stops of {len(runs)} "
+                    f"Phase II runs at {session_h:g} h")
         elif stat == "loop_response":
             note = f"fitted jointly to the motor speed's overshoot at the ramps' ends in {len(caps)} Phase I captures"
         elif stat == "lateral_mode" and runs:
