@@ -79,7 +79,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         work = args.out or Path(tmp)
         if args.sessions:
-            figures = by_parts(work, scale, where, args.sessions, show)
+            figures = by_parts(work, scale, where, args.sessions, show, full=args.scale == 1.0)
             if args.record:
                 record_parts(figures, args)
             return None
@@ -96,11 +96,11 @@ def main() -> None:
              twin("detect", str(rtf), "--reference", str(ref), "-o", str(work / "detect")))
 
 
-def by_parts(work: Path, scale: list[str], where: list[str], n: int, show) -> dict:
+def by_parts(work: Path, scale: list[str], where: list[str], n: int, show, full: bool) -> dict:
     """Phase I alone, the first ``n`` Phase II sessions alone, ``twin backlash`` on those, and the
     whole campaign projected from them; each output is deleted once measured (disk). Returns the
     figures: ``steps`` [(step, (wall s, CPU s, peak MB), output GB or None)], ``sessions`` (n of
-    how many), and at full scale :func:`against_units`' comparison under ``units``."""
+    how many), and at full scale (``full``) :func:`against_units`' comparison under ``units``."""
     import shutil
 
     sys.path.insert(0, str(REPO))
@@ -108,7 +108,8 @@ def by_parts(work: Path, scale: list[str], where: list[str], n: int, show) -> di
     from twin.sim.scenario import load
 
     paper = str(REPO / "scenarios/paper-rtf.toml")
-    hours = [u.hours for u in plan(load(paper, [scale[1]])) if u.kind == "phase2"]
+    units = plan(load(paper, [scale[1]]))
+    hours = [u.hours for u in units if u.kind == "phase2"]
     n = min(n, len(hours))
     p1, p2 = work / "phase1", work / "phase2"
     a = twin("simulate", paper, "-o", str(p1), *scale, "--set", "campaign.phase2=false", *where)
@@ -129,10 +130,10 @@ def by_parts(work: Path, scale: list[str], where: list[str], n: int, show) -> di
     shutil.rmtree(p2)
     out = {"sessions": (n, len(hours)), "steps": [
         ("`twin simulate paper-rtf --set campaign.phase2=false` "
-         f"({sum(u.kind == 'phase1' for u in plan(load(paper, [scale[1]])))} captures)", a, gb1),
+         f"({sum(u.kind == 'phase1' for u in units)} captures)", a, gb1),
         (f"`twin simulate paper-rtf --set campaign.phase1=false`, {n} sessions of 90 runs", b, gb2),
         (f"`twin backlash` on those {n} sessions", c, None)]}
-    if scale[1] in ("campaign.scale=1", "campaign.scale=1.0"):
+    if full:
         out["units"] = against_units(a[1], b[1] * k)
         out["backlash_cpu_per_session_s"] = c[1] / n
         out["backlash_cpu_all_s"] = c[1] * k
@@ -162,7 +163,7 @@ def against_units(phase1_cpu: float, phase2_cpu: float) -> dict:
           f"{measured / (est1 + est2):.2f} ({rate})")
     return {"measured_s": measured, "phase1_s": phase1_cpu, "phase2_s": phase2_cpu, "bare_s": bare,
             "projected_s": est1 + est2, "projected_phase1_s": est1, "projected_phase2_s": est2,
-            "bare_steps_per_s": f["bare_steps_per_s"], "sessions": c["phase2"]}
+            "bare_steps_per_s": f["bare_steps_per_s"]}
 
 
 #: The goals the projection is held to (issue 35's and the campaign's): 2 cores, minutes.
