@@ -20,6 +20,7 @@ from analysis.dataset import open_measurements
 from twin.harness.calibration.sensors import corrected_sensor_values
 from twin.harness.calibration.twin_statistics import _statistics, evaluate
 from twin.harness.calibration.values import (
+    CONVERGED_CHI2,
     FIT_CAPTURES,
     FIT_RUNS,
     FIT_SEEDS,
@@ -27,6 +28,7 @@ from twin.harness.calibration.values import (
     LOG_STEP,
     MAX_JACOBIANS,
     MAX_SPAN,
+    MAX_STEPS,
     MIN_SEEN,
     PRIOR_FACTOR,
     SPREAD_SEEDS,
@@ -175,11 +177,12 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         """Time of ``n_points`` evaluations of ``n_seeds`` seeds each on the workers."""
         return unit_s * math.ceil(n_points * n_seeds / max(1, workers))
 
-    # at most: the first Jacobian, MAX_JACOBIANS more, the spread at the solution; at least
-    # (what a fit with intervals needs): the first Jacobian, one step and its Jacobian, the spread
+    # at most: the first Jacobian, MAX_STEPS steps, the Jacobian at the solution, MAX_JACOBIANS
+    # more with their steps, the spread at the solution; at least (what a fit with intervals
+    # needs): the first Jacobian, one step, the Jacobian at the solution, the spread
     reserve_s = cost_s(1, SPREAD_SEEDS) + 2.0  # the spread at the solution, the files
-    full = cost_s((MAX_JACOBIANS + 1) * (len(keys) + 1)) + reserve_s
-    least = cost_s(3 * (len(keys) + 1)) + reserve_s
+    full = cost_s((MAX_JACOBIANS + 2) * (len(keys) + 1) + (MAX_JACOBIANS + 1) * MAX_STEPS) + reserve_s
+    least = cost_s(2 * (len(keys) + 1) + 1) + reserve_s
     elapsed = spent_s + (time.perf_counter() - t0)
     total = elapsed + full
     deadline = None if budget_s is None else t0 + budget_s - spent_s
@@ -217,13 +220,9 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     def resid(x: np.ndarray) -> np.ndarray:
         return np.nan_to_num((values_at([x])[0] - target) / se, nan=1e6)[rows]
 
-    def jac(x: np.ndarray, cols: np.ndarray, final: bool = False) -> np.ndarray:
-        """d(residual)/d(log p) of the parameters ``cols`` at ``x`` (all parameters); unless
-        ``final`` (the intervals'), :class:`_OutOfTime` when it and the fit's end would pass
-        the budget's deadline."""
-        if deadline is not None and not final and (
-                time.perf_counter() + cost_s(len(cols) + 1) * 2 + reserve_s > deadline):
-            raise _OutOfTime
+    def jac(x: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """d(residual)/d(log p) of the parameters ``cols`` at ``x`` (all parameters), by forward
+        differences of :data:`LOG_STEP`."""
         pts = [x.copy() for _ in cols]
         for p, j in zip(pts, cols, strict=True):
             p[j] += LOG_STEP
@@ -237,7 +236,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     # it is not informed by this recording (e.g. the rails' friction behind a screw of 5 mm
     # lead): kept at its start, its statistic out of the fit.
     all_cols = np.arange(len(keys))
-    j0 = jac(x0, all_cols, final=True)
+    j0 = jac(x0, all_cols)
     seen = np.abs(np.diag(j0)) * math.log(2.0) >= MIN_SEEN
     for j in np.flatnonzero(~seen):
         skipped[keys[j]] = (f"the recording's {FITTED[use[j]][1].replace('_', ' ')} moves by "
@@ -256,34 +255,68 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
 
     stopped: list[str] = []
 
-    def solve(start_at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(the solution, all parameters; its residuals) of the parameters ``free`` from
-        ``start_at``; at the budget's deadline, the best point evaluated so far."""
+    def solve(start_at: np.ndarray, j_start: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(the solution, all parameters; its residuals; the finite-difference Jacobian of the
+        parameters ``free`` there) from ``start_at``, ``j_start`` the Jacobian of ``free`` at or
+        near it. ``least_squares`` steps on a Jacobian kept up to date by Broyden's rank-one
+        updates between its accepted points (one simulated point a step, where a finite-difference
+        Jacobian costs one a parameter); at its solution the Jacobian is differenced again, and
+        while its Gauss–Newton step would still lower the squared residuals by
+        :data:`CONVERGED_CHI2` or more (the updates had drifted), the fit goes on from there with
+        it, :data:`MAX_JACOBIANS` times at most. At the budget's deadline: the best point
+        evaluated so far."""
         tried: list[tuple[float, np.ndarray, np.ndarray]] = []
 
         def f(z: np.ndarray) -> np.ndarray:
+            # room for this point, the Jacobian at the solution and the spread
+            if deadline is not None and tried and (
+                    time.perf_counter() + cost_s(free.size + 2) + reserve_s > deadline):
+                raise _OutOfTime
             r = resid(embed(z))
             tried.append((float(r @ r), z.copy(), r))
             return r
 
-        try:
-            sol = optimize.least_squares(f, start_at[free], jac=lambda z: jac(embed(z), free),
-                                         bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
-                                         xtol=1e-3, ftol=1e-4, max_nfev=MAX_JACOBIANS * 2)
-        except _OutOfTime:
-            _, z, r = min(tried, key=lambda t: t[0])  # least_squares evaluates the start before any Jacobian
-            stopped.append(f"the fit stopped at the budget's deadline after {sims[0]} evaluations (not "
-                           f"converged: the best point so far, residual {float(np.sqrt(r @ r)):.2f} standard "
-                           "errors); a larger --budget-minutes lets it converge")
-            progress(f"layer c: {stopped[-1]}")
-            return embed(z), r
-        return embed(sol.x), sol.fun
+        def broyden(j_at: np.ndarray):
+            last: list = [None, None, j_at]  # the last accepted point, its residuals, the Jacobian
+
+            def j(z: np.ndarray) -> np.ndarray:
+                r = resid(embed(z))  # evaluated already (memo)
+                if last[0] is not None:
+                    dz, df = z - last[0], r - last[1]
+                    if float(dz @ dz) > 0:
+                        last[2] = last[2] + np.outer(df - last[2] @ dz, dz) / float(dz @ dz)
+                last[0], last[1] = z.copy(), r
+                return last[2]
+            return j
+
+        z, j_at = start_at[free], j_start
+        for refreshed in range(MAX_JACOBIANS + 1):
+            try:
+                sol = optimize.least_squares(f, z, jac=broyden(j_at), bounds=(lo[free], hi[free]), method="trf",
+                                             x_scale="jac", xtol=1e-3, ftol=1e-4, max_nfev=MAX_STEPS)
+            except _OutOfTime:
+                _, zb, r = min(tried, key=lambda t: t[0])  # least_squares evaluates its start first
+                stopped.append(f"the fit stopped at the budget's deadline after {sims[0]} evaluations (not "
+                               f"converged: the best point so far, residual {float(np.sqrt(r @ r)):.2f} standard "
+                               "errors); a larger --budget-minutes lets it converge")
+                progress(f"layer c: {stopped[-1]}")
+                return embed(zb), r, jac(embed(zb), free)
+            z, fun_z = sol.x, sol.fun
+            j_at = jac(embed(z), free)
+            step = np.linalg.lstsq(j_at, -fun_z, rcond=None)[0]
+            gain = float(fun_z @ fun_z - np.sum((fun_z + j_at @ step) ** 2))
+            if gain < CONVERGED_CHI2 or refreshed == MAX_JACOBIANS or (
+                    deadline is not None and time.perf_counter() + cost_s(free.size + 3) + reserve_s > deadline):
+                break
+            progress(f"layer c: the Jacobian at the solution predicts {gain:.2g} lower squared residuals: "
+                     "fitted on from there with it")
+        return embed(z), fun_z, j_at
 
     if free.size:
-        xs, fun = solve(x0)
+        xs, fun, J = solve(x0, j0[np.ix_(free, free)])
         # the delta method with the statistics' full covariance: one regression gives J and
         # c_v, and a machine's draw moves them together, so their errors correlate
-        J = jac(xs, free, final=True) * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
+        J = J * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
     # the machine-to-machine scatter at the solution (it grows with the ripple, the drags, the
     # noise): the spread's seeds again, with layer (b)'s first correction set
     first: dict[str, float] = {}
@@ -383,8 +416,9 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 progress(f"layer c: {keys[j]} not told apart jointly; {stopped[-1]}")
             else:
                 progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
-                xs, fun = solve(xs)
-                J = jac(xs, free, final=True) * se[free][:, None]
+                keep = np.delete(np.arange(J.shape[0]), w)
+                xs, fun, J = solve(xs, J[np.ix_(keep, keep)] / se[free][:, None])
+                J = J * se[free][:, None]
             cov, sd, sd_all, a, prior, kept = marginal(J)
         sd = sd_all
     else:

@@ -7,13 +7,20 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 
-CALIBRATE_VERSION = 14
+CALIBRATE_VERSION = 16
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
 FIT_RUNS = 2
-#: Jacobian evaluations least_squares may make (each simulates 1 + the parameters' count).
-MAX_JACOBIANS = 6
+#: Finite-difference Jacobians a fit may make beyond the first and the one at its solution (each
+#: simulates 1 + the parameters' count): one more each time the Jacobian at a solution found with
+#: Broyden's updates still predicts a step (:data:`CONVERGED_CHI2`).
+MAX_JACOBIANS = 2
+#: Evaluations of the residual one Broyden fit may make (each simulates one point).
+MAX_STEPS = 16
+#: A fit has converged when the Gauss–Newton step of the finite-difference Jacobian at its
+#: solution would lower the sum of squared residuals (in standard errors) by less than this.
+CONVERGED_CHI2 = 0.25
 #: Twin seeds simulated at the start point: their scatter is the machine-to-machine part of the
 #: statistics' error (the twin's random geometry, ripple phase, ... at the same parameters).
 SPREAD_SEEDS = 8
