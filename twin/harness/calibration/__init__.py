@@ -15,7 +15,12 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
    (common random numbers: every evaluation draws the same noise), and
    ``scipy.optimize.least_squares`` (trust-region reflective, bounds a factor of 10 either side of
    the start) moves the parameters until the two agree within the statistics' standard errors. The
-   Jacobian's columns are simulated together (one batched rollout per capture). The 90 % intervals
+   Jacobian is differenced at the start (its columns simulated together: one batched rollout per
+   capture) and kept up to date between the fit's steps by Broyden's rank-one updates (C. G.
+   Broyden, "A class of methods for solving nonlinear simultaneous equations", Math. Comp. 19,
+   1965: one simulated point a step where a differenced Jacobian costs one a parameter); at the
+   solution it is differenced again, and the fit goes on with it while its Gauss–Newton step
+   would still lower the squared residuals (:data:`CONVERGED_CHI2`). The 90 % intervals
    come from the Jacobian at the solution and the statistics' errors (delta method: Cov = (JᵀJ)⁻¹
    for residuals in units of their standard error); an error is the recording's own (the scatter
    over its captures), the twin's, and the scatter of the statistic over :data:`SPREAD_SEEDS` twin
@@ -29,7 +34,7 @@ ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, 
 frequency to the trucks' stiffness in its direction and the mass, the IMU's ringing around the
 starts and stops, or the speed's overshoot, to the velocity loop's bandwidth), the problem is
 square and small (9 unknowns), and with common random numbers the residual is deterministic, so a
-Gauss–Newton method converges in a few Jacobians where a Bayesian optimiser would need tens of
+Gauss–Newton method converges in a few steps where a Bayesian optimiser would need tens of
 evaluations; its Jacobian is also what the intervals need.
 
 What the recording cannot inform keeps the twin's default and says why (:data:`NOT_INFORMED`).

@@ -394,7 +394,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             if not free.size:
                 xs, fun = x0.copy(), np.zeros(0)
                 break
-            if deadline is not None and time.perf_counter() + cost_s(2 * (free.size + 1)) + reserve_s > deadline:
+            if deadline is not None and time.perf_counter() + cost_s(free.size + 3) + reserve_s > deadline:
                 # No time left to fit the rest again before the budget's deadline: the linearised
                 # fit instead. The kept parameter back at its start moves the others' statistics
                 # by J[:, w]·Δ; the others move by -J_ff⁻¹·J[:, w]·Δ to answer it, and their
