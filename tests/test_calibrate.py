@@ -29,8 +29,9 @@ from analysis.calibration.sensor_chain import (
 from analysis.ingest.routine import COMMAND_RAMP, MEASURED_RAMP, fit_command, fit_moves, routine_of_moves
 
 REPO = Path(__file__).resolve().parent.parent
-#: A smaller stroke and shorter captures than the shipped scenario: the round trip in make test.
-SMALL = ("phase2.start_mm=40.0", "phase2.end_mm=240.0", "phase1.capture_s=1.5", "phase2.session_hours=[50.0, 250.0]",
+#: A 100-mm Phase II stroke, shorter captures and two sessions (the shipped scenario: 360 mm, 2-s
+#: captures, three sessions): the round trip in make test.
+SMALL = ("phase2.start_mm=40.0", "phase2.end_mm=140.0", "phase1.capture_s=1.5", "phase2.session_hours=[50.0, 250.0]",
          "phase1.sample_interval_hours=200.0")
 
 
