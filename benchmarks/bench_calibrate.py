@@ -38,13 +38,6 @@ import numpy as np
 from mujoco import rollout
 
 REPO = Path(__file__).resolve().parents[1]
-#: Issue 30's goal for a paper-size recording on 2 cores, s.
-GOAL_S = 15 * 60.0
-
-
-def goal_verdict(calibrate_s: float) -> str:
-    """"met" when the calibration took at most :data:`GOAL_S`, else "not met"."""
-    return "met" if calibrate_s <= GOAL_S else "not met"
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
@@ -55,6 +48,15 @@ from twin.sim import campaign as cp  # noqa: E402
 from twin.sim.campaign import simulate_campaign  # noqa: E402
 from twin.sim.scenario import from_dict, load  # noqa: E402
 from twin.sim.simulate import Simulator, phase1_profile  # noqa: E402
+
+#: Issue 30's goal for a paper-size recording on 2 cores, s.
+GOAL_S = 15 * 60.0
+
+
+def goal_verdict(calibrate_s: float) -> str:
+    """"met" when the calibration took at most :data:`GOAL_S`, else "not met"."""
+    return "met" if calibrate_s <= GOAL_S else "not met"
+
 
 
 def bare_steps_per_s(s) -> float:
