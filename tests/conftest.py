@@ -162,8 +162,8 @@ LONG_FILES = ("test_calibrate.py", "test_gate.py", "test_phase2_backlash.py", "t
 
 
 #: Module fixtures whose setup (counted in the timeout of the first test that takes them) takes
-#: longest: on the 2-core machine where `make test` took 33 min, the calibration round trip 354 s
-#: and the gate's cold build 321 s. Their tests get 30 min, more than 3x that, so a busy machine
+#: longest: on the 2-core machine where `make test` took 30 min, the gate's cold build 328 s and
+#: the calibration round trip 179 s. Their tests get 30 min, more than 3x that, so a busy machine
 #: does not fail them.
 LONG_FIXTURES = ("round_trip", "cold")
 
