@@ -459,7 +459,12 @@ def test_the_recorded_paper_size_calibration_time_is_this_codes():
     doc = json.loads((REPO / "docs" / "validation.json").read_text())["bench_calibrate"]
     assert doc["scale"].endswith(f"CALIBRATE_VERSION {CALIBRATE_VERSION}"), doc["scale"]
     # the goal's verdict (issue 30: at most 15 min on 2 cores) is the recorded time's
-    assert doc["figures"]["goal"]["text"] == ("met" if doc["figures"]["calibrate_min"]["value"] <= 15 else "not met")
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_calibrate", REPO / "benchmarks" / "bench_calibrate.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert doc["figures"]["goal"]["text"] == bench.goal_verdict(60.0 * doc["figures"]["calibrate_min"]["value"])
 
 
 def test_a_routine_value_fitted_through_the_servo_is_held_to_its_interval_beside_0p1_percent(monkeypatch):

@@ -186,6 +186,11 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     elapsed = spent_s + (time.perf_counter() - t0)
     total = elapsed + full
     deadline = None if budget_s is None else t0 + budget_s - spent_s
+
+    def no_room_for(n_points: int) -> bool:
+        """Whether ``n_points`` evaluations and the fit's end (the spread, the files) would pass
+        the budget's deadline (never without a budget)."""
+        return deadline is not None and time.perf_counter() + cost_s(n_points) + reserve_s > deadline
     progress(f"layer c: {len(keys)} parameters jointly; one twin evaluation {unit_s:.1f} s: the calibration "
              f"takes at most {total / 60:.1f} min, and a fit again for every parameter found not told apart"
              + ("" if budget_s is None or total <= budget_s else
@@ -269,8 +274,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
 
         def f(z: np.ndarray) -> np.ndarray:
             # room for this point, the Jacobian at the solution and the spread
-            if deadline is not None and tried and (
-                    time.perf_counter() + cost_s(free.size + 2) + reserve_s > deadline):
+            if tried and no_room_for(free.size + 2):
                 raise _OutOfTime
             r = resid(embed(z))
             tried.append((float(r @ r), z.copy(), r))
@@ -305,8 +309,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             j_at = jac(embed(z), free)
             step = np.linalg.lstsq(j_at, -fun_z, rcond=None)[0]
             gain = float(fun_z @ fun_z - np.sum((fun_z + j_at @ step) ** 2))
-            if gain < CONVERGED_CHI2 or refreshed == MAX_JACOBIANS or (
-                    deadline is not None and time.perf_counter() + cost_s(free.size + 3) + reserve_s > deadline):
+            if gain < CONVERGED_CHI2 or refreshed == MAX_JACOBIANS or no_room_for(free.size + 3):
                 break
             progress(f"layer c: the Jacobian at the solution predicts {gain:.2g} lower squared residuals: "
                      "fitted on from there with it")
@@ -394,12 +397,12 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             if not free.size:
                 xs, fun = x0.copy(), np.zeros(0)
                 break
-            if deadline is not None and time.perf_counter() + cost_s(free.size + 3) + reserve_s > deadline:
+            keep = np.delete(np.arange(J.shape[0]), w)  # J's rows and columns of the others
+            if no_room_for(free.size + 3):  # a refit's steps and the Jacobian at its solution
                 # No time left to fit the rest again before the budget's deadline: the linearised
                 # fit instead. The kept parameter back at its start moves the others' statistics
                 # by J[:, w]·Δ; the others move by -J_ff⁻¹·J[:, w]·Δ to answer it, and their
                 # Jacobian is J without the kept one's row and column.
-                keep = np.delete(np.arange(J.shape[0]), w)
                 step = x0[j] - xs[j]
                 xs = xs.copy()
                 xs[j] = x0[j]
@@ -416,7 +419,6 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 progress(f"layer c: {keys[j]} not told apart jointly; {stopped[-1]}")
             else:
                 progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
-                keep = np.delete(np.arange(J.shape[0]), w)
                 xs, fun, J = solve(xs, J[np.ix_(keep, keep)] / se[free][:, None])
                 J = J * se[free][:, None]
             cov, sd, sd_all, a, prior, kept = marginal(J)
