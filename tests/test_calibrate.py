@@ -496,7 +496,8 @@ def test_calibrate_benchmark_split_between_runs_and_recorded_is_taken_not_run(tm
 
     ran: list[int] = []
 
-    def fake_case(i, s, out, workers, diagnose, seeds, progress, kind="null", effects=None, artefacts=None):
+    def fake_case(i, s, out, workers, diagnose, seeds, progress, kind="null", effects=None, artefacts=None,
+                  key=None):
         ran.append(i)
         return {"case": i, "kind": kind, "effects": effects or {}, "artefacts": artefacts or {},
                 "formats": ["csv", "mat"], "calibrate_s": 1.0,
@@ -521,6 +522,63 @@ def test_calibrate_benchmark_split_between_runs_and_recorded_is_taken_not_run(tm
     merged = bm.run_benchmark(tmp_path / "b", cases=4, kept_dir=kept, **quiet)
     assert ran == [1]  # 0 recorded, 2 and 3 finished in b, 1 recorded by another version
     assert merged["summary"] == a["summary"]
+
+
+def test_calibrate_benchmark_stopped_in_a_diagnosis_goes_on_from_its_calibration(tmp_path, monkeypatch):
+    """A case stopped after its calibration (in its diagnosis) is not calibrated again when the
+    benchmark runs again with the same key: the twin is not simulated again either, and the entry
+    carries the first run's calibration and times; with another key (another version) the case
+    starts over."""
+    import analysis.ingest
+    import analysis.ingest.check
+    import twin.harness.calibration
+    import twin.harness.diagnosis.runner
+    import twin.harness.lab_export
+    import twin.sim.campaign
+    from analysis.diagnosis.attribution import NO_GAP
+    from twin.harness.calibration import benchmark as bm
+    from twin.sim.scenario import load
+
+    scenario = REPO / "scenarios" / "foreign-16mm.toml"
+    s = load(scenario)
+    calls = {"simulate": 0, "calibrate": 0, "diagnose": 0}
+
+    def fake_simulate(scn, out, workers=1):
+        calls["simulate"] += 1
+        Path(out).mkdir(parents=True)
+
+    def fake_calibrate(recording, out_toml, **kw):
+        calls["calibrate"] += 1
+        Path(out_toml).write_text(scenario.read_text())
+        record = {"seconds": 123.0, "estimated_s": 100.0, "values": [
+            {"key": "axis.carriage_mass_kg", "value": s.axis.carriage_mass_kg, "low": 0.0, "high": 1e3,
+             "source": "fitted"}]}
+        Path(out_toml).with_suffix(".calibration.json").write_text(json.dumps(record))
+        return record
+
+    def fake_diagnosis(*a, **kw):
+        calls["diagnose"] += 1
+        if calls["diagnose"] == 1:
+            raise KeyboardInterrupt  # the benchmark stopped by hand in its first diagnosis
+        return {"added": [], "verdict": NO_GAP, "heldout_gap_before": 1.0, "heldout_gap_critical": 2.0}
+
+    monkeypatch.setattr(twin.sim.campaign, "simulate_campaign", fake_simulate)
+    monkeypatch.setattr(twin.harness.lab_export, "export", lambda *a, **kw: None)
+    monkeypatch.setattr(analysis.ingest, "run_import", lambda *a, **kw: None)
+    monkeypatch.setattr(analysis.ingest.check, "require_clean_recording", lambda *a, **kw: None)
+    monkeypatch.setattr(analysis.ingest.check, "check_record", lambda *a, **kw: {"errors": [], "warnings": []})
+    monkeypatch.setattr(twin.harness.calibration, "calibrate", fake_calibrate)
+    monkeypatch.setattr(twin.harness.diagnosis.runner, "run_diagnosis", fake_diagnosis)
+    case = dict(workers=1, diagnose=True, seeds=2, progress=lambda _t: None)
+    with pytest.raises(KeyboardInterrupt):
+        bm.run_case(0, s, tmp_path, **case, key="k1")
+    assert calls == {"simulate": 1, "calibrate": 1, "diagnose": 1}
+    entry = bm.run_case(0, s, tmp_path, **case, key="k1")
+    assert calls == {"simulate": 1, "calibrate": 1, "diagnose": 2}
+    assert entry["calibrate_s"] == 123.0 and entry["parameters"]["axis.carriage_mass_kg"]["inside"]
+    assert entry["diagnosis"]["correct"]
+    bm.run_case(0, s, tmp_path, **case, key="k2")
+    assert calls == {"simulate": 2, "calibrate": 2, "diagnose": 3}
 
 
 def test_a_flagged_channel_keeps_its_defaults():

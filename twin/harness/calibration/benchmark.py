@@ -221,9 +221,13 @@ def score_case(truth: Scenario, calibrated: Scenario, record: dict) -> dict:
 
 def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds: int,
              progress: Callable[[str], None], kind: str = "null", effects: dict | None = None,
-             artefacts: dict | None = None) -> dict:
+             artefacts: dict | None = None, key: str | None = None) -> dict:
     """One case end to end in ``out/case-NNN``: the axis ``s`` with ``effects`` added to the
-    machine and ``artefacts`` to its recording; returns its entry of the JSON."""
+    machine and ``artefacts`` to its recording; returns its entry of the JSON. With ``key`` (the
+    case's :func:`case_key`), a finished calibration is marked with it in
+    ``case-NNN/calibrated.json``: a run stopped during the diagnosis goes on from the calibration
+    with the same key instead of calibrating again (the diagnosis's own cache, in the case's
+    directory too, keeps the twin simulations it had finished)."""
     from analysis.diagnosis.artefacts import apply
     from analysis.ingest import run_import
     from analysis.ingest.check import check_record, require_clean_recording
@@ -235,25 +239,34 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     effects, artefacts = dict(effects or {}), dict(artefacts or {})
 
     d = out / f"case-{i:03d}"
-    shutil.rmtree(d, ignore_errors=True)
-    d.mkdir(parents=True)
     f1, f2 = FORMATS[i % len(FORMATS)]
     added = ", ".join([*effects, *artefacts]) or "nothing added"
     step = lambda t: progress(f"case {i} ({kind}): {t}")  # noqa: E731 - a line per step, for a log
-    step(f"simulating the axis (lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg; {added})")
-    t0 = time.perf_counter()
-    simulate_campaign(with_effects(s, effects), d / "twin", workers=1)
-    if artefacts:
-        h5 = d / "twin" / "measurements.h5"
-        apply(h5, h5.with_name("measurements.artefacts.h5"), artefacts, s.seed).replace(h5)
-    spec = export(d / "twin", d / "lab", phase1_format=f1, phase2_format=f2)
-    run_import(spec, output=d / "campaign")
-    t_sim = time.perf_counter() - t0
-    step(f"written out as {f1}/{f2} and imported ({t_sim:.0f} s); calibrating")
-    # as the owner's `twin calibrate` does: what `twin check` flags is not fitted (errors forced)
-    check = check_record(require_clean_recording(d / "campaign", True, "twin calibrate"), True)
-    rec = calibrate(d / "campaign", d / "axis.toml", workers=workers, progress=lambda t: step(f"calibrate: {t}"),
-                    check=check)
+    marker = d / "calibrated.json"
+    earlier = json.loads(marker.read_text()) if key is not None and marker.exists() else {}
+    if key is not None and earlier.get("key") == key:
+        rec = json.loads((d / "axis.calibration.json").read_text())
+        t_sim = earlier["simulate_export_import_s"]
+        step(f"calibrated by an earlier run ({marker}, the same key): taken, not calibrated again")
+    else:
+        shutil.rmtree(d, ignore_errors=True)
+        d.mkdir(parents=True)
+        step(f"simulating the axis (lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg; {added})")
+        t0 = time.perf_counter()
+        simulate_campaign(with_effects(s, effects), d / "twin", workers=1)
+        if artefacts:
+            h5 = d / "twin" / "measurements.h5"
+            apply(h5, h5.with_name("measurements.artefacts.h5"), artefacts, s.seed).replace(h5)
+        spec = export(d / "twin", d / "lab", phase1_format=f1, phase2_format=f2)
+        run_import(spec, output=d / "campaign")
+        t_sim = time.perf_counter() - t0
+        step(f"written out as {f1}/{f2} and imported ({t_sim:.0f} s); calibrating")
+        # as the owner's `twin calibrate` does: what `twin check` flags is not fitted (errors forced)
+        check = check_record(require_clean_recording(d / "campaign", True, "twin calibrate"), True)
+        rec = calibrate(d / "campaign", d / "axis.toml", workers=workers,
+                        progress=lambda t: step(f"calibrate: {t}"), check=check)
+        if key is not None:
+            write_json(marker, {"key": key, "simulate_export_import_s": t_sim})
     cal = load(d / "axis.toml")
     entry = {"case": i, "kind": kind, "effects": effects, "artefacts": artefacts,
              "formats": [f1, f2], "scenario": json.loads(s.to_json()),
@@ -435,7 +448,8 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
         elif i < first:
             continue
         else:
-            entry = {**run_case(i, s, out, workers, diagnose, seeds, progress, kind, *additions[i]), "key": key}
+            entry = {**run_case(i, s, out, workers, diagnose, seeds, progress, kind, *additions[i], key=key),
+                     "key": key}
             write_json(kept, entry, nan_as_null=True)
         if diagnose and kind != "null" and "oracle" not in entry:
             try:
