@@ -442,6 +442,15 @@ def test_the_recorded_calibrate_benchmark_is_this_codes():
     entries = cb.kept_entries()
     stale = [e["case"] for e in entries if e["key"] != keys[e["case"]]]
     assert not stale, f"recorded cases {stale} were measured by another version: run them again or drop them"
+    # scored against the machine (the drawn axis with its effects: benchmark.score_case)
+    from twin.harness.diagnosis.library import with_effects
+    from twin.sim.scenario import from_dict
+
+    for e in entries:
+        machine = with_effects(from_dict(e["scenario"]), e["effects"]).model_dump(mode="json")
+        for key, v in e["parameters"].items():
+            section, name = key.split(".")
+            assert v["truth"] == pytest.approx(machine[section][name], rel=1e-12), (e["case"], key)
     doc = json.loads((REPO / "docs" / "validation.json").read_text()).get("calibrate_benchmark")
     if not entries:
         assert doc is None or doc["figures"]["cases"]["value"] == 0
@@ -579,6 +588,29 @@ def test_calibrate_benchmark_stopped_in_a_diagnosis_goes_on_from_its_calibration
     assert entry["diagnosis"]["correct"]
     bm.run_case(0, s, tmp_path, **case, key="k2")
     assert calls == {"simulate": 2, "calibrate": 2, "diagnose": 3}
+
+
+def test_an_effect_the_calibration_absorbed_counts_as_found():
+    """A servo-dynamics effect (both loops slower) whose every key the calibration fitted, each
+    holding the machine's value inside its interval, is absorbed: the diagnosis that then names
+    nothing is right; with one of its keys left at the default (or outside its interval) it is
+    not, and naming nothing is wrong."""
+    from analysis.diagnosis.attribution import NO_GAP
+    from twin.harness.calibration.benchmark import absorbed_effects, score_diagnosis
+
+    effects = {"servo_dynamics": {"bandwidth_factor": 0.6}}
+    both = {"axis.velocity_bandwidth_hz": {"source": "fitted", "inside": True},
+            "axis.position_bandwidth_hz": {"source": "fitted", "inside": True}}
+    res = {"added": [], "verdict": NO_GAP, "heldout_gap_before": 1.0, "heldout_gap_critical": 2.0}
+    assert absorbed_effects(effects, both) == ["servo_dynamics"]
+    assert score_diagnosis("effect", effects, {}, res, ["servo_dynamics"])["correct"]
+    for missing in ({"axis.velocity_bandwidth_hz": both["axis.velocity_bandwidth_hz"]},
+                    {**both, "axis.position_bandwidth_hz": {"source": "fitted", "inside": False}}):
+        assert absorbed_effects(effects, missing) == []
+        assert not score_diagnosis("effect", effects, {}, res, absorbed_effects(effects, missing))["correct"]
+    # the artefact of a case with both is still to be named
+    several = score_diagnosis("several", effects, {"noise:torque": {"rms": 0.05}}, res, ["servo_dynamics"])
+    assert not several["correct"]
 
 
 def test_a_flagged_channel_keeps_its_defaults():
