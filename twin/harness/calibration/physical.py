@@ -163,7 +163,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     def averaged(points: list[np.ndarray]) -> list[np.ndarray]:
         """The statistics of each point averaged over the FIT_SEEDS seeds."""
         rows = run(points, seeds[:FIT_SEEDS])
-        return [np.nanmean([rows[i * FIT_SEEDS + k][0] for k in range(FIT_SEEDS)], axis=0)[stat_idx]
+        # over the fitted statistics only: one the fit does not use may be NaN at every seed
+        return [np.nanmean(np.array([rows[i * FIT_SEEDS + k][0] for k in range(FIT_SEEDS)])[:, stat_idx], axis=0)
                 for i in range(len(points))]
 
     x0 = np.log(start)
