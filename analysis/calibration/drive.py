@@ -242,6 +242,44 @@ def imu_reversal(run) -> float:
     return float(np.log10(np.sqrt(np.mean(hp[near] ** 2)) + 1e-15))
 
 
+#: The band of :func:`imu_command_gain`, Hz: above the velocity loops of the benchmark's axes,
+#: where the servo's tracking gain rises monotonically with the loop's bandwidth (measured on
+#: the twin with the loop x0.5-2 on three axes of the calibrate benchmark and x0.7-7 on a fourth).
+VELOCITY_BAND_HZ = (30.0, 60.0)
+
+
+def imu_command_gain(run, low_hz: float = VELOCITY_BAND_HZ[0], high_hz: float = VELOCITY_BAND_HZ[1]) -> float:
+    """The servo's tracking gain in a band: the mean over ``low_hz``-``high_hz`` of |H(f)|, H the
+    frequency response from the commanded acceleration (``position_cmd`` interpolated to the
+    IMU's clock, differentiated twice) to the IMU's axial acceleration (``imu_acc`` column x) of
+    a Phase II run, both high-passed at :data:`REVERSAL_HIGHPASS_HZ` (zero phase: H is unchanged
+    by a filter both pass), estimated as H1 = P_xy / P_xx from Welch's averaged periodograms of
+    1-s segments (J. S. Bendat and A. G. Piersol, "Random Data", 4th ed., ch. 9). A cascaded
+    position and velocity loop tracks its command with |H| near 1 well below its bandwidths;
+    around and above the velocity loop's crossover the gain is set by that loop (G. Ellis,
+    "Control System Design Guide", 4th ed., ch. 17). Unlike the phase, the gain does not move
+    with a time offset between the IMU's clock and the controller's. Dimensionless; NaN without
+    ``position_cmd``, without motion, when the run is shorter than two segments or the band
+    reaches the IMU's Nyquist frequency."""
+    if getattr(run, "position_cmd", None) is None:
+        return float("nan")
+    fs, acc, x = _axial_on_command(run)
+    n = int(round(fs))
+    if acc.size < 2 * n or high_hz >= 0.5 * fs:
+        return float("nan")
+    cmd = np.gradient(np.gradient(x, 1.0 / fs), 1.0 / fs)
+    if not np.any(cmd):
+        return float("nan")
+    sos = signal.butter(4, REVERSAL_HIGHPASS_HZ, "highpass", fs=fs, output="sos")
+    cmd, acc = signal.sosfiltfilt(sos, cmd), signal.sosfiltfilt(sos, acc)
+    f, pxy = signal.csd(cmd, acc, fs=fs, nperseg=n)
+    _, pxx = signal.welch(cmd, fs=fs, nperseg=n)
+    band = (f >= low_hz) & (f < high_hz) & (pxx > 0)
+    if not band.any():
+        return float("nan")
+    return float(np.mean(np.abs(pxy[band] / pxx[band])))
+
+
 #: Lower end of the band :func:`imu_yaw_mode` looks in, Hz (below it, the motion's own content).
 YAW_BAND_LOW_HZ = 20.0
 

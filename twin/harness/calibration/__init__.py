@@ -9,12 +9,15 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
    inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl. Econometrics
    8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the torque's rigid-body
    fit J and c_v, the drag over the cruise, the ripple at its order, the carriage's vertical and
-   lateral suspension modes on the nut accelerometers, the IMU's axial acceleration around the
-   starts and stops of the Phase II runs) and the routine fit's acceleration are computed on the
-   recording's first Phase I sample and on the twin simulated with the same layout and one seed
-   (common random numbers: every evaluation draws the same noise), and
+   lateral suspension modes on the nut accelerometers, the gain from the commanded to the IMU's
+   axial acceleration at 30-60 Hz in the Phase II runs, and one statistic more than there are
+   parameters: the IMU's ringing at the starts and stops, which moves with the velocity loop and
+   the vertical trucks and tells apart second solutions of the others) and the routine fit's
+   acceleration are computed on the recording's first Phase I sample and on the twin simulated
+   with the same layout, averaged over :data:`FIT_SEEDS` seeds (common random numbers: every
+   evaluation draws the same noise), and
    ``scipy.optimize.least_squares`` (trust-region reflective, bounds a factor of 10 either side of
-   the start) moves the parameters until the two agree within the statistics' standard errors. The
+   the start) moves the parameters until the two agree best in the statistics' standard errors. The
    Jacobian is differenced at the start (its columns simulated together: one batched rollout per
    capture) and kept up to date between the fit's steps by Broyden's rank-one updates (C. G.
    Broyden, "A class of methods for solving nonlinear simultaneous equations", Math. Comp. 19,
@@ -25,15 +28,16 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
    for residuals in units of their standard error); an error is the recording's own (the scatter
    over its captures), the twin's, and the scatter of the statistic over :data:`SPREAD_SEEDS` twin
    seeds at the start (the machine's random geometry and ripple phase, which one recording cannot
-   average out); the interval uses the statistics' full covariance over those seeds (Cov = J⁻¹ Σ
-   J⁻ᵀ: one regression gives J and c_v, and a machine's draw moves them together).
+   average out); the interval uses the statistics' full covariance over those seeds (Cov = G Σ Gᵀ,
+   G = (JᵀWJ)⁻¹JᵀW the weighted least-squares solution's map, W the inverse squared errors: one
+   regression gives J and c_v, and a machine's draw moves them together).
 
 Why least_squares and not a black-box optimiser: the statistics are smooth in the parameters (each
 responds mostly to one: J to the mass, the cruise's drag to the rails' friction, c_v to the viscous drag, the
 ripple amplitude to the ripple, the ramps' slope to the commanded acceleration, a suspension mode's
-frequency to the trucks' stiffness in its direction and the mass, the IMU's ringing around the
-starts and stops, or the speed's overshoot, to the velocity loop's bandwidth), the problem is
-square and small (9 unknowns), and with common random numbers the residual is deterministic, so a
+frequency to the trucks' stiffness in its direction and the mass, the servo's tracking gain from
+the command to the IMU, or the speed's overshoot, to the velocity loop's bandwidth), the problem is
+small (9 unknowns, 10 statistics), and with common random numbers the residual is deterministic, so a
 Gauss–Newton method converges in a few steps where a Bayesian optimiser would need tens of
 evaluations; its Jacobian is also what the intervals need.
 

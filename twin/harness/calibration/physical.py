@@ -15,12 +15,14 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize
 
+from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.calibration.sensor_chain import Measured
 from analysis.dataset import open_measurements
 from twin.harness.calibration.sensors import corrected_sensor_values
 from twin.harness.calibration.twin_statistics import _statistics, evaluate
 from twin.harness.calibration.values import (
     CONVERGED_CHI2,
+    EXTRA_STATS,
     FIT_CAPTURES,
     FIT_RUNS,
     FIT_SEEDS,
@@ -120,6 +122,9 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             skipped[key] = (
                 "the ripple's order is above half the IMU accelerometer's bandwidth at every Phase II speed, or "
                 "no cruise spans 4 of its periods" if stat == "ripple" and runs else
+                "the servo's gain from the command to the IMU cannot be read: it needs Phase II runs of at least "
+                f"2 s with motion and an IMU rate above twice {VELOCITY_BAND_HZ[1]:g} Hz"
+                if stat == "loop_response" and runs else
                 f"the recording's {stat.replace('_', ' ')} cannot be measured (no ramp, or no cruise of 4 "
                 "ripple periods, in its first Phase I sample)")
         else:
@@ -134,7 +139,11 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         use = [i for i in use if FITTED[i][0] not in bad]
         keys = [FITTED[i][0] for i in use]
         start = np.array([float(get_dotted(data0, k)) for k in keys])
-    stat_idx = np.array(use, dtype=int)
+    # the statistics in the fit: each fitted parameter's, then the extra ones the recording gives
+    n_own = len(FITTED)
+    stat_idx = np.array(use + [n_own + e for e in range(len(EXTRA_STATS)) if np.isfinite(real[n_own + e])],
+                        dtype=int)
+    extra_rows = np.arange(len(use), stat_idx.size)  # their positions among the fit's statistics
     cache.mkdir(parents=True, exist_ok=True)
     sims = [0]
 
@@ -221,7 +230,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 memo[p.tobytes()] = r
         return [memo[p.tobytes()] for p in points]
 
-    rows = np.arange(len(keys))  # the statistics in the fit (one per parameter)
+    rows = np.arange(stat_idx.size)  # the statistics in the fit (one per parameter, then the extra ones)
 
     def resid(x: np.ndarray) -> np.ndarray:
         return np.nan_to_num((values_at([x])[0] - target) / se, nan=1e6)[rows]
@@ -249,7 +258,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                             f"{abs(j0[j, j]) * math.log(2.0):.2g} standard errors for a factor 2 of it (under "
                             f"{MIN_SEEN:g}): not informed, kept at {start[j]:.6g}")
     free = np.flatnonzero(seen)
-    rows = free
+    rows = np.concatenate([free, extra_rows])
 
     def embed(z: np.ndarray) -> np.ndarray:
         x = x0.copy()
@@ -317,10 +326,10 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         return embed(z), fun_z, j_at
 
     if free.size:
-        xs, fun, J = solve(x0, j0[np.ix_(free, free)])
+        xs, fun, J = solve(x0, j0[np.ix_(rows, free)])
         # the delta method with the statistics' full covariance: one regression gives J and
         # c_v, and a machine's draw moves them together, so their errors correlate
-        J = J * se[free][:, None]  # d(statistic)/d(log p), the statistics' units
+        J = J * se[rows][:, None]  # d(statistic)/d(log p), the statistics' units
     # the machine-to-machine scatter at the solution (it grows with the ripple, the drags, the
     # noise): the spread's seeds again, with layer (b)'s first correction set
     first: dict[str, float] = {}
@@ -337,16 +346,26 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         spread_all = np.array([r[0] for r in final])[:, stat_idx]
         own_all = np.nan_to_num(real_se[stat_idx] ** 2 + np.nan_to_num(sim_se, nan=0.0) ** 2, nan=0.0)
 
+        def solver(J: np.ndarray) -> np.ndarray:
+            """The linear map from the statistics ``rows`` to log p of the parameters ``free``
+            that the weighted least-squares fit is near its solution: (JᵀWJ)⁻¹JᵀW, W the inverse
+            squared standard errors (J⁻¹ when there are no extra statistics); inf when JᵀWJ is
+            singular."""
+            jw = J.T / se[rows] ** 2
+            try:
+                return np.linalg.solve(jw @ J, jw)
+            except np.linalg.LinAlgError:
+                return np.full((J.shape[1], J.shape[0]), np.inf)
+
         def deltas(J: np.ndarray) -> np.ndarray:
             """The delta method's covariance of log p for the parameters ``free`` (inf when J
-            is singular)."""
-            vals = spread_all[:, free]
+            is singular): the sandwich through :func:`solver`."""
+            vals = spread_all[:, rows]
             ok = np.all(np.isfinite(vals), axis=1)
-            cov_seed = np.cov(vals[ok].T, ddof=1).reshape(free.size, free.size) if ok.sum() > 2 else 0.0
-            cov_stat = np.diag(own_all[free]) + cov_seed * (1 + 1 / FIT_SEEDS)
-            try:
-                jinv = np.linalg.inv(J)
-            except np.linalg.LinAlgError:
+            cov_seed = np.cov(vals[ok].T, ddof=1).reshape(rows.size, rows.size) if ok.sum() > 2 else 0.0
+            cov_stat = np.diag(own_all[rows]) + cov_seed * (1 + 1 / FIT_SEEDS)
+            jinv = solver(J)
+            if not np.all(np.isfinite(jinv)):
                 return np.full((free.size, free.size), np.inf)
             return jinv @ cov_stat @ jinv.T
 
@@ -362,11 +381,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             prior = np.diag([(math.log(PRIOR_FACTOR[keys[j]]) / Z90) ** 2 for j in kept])
             if not kept.size:
                 return cov, sd, sd, np.zeros((free.size, 0)), prior, kept
-            j_fk = j0[np.ix_(free, kept)] * se[free][:, None]
-            try:
-                a = -np.linalg.solve(J, j_fk)
-            except np.linalg.LinAlgError:
-                a = np.full((free.size, kept.size), np.inf)
+            j_fk = j0[np.ix_(rows, kept)] * se[rows][:, None]
+            a = -solver(J) @ j_fk
             return cov, sd, np.sqrt(sd ** 2 + (a ** 2) @ np.diag(prior)), a, prior, kept
 
         cov, sd, sd_all, a, prior, kept = marginal(J)
@@ -394,11 +410,12 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                                     f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side (its statistic, the "
                                     f"recording's {stat_name}, {why}): kept at {start[j]:.6g}")
             free = np.delete(free, w)
-            rows = free
+            rows = np.concatenate([free, extra_rows])
             if not free.size:
                 xs, fun = x0.copy(), np.zeros(0)
                 break
-            keep = np.delete(np.arange(J.shape[0]), w)  # J's rows and columns of the others
+            keep = np.delete(np.arange(J.shape[1]), w)  # J's columns of the others
+            keep_rows = np.delete(np.arange(J.shape[0]), w)  # its rows but the kept one's statistic
             if no_room_for(free.size + 3):  # a refit's steps and the Jacobian at its solution
                 # No time left to fit the rest again before the budget's deadline: the linearised
                 # fit instead. The kept parameter back at its start moves the others' statistics
@@ -407,12 +424,10 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 step = x0[j] - xs[j]
                 xs = xs.copy()
                 xs[j] = x0[j]
-                try:
-                    xs[free] = np.clip(xs[free] - np.linalg.solve(J[np.ix_(keep, keep)], J[keep, w]) * step,
-                                       lo[free], hi[free])
-                except np.linalg.LinAlgError:
-                    pass  # the others keep their values
-                J = J[np.ix_(keep, keep)]
+                move = solver(J[np.ix_(keep_rows, keep)]) @ J[keep_rows, w] * step
+                if np.all(np.isfinite(move)):  # else the others keep their values
+                    xs[free] = np.clip(xs[free] - move, lo[free], hi[free])
+                J = J[np.ix_(keep_rows, keep)]
                 fun = np.delete(fun, w)
                 stopped.append(f"the budget's deadline left no time to fit the others again after {keys[j]} was "
                                "kept at its default: they were moved by the linearised fit instead; a larger "
@@ -420,8 +435,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 progress(f"layer c: {keys[j]} not told apart jointly; {stopped[-1]}")
             else:
                 progress(f"layer c: {keys[j]} not told apart jointly; fitted again without it")
-                xs, fun, J = solve(xs, J[np.ix_(keep, keep)] / se[free][:, None])
-                J = J * se[free][:, None]
+                xs, fun, J = solve(xs, J[np.ix_(keep_rows, keep)] / se[rows][:, None])
+                J = J * se[rows][:, None]
             cov, sd, sd_all, a, prior, kept = marginal(J)
         sd = sd_all
     else:
@@ -444,8 +459,9 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         if stat in ("accel", "dwell"):
             note = f"fitted through the twin's servo to the moves of {len(caps)} Phase I captures"
         elif stat == "loop_response" and runs:
-            note = (f"fitted jointly to the IMU's axial acceleration around the starts and stops of {len(runs)} "
-                    f"Phase II runs at {session_h:g} h")
+            note = (f"fitted jointly to the gain from the commanded to the IMU's axial acceleration at "
+                    f"{VELOCITY_BAND_HZ[0]:g}-{VELOCITY_BAND_HZ[1]:g} Hz and its ringing at the starts and stops "
+                    f"in {len(runs)} Phase II runs at {session_h:g} h")
         elif stat == "loop_response":
             note = f"fitted jointly to the motor speed's overshoot at the ramps' ends in {len(caps)} Phase I captures"
         elif stat == "lateral_mode" and runs:

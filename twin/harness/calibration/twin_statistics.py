@@ -14,6 +14,7 @@ import numpy as np
 
 from analysis.base.files import write_json
 from analysis.calibration.drive import (
+    imu_command_gain,
     imu_reversal,
     imu_ripple,
     imu_yaw_mode,
@@ -36,7 +37,7 @@ def _key(s: Scenario) -> str:
 
 
 def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    """(values (9,), standard errors (9,)) of :data:`STAT_NAMES` over the Phase I ``captures``
+    """(values (10,), standard errors (10,)) of :data:`STAT_NAMES` over the Phase I ``captures``
     and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive
     statistics of the captures, with the ripple read on the IMU of the runs when there are any
     (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
@@ -46,10 +47,13 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     and at the end of a move differ a little: both are fitted through the twin's servo), and the
     vertical suspension mode (Hz, :func:`analysis.calibration.drive.suspension_mode`) with its
     scatter over the captures, and, on the IMU of the runs when there are any, the lateral (yaw)
-    mode (:func:`analysis.calibration.drive.imu_yaw_mode`) and the velocity loop's response (the
-    axial acceleration around the starts and stops: :func:`analysis.calibration.drive.imu_reversal`),
-    else the lateral mode on the nut accelerometers and the speed's overshoot over the captures
-    (:func:`analysis.calibration.drive.speed_overshoot`)."""
+    mode (:func:`analysis.calibration.drive.imu_yaw_mode`), the velocity loop's response (the
+    gain from the commanded to the IMU's axial acceleration at 30-60 Hz:
+    :func:`analysis.calibration.drive.imu_command_gain`) and the IMU's ringing at the starts and
+    stops (:func:`analysis.calibration.drive.imu_reversal`, the extra statistic: it moves with
+    the loop, not monotonically, and with the vertical trucks), else the lateral mode on the nut
+    accelerometers, the speed's overshoot over the captures
+    (:func:`analysis.calibration.drive.speed_overshoot`) and NaN for the ringing."""
     order = s.axis.torque_ripple_per_rev
     mean, se = recording_statistics(m, captures, order)
     loaded = [m.phase2(a, b) for a, b in runs]  # each run read once
@@ -70,17 +74,19 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
                    if a["t_stop"] is not None and b["t_start"] is not None]
     acc, acc_se = _mean_se(slopes)
     dwell, dwell_se = _mean_se(dwells)
-    rows: list[list[float]] = [[], [], []]  # vertical mode, lateral mode, the loop's response
+    # vertical mode, lateral mode, the loop's response, the IMU's ringing at the starts and stops
+    rows: list[list[float]] = [[], [], [], []]
     for name in captures:
         c = m.phase1(name)
         fs = float(c.fs_hz)
-        for row, x in zip(rows, (suspension_mode([c.acc1, c.acc2], fs, 2),
-                                 np.nan if runs else suspension_mode([c.acc1, c.acc2], fs, 1),
-                                 np.nan if runs else speed_overshoot(np.asarray(c.speed, float), fs)), strict=True):
+        for row, x in zip(rows[:3], (suspension_mode([c.acc1, c.acc2], fs, 2),
+                                     np.nan if runs else suspension_mode([c.acc1, c.acc2], fs, 1),
+                                     np.nan if runs else speed_overshoot(np.asarray(c.speed, float), fs)),
+                          strict=True):
             if np.isfinite(x):
                 row.append(x)
-    for run in loaded:  # on the IMU, far sharper: the yaw mode, the velocity loop around starts and stops
-        for row, x in zip(rows[1:], (imu_yaw_mode(run), imu_reversal(run)), strict=True):
+    for run in loaded:  # on the IMU, far sharper: the yaw mode, the velocity loop's tracking, the ringing
+        for row, x in zip(rows[1:], (imu_yaw_mode(run), imu_command_gain(run), imu_reversal(run)), strict=True):
             if np.isfinite(x):
                 row.append(x)
     extra = [_mean_se(row) for row in rows]

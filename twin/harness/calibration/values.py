@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 
-CALIBRATE_VERSION = 16
+CALIBRATE_VERSION = 17
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -64,7 +64,13 @@ PRIOR_FACTOR = {
     "axis.velocity_bandwidth_hz": 2.0,
 }
 STAT_NAMES = ("inertia", "cruise_drag", "viscous_drag", "ripple", "accel", "dwell", "vertical_mode",
-              "lateral_mode", "loop_response")
+              "lateral_mode", "loop_response", "loop_ringing")
+#: Statistics of :data:`STAT_NAMES` after the one of each fitted parameter (``STAT_NAMES[i]`` is
+#: ``FITTED[i]``'s): fitted too, with no parameter of their own (the fit is least squares over
+#: more statistics than parameters). The IMU's ringing at the starts and stops moves with the
+#: velocity loop and the vertical trucks: beside the loop's tracking gain it tells a second
+#: solution of the gain and the vertical mode (a stiff truck's mode hidden by the nut's) apart.
+EXTRA_STATS = STAT_NAMES[len(FITTED):]
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
 NOT_INFORMED = {
