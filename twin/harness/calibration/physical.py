@@ -221,7 +221,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     se = np.where(np.isfinite(se) & (se > 0), se, 0.01 * np.abs(real[stat_idx]))
     target = real[stat_idx]
     memo: dict[bytes, np.ndarray] = {
-        x0.tobytes(): np.nanmean([r[0] for r in spread[:FIT_SEEDS]], axis=0)[stat_idx]}
+        x0.tobytes(): np.nanmean(np.array([r[0] for r in spread[:FIT_SEEDS]])[:, stat_idx], axis=0)}
 
     def values_at(points: list[np.ndarray]) -> list[np.ndarray]:
         todo = [p for p in points if p.tobytes() not in memo]
