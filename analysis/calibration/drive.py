@@ -32,9 +32,12 @@ The velocity loop's bandwidth shows in the motor speed's overshoot where a ramp 
 proportional-integral loop lets the speed overshoot the new set point by an amount that falls
 as its crossover rises (G. Ellis, "Control System Design Guide", 4th ed., ch. 6: the step response
 of a PI velocity loop); :func:`speed_overshoot` reads it. Where the recording has IMU runs with
-their command, the carriage's axial acceleration around each start and stop
-(:func:`imu_reversal`) shows the same loop far more precisely: the jerk of a start excites the
-carriage on the loop-stiffened screw, and how it rings is set by the loop's crossover.
+their command, the gain from the commanded to the IMU's axial acceleration just above the loops'
+crossovers (:func:`imu_command_gain`) shows the same loop far more precisely and rises
+monotonically with its bandwidth. The carriage's axial acceleration around each start and stop
+(:func:`imu_reversal`: the jerk of a start excites the carriage on the loop-stiffened screw)
+moves with the loop too, but not monotonically (a slow loop and a fast one ring alike), and with
+the vertical trucks.
 """
 
 from __future__ import annotations
@@ -242,9 +245,9 @@ def imu_reversal(run) -> float:
     return float(np.log10(np.sqrt(np.mean(hp[near] ** 2)) + 1e-15))
 
 
-#: The band of :func:`imu_command_gain`, Hz: above the velocity loops of the benchmark's axes,
-#: where the servo's tracking gain rises monotonically with the loop's bandwidth (measured on
-#: the twin with the loop x0.5-2 on three axes of the calibrate benchmark and x0.7-7 on a fourth).
+#: The band of :func:`imu_command_gain`, Hz: at and above the velocity loops of the calibrate
+#: benchmark's axes (30-96 Hz as drawn), where the servo's tracking gain rises monotonically with
+#: the loop's bandwidth (tests/test_calibrate.py::test_imu_statistics_follow_the_velocity_loop_and_the_lateral_trucks).
 VELOCITY_BAND_HZ = (30.0, 60.0)
 
 
