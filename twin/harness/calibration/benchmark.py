@@ -260,6 +260,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     from twin.sim.campaign import simulate_campaign
 
     effects, artefacts = dict(effects or {}), dict(artefacts or {})
+    machine = with_effects(s, effects)  # the axis as built: simulated, and what the calibration is scored against
 
     d = out / f"case-{i:03d}"
     f1, f2 = FORMATS[i % len(FORMATS)]
@@ -276,7 +277,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         d.mkdir(parents=True)
         step(f"simulating the axis (lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg; {added})")
         t0 = time.perf_counter()
-        simulate_campaign(with_effects(s, effects), d / "twin", workers=1)
+        simulate_campaign(machine, d / "twin", workers=1)
         if artefacts:
             h5 = d / "twin" / "measurements.h5"
             apply(h5, h5.with_name("measurements.artefacts.h5"), artefacts, s.seed).replace(h5)
@@ -294,7 +295,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     entry = {"case": i, "kind": kind, "effects": effects, "artefacts": artefacts,
              "formats": [f1, f2], "scenario": json.loads(s.to_json()),
              "simulate_export_import_s": t_sim, "calibrate_s": rec["seconds"],
-             "calibrate_estimated_s": rec.get("estimated_s"), **score_case(with_effects(s, effects), cal, rec)}
+             "calibrate_estimated_s": rec.get("estimated_s"), **score_case(machine, cal, rec)}
     if diagnose:
         from twin.harness.diagnosis.runner import run_diagnosis
 
