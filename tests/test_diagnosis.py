@@ -207,3 +207,23 @@ def test_a_response_averaged_over_seeds_is_not_penalised_within_its_own_spread()
     f2 = at.fit_candidate(averaged, z, z, {"cal": sd, "heldout": sd}, select, 0.01, regions=regions)
     assert f2.params == f1.params and f2.gain == f1.gain
     assert f2.worse == [] and f2.penalty == 0.0 and f2.significant(0.1)
+
+
+def test_a_stroke_too_short_for_the_position_statistics_leaves_them_out():
+    """A short Phase II stroke: the error-motion profile of the trimmed slow pass spans a few mm
+    (16 mm for a 60-mm stroke at 80 mm/s), less than the lag search's margins. The position
+    segments and the lags are left out (no segment, NaN for a span a session does not reach),
+    not an IndexError."""
+    from analysis.diagnosis.signature import LAG_SEARCH_M, POSITION_SEGMENTS, _lag, _segments
+
+    dx = 0.5e-3
+    short = np.arange(0.062, 0.0785, dx)  # 16 mm
+    assert _segments(short, LAG_SEARCH_M + 4e-3) == []
+    assert len(_segments(short, 1e-3)) == POSITION_SEGMENTS
+    long = np.arange(0.062, 0.1185, dx)  # 56 mm: the lags' four spans of 8.5 mm
+    spans = _segments(long, LAG_SEARCH_M + 4e-3)
+    assert len(spans) == POSITION_SEGMENTS and spans[0][0] == pytest.approx(0.073)
+    wave = np.random.default_rng(0).normal(size=long.size)
+    shifted = np.roll(wave, -2)  # y(u) = ref(u + 1 mm)
+    assert _lag(long, wave, long, shifted, *spans[1]) == pytest.approx(1e-3, abs=0.05e-3)
+    assert np.isnan(_lag(long, wave, short, wave[:short.size], *spans[-1]))  # not reached

@@ -17,6 +17,7 @@ import re
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import run_twin
 from foreign_recording import export
@@ -113,7 +114,7 @@ def _acceptance(tmp: Path, overrides: tuple[str, ...], wrong_lead: bool) -> dict
     return out
 
 
-def test_foreign_recording_small(tmp_path):
+def test_foreign_recording_small(tmp_path, monkeypatch):
     """Two sessions (0 and 10 µm), two runs each, two Phase I samples of two 2-s captures; the
     scenario that ``scenario init`` wrote has the recording's layout (the check ``twin diagnose``
     makes before anything else: it simulates the scenario once and compares)."""
@@ -128,6 +129,27 @@ def test_foreign_recording_small(tmp_path):
     with pytest.raises(LayoutError, match="the scenario has 3"):
         check_layout(out["campaign"], load(out["lab"] / "axis.toml", ["phase2.runs_per_session=3"]),
                      tmp_path / "cache")
+    # with keep (the diagnosis with artefact candidates): the first seed's files stay, and the
+    # artefacts are post-processed on them, not on a second simulation of the same campaign
+    import importlib
+
+    from twin.harness.diagnosis.cache import _key, twin_seeds, with_seed
+
+    artefact_grid = importlib.import_module("twin.harness.diagnosis.artefact_grid")  # the module, not its function
+
+    nominal = load(out["lab"] / "axis.toml")
+    check_layout(out["campaign"], nominal, tmp_path / "kept", keep=True)
+    s0 = with_seed(nominal, twin_seeds(nominal, 1)[0])
+    assert (tmp_path / "kept" / _key(s0) / "campaign" / "measurements.h5").exists()
+
+    def no_simulation(*a, **k):
+        raise AssertionError("the first seed's campaign simulated again")
+
+    monkeypatch.setattr(artefact_grid, "simulate_campaigns_batched", no_simulation)
+    base, (gained,) = artefact_grid.artefact_signatures(s0, [{"gain:torque": {"error_pct": 5.0}}], tmp_path / "kept")
+    own = np.load(tmp_path / "kept" / _key(s0) / "signature.npz")
+    assert np.array_equal(base["cal"].values, own["cal"], equal_nan=True)
+    assert not np.array_equal(gained["cal"].values, own["cal"], equal_nan=True)
 
 
 @pytest.mark.slow

@@ -33,6 +33,7 @@ gap test (:mod:`analysis.diagnosis.gap`) assumes.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -292,7 +293,12 @@ def _phase2_run_stats(run, acc_bandwidth_hz: float = 300.0) -> tuple[dict, np.nd
 
 
 def _segments(x: np.ndarray, margin: float) -> list[tuple[float, float]]:
+    """The POSITION_SEGMENTS equal spans (lo, hi) in m of the grid ``x`` (n,) less ``margin`` at
+    each end; none when the profile is too short to leave each of them 4 grid steps (a short
+    stroke: the trimmed cruise of the slow pass leaves a few mm)."""
     lo, hi = x[0] + margin, x[-1] - margin
+    if x.size < 2 or hi - lo < POSITION_SEGMENTS * 4 * (x[1] - x[0]):
+        return []
     edges = np.linspace(lo, hi, POSITION_SEGMENTS + 1)
     return list(zip(edges[:-1], edges[1:], strict=True))
 
@@ -315,6 +321,8 @@ def _lag(ref_x: np.ndarray, ref: np.ndarray, x: np.ndarray, y: np.ndarray, lo: f
     parabolic sub-sample refinement. Both on the same uniform grid step."""
     dx = ref_x[1] - ref_x[0]
     sel = (x >= lo) & (x < hi)
+    if np.count_nonzero(sel) < 2:  # this session's profile does not reach the span
+        return np.nan
     seg = y[sel] - y[sel].mean()
     n_lag = int(round(LAG_SEARCH_M / dx))
     i0 = int(round((x[sel][0] - ref_x[0]) / dx))
@@ -376,13 +384,17 @@ def _phase2(m: Measurements, part: str, b: _Builder) -> None:
         return
     ref_x, ref = profiles[0]
     segs = _segments(ref_x, LAG_SEARCH_M + 4e-3)
+    if not segs:
+        return
     lags = np.full((len(profiles) - 1, len(segs), len(LAG_DOFS)), np.nan)
     for i, (x, prof) in enumerate(profiles[1:]):
         for k, (lo, hi) in enumerate(segs):
             for j, dof in enumerate(LAG_DOFS):
                 r = DOFS.index(dof)
                 lags[i, k, j] = _lag(ref_x, ref[r], x, prof[r], lo, hi)
-    rms = np.sqrt(np.nanmean(lags ** 2, axis=0))
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a span no session reaches: NaN, left out
+        rms = np.sqrt(np.nanmean(lags ** 2, axis=0))
     for k, (lo, hi) in enumerate(segs):
         for j, dof in enumerate(LAG_DOFS):
             # log10 of the RMS shift in µm plus 10 µm (about the shift's scatter in a few runs)

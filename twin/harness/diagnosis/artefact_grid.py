@@ -86,10 +86,13 @@ def artefact_signatures(base: Scenario, specs: list[dict[str, dict[str, float]]]
     if todo or not base_path.exists():
         if not h5.exists():
             simulate_campaigns_batched([base], [d / "campaign"])
-        sigs = {p: signature(h5, p) for p in PARTS}
-        arrays = {"cal": sigs["cal"].values, "heldout": sigs["heldout"].values,
-                  "regions": np.array(_regions_json(sigs["cal"].regions))}
-        atomic_write(base_path, lambda t, a=arrays: _save_npz(t, a))
+        if (d / "signature.npz").exists():  # the twin seed's own (:func:`evaluate`), of these files
+            shutil.copyfile(d / "signature.npz", base_path)
+        else:
+            sigs = {p: signature(h5, p) for p in PARTS}
+            arrays = {"cal": sigs["cal"].values, "heldout": sigs["heldout"].values,
+                      "regions": np.array(_regions_json(sigs["cal"].regions))}
+            atomic_write(base_path, lambda t, a=arrays: _save_npz(t, a))
     uniq: dict[str, tuple[str, str]] = {}
     for i in todo:
         uniq.setdefault(str(paths[i]), (json.dumps(specs[i]), str(paths[i])))

@@ -103,18 +103,18 @@ def build_ensemble(nominal: Scenario, cache: Path, seeds: int = DEFAULT_SEEDS,
     return TwinEnsemble(nominal, seed_list, twin, cands, effects, left_out)
 
 
-def check_layout(real_dir: Path, nominal: Scenario, cache: Path) -> None:
+def check_layout(real_dir: Path, nominal: Scenario, cache: Path, keep: bool = False) -> None:
     """Refuse a scenario without the two parts, or a recording whose layout differs from the
     scenario's (raises :class:`analysis.diagnosis.layout.LayoutError` naming every difference).
     The scenario's layout is that of its first twin seed, simulated once (and cached for the
-    spread)."""
+    spread; ``keep``: its campaign's files too, for the artefacts post-processed on it)."""
     for key, n, on in (("phase1.captures_per_sample", nominal.captures_per_sample, nominal.campaign.phase1),
                        ("phase2.runs_per_session", nominal.runs_per_session, nominal.campaign.phase2)):
         if on and n < 2:
             raise ValueError(f"scenario {nominal.name}: {key} gives {n}; the diagnosis needs at "
                              "least 2 (even ones to fit, odd ones held out)")
     s0 = with_seed(nominal, twin_seeds(nominal, 1)[0])
-    sig = evaluate([s0.to_json()], str(cache))[0]
+    sig = evaluate([s0.to_json()], str(cache), keep=keep)[0]
     twin = json.loads((Path(sig).parent / "layout.json").read_text())
     layout.compare(Path(real_dir) / "measurements.h5", twin)
 

@@ -105,13 +105,14 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = Path(cache) if cache else out / "cache"
-    resolve_library(library, kinds)  # an unknown candidate or kind stops before anything is simulated
+    # an unknown candidate or kind stops before anything is simulated
+    artefacts = resolve_library(library, kinds)[1]
     recording, sub = str(real_dir), None
     if budget_minutes is not None:
         real_dir, nominal, sub = prepare_subset(
             real_dir, nominal, out, cache, budget_minutes, seeds=seeds, library=library, kinds=kinds,
             resim_seeds=resim_seeds, workers=parallel_slots(workers, scheduler), response_seeds=response_seeds)
-    check_layout(real_dir, nominal, cache)
+    check_layout(real_dir, nominal, cache, keep=bool(artefacts))  # the artefacts' first base
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler,
                          response_seeds)
