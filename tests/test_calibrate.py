@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -308,9 +309,11 @@ def test_imu_ripple_reads_the_amplitude_at_its_order():
 @pytest.fixture(scope="module")
 def round_trip(tmp_path_factory):
     """The foreign axis through the owner's path: simulate, export (TDMS in mV, vendor CSV),
-    import, calibrate, diagnose against the calibrated and against the `scenario init` scenario."""
+    import, calibrate, diagnose against the calibrated and against the `scenario init` scenario:
+    (directory, the calibration's process, the seconds it all took)."""
     from twin.harness.lab_export import export
 
+    t0 = time.perf_counter()
     tmp = tmp_path_factory.mktemp("calibrate")
     run_twin("simulate", "foreign-16mm", "-o", tmp / "twin", *[a for o in SMALL for a in ("--set", o)],
              "--workers", "1")
@@ -336,7 +339,7 @@ def round_trip(tmp_path_factory):
         cal = run_twin("calibrate", tmp / "campaign", "-o", tmp / "axis.toml", "--workers", "1")
         diagnose("axis", "6")
         init.result()
-    return tmp, cal
+    return tmp, cal, time.perf_counter() - t0
 
 
 def _truth(tmp: Path) -> dict:
@@ -345,10 +348,13 @@ def _truth(tmp: Path) -> dict:
     return load(REPO / "scenarios" / "foreign-16mm.toml", list(SMALL)).model_dump(mode="json")
 
 
-def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent(round_trip):
+@pytest.mark.quoted
+def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent(round_trip, quote):
     from twin.sim.scenario import load
 
-    tmp, cal = round_trip
+    tmp, cal, seconds = round_trip
+    print(f"\nthe round trip (simulate, export, import, calibrate, both diagnoses): {seconds:.0f} s")
+    quote("round_trip_s", seconds, f"{seconds:.0f} s")
     truth = _truth(tmp)
     rec = json.loads((tmp / "axis.calibration.json").read_text())
     got = {v["key"]: v for v in rec["values"]}
@@ -383,7 +389,7 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
 
 
 def test_calibrated_twin_shows_no_gap_where_the_default_twin_shows_one(round_trip):
-    tmp, _ = round_trip
+    tmp, _, _ = round_trip
     calibrated = json.loads((tmp / "diag-axis" / "diagnosis.json").read_text())
     default = json.loads((tmp / "diag-init" / "diagnosis.json").read_text())
     assert calibrated["verdict"] == "no significant gap"
@@ -399,7 +405,7 @@ def test_calibrated_twin_shows_no_gap_where_the_default_twin_shows_one(round_tri
 
 
 def test_calibrate_refuses_a_budget_too_small_naming_the_estimate(round_trip, tmp_path):
-    tmp, _ = round_trip
+    tmp, _, _ = round_trip
     r = run_twin("calibrate", tmp / "campaign", "-o", tmp_path / "a.toml", "--budget-minutes", "0.01",
                  "--workers", "1", "--cache", tmp_path / "c", check=False)
     assert r.returncode == 2
@@ -652,7 +658,7 @@ def test_calibrate_refuses_a_recording_check_rejects(round_trip, tmp_path):
 
     import h5py
 
-    tmp, _ = round_trip
+    tmp, _, _ = round_trip
     bad = tmp_path / "bad"
     shutil.copytree(tmp / "campaign", bad)
     with h5py.File(bad / "measurements.h5", "r+") as f:
