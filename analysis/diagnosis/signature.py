@@ -392,7 +392,7 @@ def _phase2(m: Measurements, part: str, b: _Builder) -> None:
             for j, dof in enumerate(LAG_DOFS):
                 r = DOFS.index(dof)
                 lags[i, k, j] = _lag(ref_x, ref[r], x, prof[r], lo, hi)
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a span no session reaches: NaN, left out
         rms = np.sqrt(np.nanmean(lags ** 2, axis=0))
     for k, (lo, hi) in enumerate(segs):
