@@ -39,25 +39,33 @@ def run_twin(*args, check=True, env=None, **kw):
                           text=True, check=check, **kw)
 
 
-def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
-    """``twin simulate SCENARIO -o OUT ARGS...`` for a campaign several test files simulate alike:
-    simulated once per test run (the first test process to ask holds a file lock while the
-    others wait) into a store shared by the run's test processes, then copied to ``out``, so each
-    caller may write into its copy. The twin is deterministic (same scenario, same arguments,
-    same bytes: tests/test_campaign.py), so the copy is what its own simulation would give."""
+def made_once(tmp_path_factory, key: list, out, make) -> Path:
+    """``make(master)`` once per test run for this ``key`` (the first test process to ask holds a
+    file lock while the others wait), into a store shared by the run's test processes, then
+    ``master`` copied to ``out``, so each caller may write into its copy. For what the twin makes
+    deterministically (same inputs, same bytes: tests/test_campaign.py), so the copy is what the
+    caller's own run would give."""
     base = tmp_path_factory.getbasetemp()
     store = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "shared-campaigns"
     store.mkdir(exist_ok=True)
-    key = hashlib.sha256(json.dumps([str(scenario), [str(a) for a in args]]).encode()).hexdigest()[:16]
-    master = store / key
-    with open(store / f"{key}.lock", "w") as lock:
+    digest = hashlib.sha256(json.dumps([str(k) for k in key]).encode()).hexdigest()[:16]
+    master = store / digest
+    with open(store / f"{digest}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (store / f"{key}.done").exists():
+        if not (store / f"{digest}.done").exists():
             shutil.rmtree(master, ignore_errors=True)
-            run_twin("simulate", scenario, "-o", master, *args)
-            (store / f"{key}.done").touch()
+            make(master)
+            master.mkdir(exist_ok=True)
+            (store / f"{digest}.done").touch()
     shutil.copytree(master, out)
     return Path(out)
+
+
+def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
+    """``twin simulate SCENARIO -o OUT ARGS...`` for a campaign several test files simulate alike:
+    simulated once per test run (:func:`made_once`)."""
+    return made_once(tmp_path_factory, ["simulate", scenario, *args], out,
+                     lambda master: run_twin("simulate", scenario, "-o", master, *args))
 
 
 DIAGNOSE_BENCH = REPO / "scenarios" / "diagnose-bench.toml"
@@ -146,9 +154,18 @@ DEMO_SMALL = ["--set", "campaign.total_hours=250", "--set", "phase2.session_hour
 
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory):
-    """``twin demo`` run once per test session: (directory, completed process)."""
-    out = tmp_path_factory.mktemp("demo") / "demo"
-    proc = run_twin("demo", "-o", out, *DEMO_SMALL, check=False, timeout=900)
+    """``twin demo`` run once per test run (:func:`made_once`: the test processes share it), a
+    copy for this one: (directory, completed process)."""
+    def demo(master: Path) -> None:
+        proc = run_twin("demo", "-o", master, *DEMO_SMALL, check=False, timeout=900)
+        master.mkdir(parents=True, exist_ok=True)
+        (master / "demo-process.json").write_text(json.dumps(
+            {"returncode": proc.returncode, "stdout": proc.stdout, "stderr": proc.stderr}))
+
+    out = made_once(tmp_path_factory, ["demo", *DEMO_SMALL], tmp_path_factory.mktemp("demo") / "demo", demo)
+    said = json.loads((out / "demo-process.json").read_text())
+    (out / "demo-process.json").unlink()
+    proc = subprocess.CompletedProcess(["twin", "demo"], said["returncode"], said["stdout"], said["stderr"])
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return out, proc
 
