@@ -128,6 +128,10 @@ def figures(entries: list[dict]) -> dict[str, tuple[float | None, str]]:
         "parameters_inside": (inside := sm["parameters_inside"] if entries else None, percent(inside)),
         "parameter_pairs": (float(sm["parameter_pairs"]), str(sm["parameter_pairs"])),
         "calibrate_s_median": (sm["calibrate_s_median"], text(sm["calibrate_s_median"], "{:.0f}")),
+        "case_min_median": (m := None if sm.get("case_s_median") is None else sm["case_s_median"] / 60,
+                            f"{text(m, '{:.0f}')} min"),
+        # the 24 cases on two processes of one core each, at that median
+        "all_cases_h": (h := None if m is None else 24 * m / 60 / 2, f"{text(h, '{:.1f}')} hours"),
     }
     for key, kind in (("null_no_gap", "null"), ("effect_named_first", "effect"),
                       ("artefact_named_first", "artefact"), ("several_all_named", "several"),

@@ -348,6 +348,13 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
     return row
 
 
+def case_seconds(case: dict) -> float:
+    """The seconds a benchmark entry took: its simulation, export and import, its calibration,
+    its diagnosis and its oracle's (those it has)."""
+    return (case.get("simulate_export_import_s") or 0.0) + case["calibrate_s"] + sum(
+        (case.get(part) or {}).get("seconds") or 0.0 for part in ("diagnosis", "oracle"))
+
+
 def summarise(cases: list[dict]) -> dict:
     """The benchmark's figures over ``cases``."""
     routine = [v for c in cases for v in c["routine"].values()]
@@ -377,7 +384,9 @@ def summarise(cases: list[dict]) -> dict:
            "parameter_pairs": len(params),
            "per_parameter_inside": {k: sum(v) / len(v) for k, v in per_key.items()},
            "formats_used": sorted({f for c in cases for f in c["formats"]}),
-           "calibrate_s_median": float(np.median([c["calibrate_s"] for c in cases])) if cases else None}
+           "calibrate_s_median": float(np.median([c["calibrate_s"] for c in cases])) if cases else None,
+           # a whole case: simulated and written out, imported, calibrated, diagnosed, its oracle
+           "case_s_median": float(np.median([case_seconds(c) for c in cases])) if cases else None}
     ratio = [c["calibrate_s"] / c["calibrate_estimated_s"] for c in cases if c.get("calibrate_estimated_s")]
     if ratio:  # what --budget-minutes is held to: the estimate after the first simulations
         out["calibrate_actual_over_estimate"] = {"median": float(np.median(ratio)), "min": min(ratio),
