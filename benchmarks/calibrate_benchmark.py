@@ -37,12 +37,8 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 from record import record, text  # noqa: E402
 
 from analysis.base.files import write_json  # noqa: E402
-from twin.harness.calibration.benchmark import (  # noqa: E402
-    CASE_KINDS,
-    case_key,
-    draws,
-    summarise,
-)
+from twin.harness.calibration.benchmark import case_key, draws  # noqa: E402
+from twin.harness.calibration.benchmark_summary import CASE_KINDS, summarise  # noqa: E402
 
 RESULTS = REPO / "benchmarks" / "results" / "calibrate-benchmark"
 #: The benchmark as the docs state it (the CLI's defaults with ``--diagnose``).
@@ -130,8 +126,8 @@ def figures(entries: list[dict]) -> dict[str, tuple[float | None, str]]:
         "calibrate_s_median": (sm["calibrate_s_median"], text(sm["calibrate_s_median"], "{:.0f}")),
         "case_min_median": (m := None if sm.get("case_s_median") is None else sm["case_s_median"] / 60,
                             f"{text(m, '{:.0f}')} min"),
-        # the 24 cases on two processes of one core each, at that median
-        "all_cases_h": (h := None if m is None else 24 * m / 60 / 2, f"{text(h, '{:.1f}')} hours"),
+        # the CASES cases on two processes of one core each, at that median
+        "all_cases_h": (h := None if m is None else CASES * m / 60 / 2, f"{text(h, '{:.1f}')} hours"),
     }
     for key, kind in (("null_no_gap", "null"), ("effect_named_first", "effect"),
                       ("artefact_named_first", "artefact"), ("several_all_named", "several"),

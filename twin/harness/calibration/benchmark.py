@@ -417,5 +417,5 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     return doc
 
 
-__all__ = ["CASE_KINDS", "absorbed_effects", "case_key", "draw_additions", "draw_case", "draws", "run_benchmark",
-           "run_oracle", "score_case", "score_diagnosis", "summarise"]
+__all__ = ["absorbed_effects", "case_key", "draw_additions", "draw_case", "draws", "run_benchmark",
+           "run_oracle", "score_case", "score_diagnosis"]
