@@ -137,3 +137,15 @@ def test_wheel_installs_without_extras_then_with_sim(tmp_path, tmp_path_factory,
     r = run("simulate", "quick", "-o", "q", *SMALL, "--workers", "1")
     assert r.returncode == 0, r.stderr[-2000:]
     assert (work / "q" / "measurements.h5").is_file() and (work / "q" / "truth.h5").is_file()
+
+
+def test_the_command_line_starts_without_the_heavy_libraries():
+    """`twin` parses its arguments before it loads a numerical library beyond NumPy: the suite
+    and every user run it in a fresh process (SciPy's optimize and special alone took about a
+    second of its start), and `spawn` workers start the same way."""
+    probe = ("import sys, twin.cli\n"
+             "print(sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'sklearn', 'h5py', 'mujoco', "
+             "'matplotlib', 'pandas', 'dask', 'rerun'}))")
+    out = subprocess.run([sys.executable, "-c", probe], env=dict(os.environ, PYTHONPATH=str(REPO)),
+                         capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

@@ -12,7 +12,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special
 
 _HERTZ_EXPONENT = 1.5  # Q ∝ delta^(3/2) for a point contact [Hertz]
 _N_HERMITE = 48  # Gauss–Hermite nodes for the smooth (no-truncation) branch of the 3/2 moment
@@ -119,6 +118,8 @@ def _positive_part_moment(mean: np.ndarray, std: float) -> np.ndarray:
     far = z > _Z_SWITCH
     near = ~far
     if np.any(near):
+        from scipy import special  # here, not at the top: the CLI starts without SciPy
+
         zn = z[near]
         d, _ = special.pbdv(-nu - 1.0, -zn)
         val = std**nu * special.gamma(nu + 1.0) / math.sqrt(2.0 * math.pi) * np.exp(-0.25 * zn * zn) * d
@@ -171,6 +172,8 @@ def _expected_clearance_um(wear_um: np.ndarray, law: WearLaw) -> np.ndarray:
     s = law.scatter_um
     if s == 0.0:
         return np.maximum(d, 0.0)
+    from scipy import special
+
     zeta = d / s
     return s * (zeta * special.ndtr(zeta) + np.exp(-0.5 * zeta * zeta) / math.sqrt(2.0 * math.pi))
 

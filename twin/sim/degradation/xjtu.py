@@ -11,7 +11,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from scipy import optimize
 
 from twin.sim.degradation.wear import WearLaw, _hours_array, normalised_drag_torque
 
@@ -179,6 +178,8 @@ def fit_friction_trend(
         (0.2, 0.6),  # c0
         (1.0,),  # initial ratio
     )
+    from scipy import optimize  # here, not at the top: the CLI starts without SciPy
+
     best = None
     for x0 in starts:
         x0 = np.clip(np.array(x0, dtype=float), lower, upper)
