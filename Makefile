@@ -57,7 +57,7 @@ validate: $(STAMP)
 	$(PY) benchmarks/record.py
 
 # CI's second step (.ci/run, after `make test`): the part of `make validate` that fits CI's 90
-# minutes on a slow 2-core machine (docs/architecture.md gives the times). It re-runs the
+# minutes on a slow 2-core machine (the run prints its slowest steps). It re-runs the
 # benchmarks below with --record and the `validate` tests except the diagnosis benchmark's, then
 # writes the figures into the docs and lists the pages whose figures moved. Left to
 # `make validate` (run by hand, the figures committed): the gap diagnosis's blind benchmark

@@ -382,11 +382,12 @@ def reversal_campaign(tmp_path_factory):
     return out
 
 
-def test_slow_reversal_travels_l_minus_b(reversal_campaign):
+@pytest.mark.quoted
+def test_slow_reversal_travels_l_minus_b(reversal_campaign, quote):
     """Eq. 9's premise on backlash-slow-reversal: every move, the first of a run included,
     travels D = L − b between rests: D − L changes with the injected backlash by −Δb within
     0.5 µm, forward and reverse (the carriage stops on the driving flank and the next move
-    crosses the whole clearance)."""
+    crosses the whole clearance). The changes are quoted in docs/error-motions.md."""
     from analysis.dataset import open_truth
 
     injected = injected_change_um(reversal_campaign)
@@ -401,6 +402,8 @@ def test_slow_reversal_travels_l_minus_b(reversal_campaign):
     for s, inj, d in rows:
         assert np.allclose(speeds[s], [0.02, -0.02], rtol=1e-9)
         assert np.all(np.abs(d + inj) <= 0.5), (s, inj, d)
+    moved = [f"{signed(d[0])} | {signed(d[1])}" for _, inj, d in rows if inj > 0]
+    quote("slow_reversal_dl_um", None, ", ".join(moved[:-1]) + f" and {moved[-1]} µm")
 
 
 @pytest.mark.quoted
