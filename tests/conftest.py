@@ -198,3 +198,15 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.timeout(3600))
         elif set(LONG_FIXTURES) & set(getattr(item, "fixturenames", ())):
             item.add_marker(pytest.mark.timeout(1800))
+
+
+@pytest.fixture(autouse=True, scope="session")
+def backlash_cache(tmp_path_factory):
+    """Every `twin backlash` the suite runs keeps its sessions' error motions in one folder per
+    test process (TWIN_BACKLASH_CACHE, the --cache default): the files run it on the same
+    recordings with other estimators and options. Keyed by the recording's bytes and the
+    error-motion options (analysis.phase2.error_motion_cache), so a changed recording misses;
+    tests/test_phase2_cli.py proves the cached result equals the computed one."""
+    os.environ["TWIN_BACKLASH_CACHE"] = str(tmp_path_factory.mktemp("backlash-cache"))
+    yield
+    os.environ.pop("TWIN_BACKLASH_CACHE", None)

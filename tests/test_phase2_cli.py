@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 
 import h5py
 import numpy as np
 import pytest
-from conftest import run_twin, truncate_dataset
+from conftest import REPO, run_twin, truncate_dataset
 from test_phase2_backlash import SLOW, steps_campaign
 
 DOFS = ("E_XX", "E_YX", "E_ZX", "E_AX", "E_BX", "E_CX")
@@ -112,6 +113,38 @@ def test_check6_bad_runs(small, tmp_path, damage):
     assert channel in skipped[0]["reason"]
     est = doc["sessions"][-1]["delta_backlash_um_shift"]
     assert math.isfinite(est) and est == pytest.approx(20.0, abs=4.0)
+
+
+def test_cache_gives_the_computed_result_and_misses_a_changed_recording(small, tmp_path):
+    """`twin backlash --cache DIR`: the second run takes every session's error motions from the
+    cache and writes the backlash.json (skipped run and its warning included) of the first, which
+    computed them; the skip and --strict policies and a changed recording are kept apart."""
+    from analysis.dataset import DatasetError, open_measurements
+    from analysis.phase2.backlash import campaign_backlash
+    from analysis.phase2.error_motion_cache import ErrorMotionCache
+
+    d = tmp_path / "rec"
+    path = _copy(small, d)
+    with h5py.File(path, "r+") as f:
+        session, run, _ = _nan(f)
+    env = {k: v for k, v in os.environ.items() if k != "TWIN_BACKLASH_CACHE"} | {"PYTHONPATH": str(REPO)}
+    cache = tmp_path / "cache"
+    for out, hits in (("first", 0), ("second", 2)):  # the first computes every session
+        r = run_twin("backlash", d, "-o", d / out, "--no-plots", "--force", "--cache", cache, env=env)
+        text = " ".join((r.stdout + r.stderr).split())
+        assert f"error motions: {hits} of 2 sessions from the cache {cache}" in text
+        assert f"warning: skipped session {session} run {run}" in text
+    assert (json.loads((d / "second" / "backlash.json").read_text())
+            == json.loads((d / "first" / "backlash.json").read_text()))
+    kw = {"cache": ErrorMotionCache(cache), "position_reference": "command"}  # the options as the CLI gives them
+    with open_measurements(path) as m:
+        assert campaign_backlash(m, **kw).from_cache == 2
+        with pytest.raises(DatasetError, match=f"{session}.*{run}"):  # not the skip policy's entry
+            campaign_backlash(m, on_bad_run="raise", **kw)
+    with h5py.File(path, "r+") as f:
+        f["phase2/s0000/r0000/imu_acc"][0, 0] += 1e-3
+    with open_measurements(path) as m:
+        assert campaign_backlash(m, **kw).from_cache == 0
 
 
 def test_missing_campaign_exits_2(tmp_path):

@@ -25,6 +25,7 @@ from analysis.phase2.backlash import (
     estimator_for,
     primary_m,
 )
+from analysis.phase2.error_motion_cache import ErrorMotionCache
 from analysis.phase2.error_motion_file import write_error_motions
 from analysis.phase2.error_motions import BAND_PRECISION, resolve_position_reference
 from analysis.phase2.figures import write_figures
@@ -73,7 +74,7 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         plots: bool = True, process_noise: float | str = "auto",
         baseline_sessions: int = 1, estimator: BacklashEstimator | str | None = None,
         position_reference: str = "auto", params: dict | None = None,
-        map_sessions=None) -> BacklashRun:
+        map_sessions=None, cache: str | Path | None = None) -> BacklashRun:
     """Estimate the change of backlash of every Phase II session of ``directory``.
 
     Args:
@@ -98,6 +99,9 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
             ``position_cmd`` is not read). Recorded in ``parameters.position_reference``.
         map_sessions: runs the sessions' error motions elsewhere (the caller's executor; see
             :func:`analysis.phase2.backlash.campaign_backlash`); None: here, one by one.
+        cache: a folder that keeps the sessions' error motions
+            (:class:`analysis.phase2.error_motion_cache.ErrorMotionCache`): a rerun on the same
+            recording with the same error-motion options computes none again; None: no cache.
 
     Raises:
         DatasetError, FileNotFoundError, OSError: unreadable input (names file, key, channel).
@@ -114,7 +118,8 @@ def run(directory: str | Path, out: str | Path | None = None, *, strict: bool = 
         result = campaign_backlash(m, on_bad_run="raise" if strict else "skip",
                                    baseline_sessions=baseline_sessions, estimator=estimator,
                                    position_reference=position_reference,
-                                   map_sessions=map_sessions)
+                                   map_sessions=map_sessions,
+                                   cache=None if cache is None else ErrorMotionCache(cache))
         dial = m.dial_indicator()
     ses = result.sessions
     hours = [s.hours for s in ses]

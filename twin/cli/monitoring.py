@@ -157,6 +157,11 @@ def backlash(
                                               "it writes to OUT/NAME/"),
     set_param: list[str] = typer.Option([], "--set-param",
                                         help="estimator parameter KEY=VALUE (TOML value), repeatable"),
+    cache: Path | None = typer.Option(None, "--cache", envvar="TWIN_BACKLASH_CACHE",
+                                      help="keep the sessions' error motions in this folder: a rerun on "
+                                           "the same recording with the same --position-reference and "
+                                           "--strict (other estimators or parameters, say) computes none "
+                                           "again"),
     workers: Workers = None,
     scheduler: Scheduler = None,
     force: Force = False,
@@ -199,13 +204,16 @@ def backlash(
         br = run(directory, out, strict=strict, plots=plots, process_noise=q,
                  baseline_sessions=baseline_sessions, position_reference=position_reference,
                  estimator=estimator, params=params,
-                 map_sessions=mapper(workers, scheduler=scheduler, prefix="session"))
+                 map_sessions=mapper(workers, scheduler=scheduler, prefix="session"), cache=cache)
     except (DatasetError, FileNotFoundError, OSError, ExecutorError) as exc:
         _fail(str(exc))
     except ValueError as exc:  # traces that cannot be correlated
         _fail(f"{directory}: {exc}")
     record_check(out / "backlash.json", checked)
     result, records, prog, figures = br.result, br.doc["sessions"], br.prognosis, br.figures
+    if cache is not None:
+        console.print(f"error motions: {result.from_cache} of {len(records) + len(result.skipped_sessions)} "
+                      f"sessions from the cache {cache}", markup=False, highlight=False)
     ses = result.sessions
     for session, run_name, why in result.skipped_runs:
         console.print(f"warning: skipped session {session} run {run_name}: {why}", style="yellow",

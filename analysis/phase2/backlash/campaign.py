@@ -27,6 +27,7 @@ class CampaignBacklash:
         baseline_sessions: how many leading sessions define zero change (see
             :func:`rezero_on_baseline`); 1 is the paper's single reference.
         baseline_offset_m: (by shifts, by pitch) subtracted from every raw estimate, m.
+        from_cache: how many sessions' error motions came from the cache (``cache``).
     """
 
     sessions: list
@@ -36,6 +37,7 @@ class CampaignBacklash:
     estimator: BacklashEstimator
     baseline_sessions: int = 1
     baseline_offset_m: tuple = (0.0, 0.0)
+    from_cache: int = 0
 
 
 def rezero_on_baseline(sessions: list, k: int) -> tuple[list, tuple[float, float]]:
@@ -112,7 +114,7 @@ def session_error_motions_task(path: str, session: str, on_bad_run: str,
 
 def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimator | None = None,
                       progress=None, baseline_sessions: int = 1, map_sessions=None,
-                      **error_motion_kw) -> CampaignBacklash:
+                      cache=None, **error_motion_kw) -> CampaignBacklash:
     """Error motions (:func:`analysis.phase2.error_motions.session_error_motions`) and backlash
     estimates for every Phase II session of an open ``measurements.h5``.
 
@@ -129,6 +131,8 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
             sessions elsewhere (processes, a cluster: the caller's executor); None computes them
             here, one after the other. Each session is estimated as it arrives, so a generator
             lets this work overlap the next sessions'. The results are the same either way.
+        cache: optional :class:`analysis.phase2.error_motion_cache.ErrorMotionCache`: sessions
+            found there are not computed, the others are stored there once computed.
     Raises:
         DatasetError: a bad run with ``on_bad_run="raise"``, no Phase II session, or no usable
             run in any session.
@@ -140,22 +144,27 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
         raise DatasetError(f"{m.label}: /phase2 has no session; expected at least two sessions")
     if estimator is None:
         estimator = estimator_for(m)
-    if map_sessions is None:
-        from analysis.phase2.error_motions import session_error_motions
+    from analysis.phase2.error_motions import session_error_motions
 
-        def outcome(name):
-            try:
-                return session_error_motions(m, name, on_bad_run=on_bad_run, **error_motion_kw), ""
-            except DatasetError as exc:
-                if on_bad_run == "raise":
-                    raise
-                return None, str(exc)
+    def outcome(name):
+        try:
+            return session_error_motions(m, name, on_bad_run=on_bad_run, **error_motion_kw), ""
+        except DatasetError as exc:
+            if on_bad_run == "raise":
+                raise
+            return None, str(exc)
 
-        outcomes = (outcome(name) for name in names)
+    cached = {}
+    if cache is not None:
+        cache.for_recording(m.path)
+        cached = {n: em for n in names if (em := cache.get(n, on_bad_run, error_motion_kw)) is not None}
+    todo = [n for n in names if n not in cached]
+    if map_sessions is None or not todo:
+        computed = (outcome(name) for name in todo)
     else:
-        outcomes = map_sessions(session_error_motions_task,
-                                [(str(m.path.resolve()), name, on_bad_run, error_motion_kw)
-                                 for name in names])
+        computed = map_sessions(session_error_motions_task,
+                                [(str(m.path.resolve()), name, on_bad_run, error_motion_kw) for name in todo])
+    outcomes = _merged(names, cached, iter(computed), cache, on_bad_run, error_motion_kw)
     ems, estimates, skipped_runs, skipped_sessions = [], [], [], []
     for i, (name, (em, why)) in enumerate(zip(names, outcomes, strict=True)):
         if em is None:
@@ -177,4 +186,18 @@ def campaign_backlash(m, *, on_bad_run: str = "skip", estimator: BacklashEstimat
     sessions, offset = rezero_on_baseline(estimates, baseline_sessions)
     return CampaignBacklash(sessions=sessions, error_motions=ems, skipped_runs=skipped_runs,
                             skipped_sessions=skipped_sessions, estimator=estimator,
-                            baseline_sessions=baseline_sessions, baseline_offset_m=offset)
+                            baseline_sessions=baseline_sessions, baseline_offset_m=offset,
+                            from_cache=len(cached))
+
+
+def _merged(names, cached: dict, computed, cache, on_bad_run: str, options: dict):
+    """(error motions, why) of every session of ``names`` in order: from ``cached`` where it is,
+    else the next of ``computed`` (stored in ``cache`` when usable)."""
+    for name in names:
+        if name in cached:
+            yield cached[name], ""
+            continue
+        em, why = next(computed)
+        if em is not None and cache is not None:
+            cache.put(em, on_bad_run, options)
+        yield em, why

@@ -100,19 +100,10 @@ def _outputs(c: Campaign) -> list[str]:
 def _save_error_motions(path: Path, ems: list, injected_um: np.ndarray, axis: tuple[float, float]) -> None:
     """The sessions' error motions (SessionErrorMotions) with the injected change of backlash of
     each session against the first (µm) and the axis's (travel, lead) in m, as one npz."""
-    arrays: dict[str, np.ndarray] = {
-        "sessions": np.array([e.session for e in ems]), "hours": np.array([e.hours for e in ems]),
-        "injected_um": np.asarray(injected_um, dtype=float), "axis_m": np.asarray(axis, dtype=float),
-        "position_reference": np.array([e.position_reference for e in ems])}
-    for i, e in enumerate(ems):
-        arrays[f"{i}/runs"] = np.array(e.runs)
-        for part in ("combined", "slow"):
-            tr = getattr(e, part)
-            arrays[f"{i}/{part}/x_m"] = tr.x_m
-            arrays[f"{i}/{part}/forward"] = tr.forward
-            arrays[f"{i}/{part}/reverse"] = tr.reverse
-            if tr.band_m is not None:
-                arrays[f"{i}/{part}/band_m"] = tr.band_m
+    from analysis.phase2.error_motion_cache import error_motion_arrays
+
+    arrays = {**error_motion_arrays(ems), "injected_um": np.asarray(injected_um, dtype=float),
+              "axis_m": np.asarray(axis, dtype=float)}
     with open(path, "wb") as fh:
         np.savez(fh, **arrays)
 
@@ -138,22 +129,12 @@ class Phase2Input:
 
 
 def _load_error_motions(path: Path) -> Phase2Input:
-    from analysis.phase2.traces import DirectionalTraces, SessionErrorMotions
+    from analysis.phase2.error_motion_cache import error_motions_from
 
     with np.load(path, allow_pickle=False) as z:
-        names, hours, refs = z["sessions"], z["hours"], z["position_reference"]
-        ems = []
-        for i, name in enumerate(names):
-            parts = {part: DirectionalTraces(_frozen(z[f"{i}/{part}/x_m"]), _frozen(z[f"{i}/{part}/forward"]),
-                                             _frozen(z[f"{i}/{part}/reverse"]),
-                                             _frozen(z[f"{i}/{part}/band_m"]) if f"{i}/{part}/band_m" in z else None)
-                     for part in ("combined", "slow")}
-            ems.append(SessionErrorMotions(session=str(name), hours=float(hours[i]),
-                                           runs=tuple(str(r) for r in z[f"{i}/runs"]),
-                                           combined=parts["combined"], slow=parts["slow"],
-                                           position_reference=str(refs[i])))
         travel, lead = (float(v) for v in z["axis_m"])
-        return Phase2Input(ems, np.array(z["injected_um"], dtype=float), travel, lead)
+        return Phase2Input(error_motions_from(z, read_only=True), np.array(z["injected_um"], dtype=float),
+                           travel, lead)
 
 
 @dataclass(frozen=True)
