@@ -20,7 +20,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import REPO, TWIN
+from conftest import REPO, TWIN, simulate_shared
 
 from analysis.base import registry
 from analysis.dataset import open_truth
@@ -286,7 +286,15 @@ def test_candidate_by_module_name_and_bad_names(plugin, tmp_path):
             f"{', '.join(candidate_names(ALL_KINDS))}, or module:NAME of an Effect") in flat(r.stderr)
 
 
-def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path):
+def heavier_carriage(tmp_path_factory, out):
+    """diagnose-bench (Phase I only, 1-s captures) with a carriage of 180 kg, seed 3: the
+    recording of the two tests below, simulated once per test run."""
+    sets = [a for kv in DIAG for a in ("--set", kv)]
+    return simulate_shared(tmp_path_factory, REPO / "scenarios/diagnose-bench.toml", out, *sets,
+                           "--set", "axis.carriage_mass_kg=180", "--set", "seed=3")
+
+
+def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path, tmp_path_factory):
     """A recording of a carriage 60 kg heavier than the scenario's: the diagnosis, given the
     external candidate by its entry point's name (then by module:NAME, from the same cache) and
     cogging, ranks it first, adds it with about 60 kg and shrinks the held-out gap."""
@@ -294,8 +302,7 @@ def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path):
     path = os.pathsep.join((src, ep))
     bench = REPO / "scenarios/diagnose-bench.toml"
     sets = [a for kv in DIAG for a in ("--set", kv)]
-    twin("simulate", bench, "-o", tmp_path / "real", *sets, "--set", "axis.carriage_mass_kg=180",
-         "--set", "seed=3", pythonpath=path)
+    heavier_carriage(tmp_path_factory, tmp_path / "real")
     results = {}
     for spec in ("carriage_mass", f"{MODULE}:HEAVY"):
         out = tmp_path / f"diag-{len(results)}"
@@ -316,15 +323,14 @@ def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path):
 
 
 
-def test_a_candidate_the_statistics_cannot_be_computed_for_is_left_out(plugin, tmp_path):
+def test_a_candidate_the_statistics_cannot_be_computed_for_is_left_out(plugin, tmp_path, tmp_path_factory):
     """A candidate whose simulation at the strong end of its grid has no constant-speed Phase I
     segment (the 220-mm stroke at 400 mm/s with 137 mm/s² never cruises): the diagnosis leaves
     it out with the reason (JSON, terminal, page) and ranks the others; it does not stop."""
     src, _ = plugin
     bench = REPO / "scenarios/diagnose-bench.toml"
     sets = [a for kv in DIAG for a in ("--set", kv)]
-    twin("simulate", bench, "-o", tmp_path / "real", *sets, "--set", "axis.carriage_mass_kg=180",
-         "--set", "seed=3", pythonpath=src)
+    heavier_carriage(tmp_path_factory, tmp_path / "real")
     out = tmp_path / "diag"
     r = twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, "--candidate", f"{MODULE}:HEAVY",
              "--candidate", f"{MODULE}:SLOW_ACCEL", "--seeds", "3", "-o", out, pythonpath=src)
