@@ -9,6 +9,7 @@ the new one, and two processes writing the same target never share a temporary f
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -133,3 +134,23 @@ def read_json(path: str | os.PathLike, what: str, *, error: type[Exception] = Va
     if not isinstance(doc, dict):
         raise error(f"{path}: JSON of type {type(doc).__name__}; expected {what} (a JSON object)")
     return doc
+
+
+def sha256_of(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file, read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def package_version() -> str:
+    """The installed version of ``ballscrew-twin`` ("unknown" when it is not installed): part of
+    the key of what a cache keeps."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("ballscrew-twin")
+    except PackageNotFoundError:
+        return "unknown"

@@ -10,8 +10,9 @@ unit is complete when the manifest exists and the data file matches it (:func:`m
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
+
+from analysis.base.files import sha256_of
 
 __all__ = ["MANIFEST_KEYS", "SOURCE_FORMAT", "UNIT_FORMAT", "UNIT_VERSION", "manifest_ok", "sha256_of"]
 
@@ -20,15 +21,6 @@ SOURCE_FORMAT = "ballscrew-twin/live-source"
 UNIT_VERSION = 1
 #: Keys every manifest has (Phase I manifests also ``sample`` and ``captures_in_sample``).
 MANIFEST_KEYS = frozenset({"format", "version", "seq", "kind", "name", "hours", "file", "bytes", "sha256"})
-
-
-def sha256_of(path: str | Path) -> str:
-    """Hex SHA-256 of a file, read in 1 MiB blocks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def manifest_ok(live_dir: str | Path, manifest: dict) -> bool:

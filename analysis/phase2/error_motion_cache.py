@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analysis.base.files import atomic_write
+from analysis.base.files import atomic_write, package_version, sha256_of
 from analysis.phase2.traces import DirectionalTraces, SessionErrorMotions
 
 __all__ = ["ErrorMotionCache", "error_motion_arrays", "error_motions_from"]
@@ -71,24 +71,6 @@ def error_motions_from(z, read_only: bool = False) -> list[SessionErrorMotions]:
     return ems
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("ballscrew-twin")
-    except PackageNotFoundError:
-        return "unknown"
-
-
-def file_sha256(path: str | Path) -> str:
-    """SHA-256 of the file at ``path`` (hex)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 class ErrorMotionCache:
     """One npz per session under ``root``, named by its key (see the module docstring).
 
@@ -102,14 +84,14 @@ class ErrorMotionCache:
         self._recording: str | None = None
 
     def for_recording(self, path: str | Path) -> ErrorMotionCache:
-        self._recording = file_sha256(path)
+        self._recording = sha256_of(path)
         return self
 
     def _path(self, session: str, on_bad_run: str, options: dict) -> Path:
         if self._recording is None:
             raise RuntimeError("ErrorMotionCache: call for_recording(path) first")
         what = json.dumps({"recording": self._recording, "session": session, "on_bad_run": on_bad_run,
-                           "options": options, "format": FORMAT, "version": _version()},
+                           "options": options, "format": FORMAT, "version": package_version()},
                           sort_keys=True, default=str)
         return self.root / f"{hashlib.sha256(what.encode()).hexdigest()}.npz"
 

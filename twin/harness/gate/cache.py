@@ -4,7 +4,6 @@ motions, Phase I features), verified against its manifest.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -16,20 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from analysis.base.files import package_version, sha256_of
 from twin.harness.gate.suite import CACHE_ENV, MANIFEST, Campaign, GateError, Suite, get_suite
 
 # ---------------------------------------------------------------------------------------------
 # The cache
-
-
-def package_version() -> str:
-    """The installed version of ``ballscrew-twin`` ("unknown" when it is not installed)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("ballscrew-twin")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 def default_root() -> Path:
@@ -47,19 +37,11 @@ def cache_dir(root: str | Path | None, suite: Suite) -> Path:
     return cache_root(root) / f"{suite.name}-v{suite.version}-{package_version()}"
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _manifest(folder: Path, suite: Suite) -> dict:
     files = sorted(p for p in folder.rglob("*") if p.is_file() and p.name != MANIFEST)
     return {"suite": suite.name, "suite_version": suite.version, "package_version": package_version(),
             "suite_fingerprint": suite.fingerprint(),
-            "files": {p.relative_to(folder).as_posix(): {"sha256": _sha256(p), "bytes": p.stat().st_size}
+            "files": {p.relative_to(folder).as_posix(): {"sha256": sha256_of(p), "bytes": p.stat().st_size}
                       for p in files}}
 
 
@@ -86,7 +68,7 @@ def verify(folder: Path, suite: Suite) -> str | None:
         p = folder / rel
         if not p.is_file():
             return f"{rel} is missing"
-        if p.stat().st_size != meta.get("bytes") or _sha256(p) != meta.get("sha256"):
+        if p.stat().st_size != meta.get("bytes") or sha256_of(p) != meta.get("sha256"):
             return f"{rel} does not match its sha256 in {MANIFEST}"
     return None
 
