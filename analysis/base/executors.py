@@ -175,11 +175,17 @@ class _LocalPool(Executor):
         # ProcessPoolExecutor cannot stop running calls: its worker processes (in _processes,
         # which shutdown() forgets, so they are taken first) are killed.
         procs = list((getattr(self.pool, "_processes", None) or {}).values())
+        manager = getattr(self.pool, "_executor_manager_thread", None)
         self.pool.shutdown(wait=False, cancel_futures=True)
         for proc in procs:
             proc.kill()
         for proc in procs:
             proc.join(timeout=1.0)
+        # The pool's manager thread closes its wake-up pipe once it sees the workers gone; the
+        # interpreter's exit writes to that pipe, and if the thread is still closing it the write
+        # fails with "Bad file descriptor" and a traceback after the clean exit 130. So wait for it.
+        if manager is not None:
+            manager.join(timeout=1.0)
 
 
 class _Dask(Executor):
