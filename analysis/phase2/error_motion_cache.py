@@ -19,7 +19,7 @@ import numpy as np
 from analysis.base.files import atomic_write, package_version, sha256_of
 from analysis.phase2.traces import DirectionalTraces, SessionErrorMotions
 
-__all__ = ["ErrorMotionCache", "error_motion_arrays", "error_motions_from"]
+__all__ = ["ErrorMotionCache", "error_motion_arrays", "error_motions_from", "frozen"]
 
 FORMAT = 1  # the layout of error_motion_arrays; part of the cache key
 
@@ -45,7 +45,8 @@ def error_motion_arrays(ems: list[SessionErrorMotions]) -> dict[str, np.ndarray]
     return arrays
 
 
-def _read_only(a: np.ndarray) -> np.ndarray:
+def frozen(a: np.ndarray) -> np.ndarray:
+    """A read-only copy of ``a``."""
     a = np.array(a)
     a.setflags(write=False)
     return a
@@ -55,7 +56,7 @@ def error_motions_from(z, read_only: bool = False) -> list[SessionErrorMotions]:
     """The sessions of an open npz (or any mapping) written from :func:`error_motion_arrays`;
     ``read_only`` makes every array read-only (the gate: a method that writes into its input
     fails its check instead of changing what the next method is given)."""
-    keep = _read_only if read_only else np.asarray
+    keep = frozen if read_only else np.asarray
     ems = []
     for i, name in enumerate(z["sessions"]):
         parts = {part: DirectionalTraces(keep(z[f"{i}/{part}/x_m"]), keep(z[f"{i}/{part}/forward"]),

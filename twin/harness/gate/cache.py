@@ -90,14 +90,6 @@ def _save_error_motions(path: Path, ems: list, injected_um: np.ndarray, axis: tu
         np.savez(fh, **arrays)
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
-    """``a`` made read-only: a method that writes into its input fails its check (naming the
-    error) instead of changing what the next method is given."""
-    a = np.array(a)
-    a.setflags(write=False)
-    return a
-
-
 @dataclass(frozen=True)
 class Phase2Input:
     """What a backlash check feeds the estimator: the sessions' error motions in hours order
@@ -144,14 +136,15 @@ def _save_phase1(path: Path, table, onset: float | None, labels: np.ndarray | No
 
 def _load_phase1(path: Path) -> Phase1Input:
     from analysis.phase1.features import FEATURE_NAMES
+    from analysis.phase2.error_motion_cache import frozen
 
     with np.load(path, allow_pickle=False) as z:
         if tuple(str(n) for n in z["names"]) != tuple(FEATURE_NAMES):
             raise GateError(f"{path}: its feature names are not this package's")
         onset = float(z["onset_hours"])
-        return Phase1Input(_frozen(z["hours"]), _frozen(z["X"]), _frozen(z["ae"]),
+        return Phase1Input(frozen(z["hours"]), frozen(z["X"]), frozen(z["ae"]),
                            None if math.isnan(onset) else onset,
-                           _frozen(z["labels"]) if "labels" in z else None)
+                           frozen(z["labels"]) if "labels" in z else None)
 
 
 def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str], None]) -> None:
