@@ -21,8 +21,11 @@ subset it chooses, and simulates only the subset's layout. So:
    and the subset of this recording within the same budget is all of it, the same
    simulations as for the full recording).
 
+``--record`` (with ``--measure``) stores the figures and the table of docs/gap-diagnosis.md's
+"The paper's layout" in docs/validation.json (``benchmarks/record.py`` writes them into the doc).
+
 Usage: .venv/bin/python benchmarks/bench_diagnose_campaign.py [--out DIR] [--workers 1]
-       [--budget-minutes 60] [--measure]
+       [--budget-minutes 60] [--measure [--record]]
 """
 
 from __future__ import annotations
@@ -93,9 +96,13 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--budget-minutes", type=float, default=60.0)
     ap.add_argument("--measure", action="store_true")
+    ap.add_argument("--record", action="store_true",
+                    help="store the measured figures in docs/validation.json (needs --measure)")
     ap.add_argument("--response-seeds", type=int, default=3,
                     help="twin seeds of each candidate's response (twin diagnose --response-seeds)")
     a = ap.parse_args()
+    if a.record and not a.measure:
+        ap.error("--record needs --measure: the docs quote the measured diagnosis beside the projection")
     cache = a.out / "cache"
     paper = load(PAPER)
     inv = layout_of(paper)
@@ -129,6 +136,7 @@ def main() -> None:
         print(f"  N = {n:3d}: {est / 60:.1f} min; {describe(more)} ({more.estimated_s / 60:.1f} min); "
               f"the whole recording {whole / 3600:.1f} h")
         report.setdefault("workers", []).append({"n": n, "chosen_minutes": est / 60, "within_budget": describe(more),
+                                                 "within_budget_minutes": more.estimated_s / 60,
                                                  "whole_hours": whole / 3600})
     t0 = time.perf_counter()
     sk = skeleton(a.out / "skeleton" / "measurements.h5", paper, inv)
@@ -166,11 +174,54 @@ def main() -> None:
           f"diagnosis.json's actual {sub['actual_minutes']:.1f} min); verdict {res['verdict']}")
     # The subset writer reads only the chosen parts: the same from a full recording.
     print(f"writing the subset: {sub['subset_write_s']:.1f} s")
+    report["workload"] = work.__dict__
     report.update(measured={"budget_minutes": a.budget_minutes, "workers": a.workers, "size": describe(chosen),
                             "wall_minutes": wall / 60, "estimated_minutes": sub["estimated_minutes"],
                             "actual_minutes": sub["actual_minutes"], "verdict": res["verdict"],
                             "subset_write_s": sub["subset_write_s"]})
     (a.out / "bench.json").write_text(json.dumps(report, indent=1))
+    if a.record:
+        record_figures(report, res, a)
+
+
+def record_figures(report: dict, res: dict, a: argparse.Namespace) -> None:
+    """Store the measured run's figures and the projection over N workers in docs/validation.json
+    (docs/gap-diagnosis.md, "The paper's layout")."""
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    from record import record
+
+    c, m, w = report["unit_costs_s"], report["measured"], report["workload"]
+    worst = [f"{r['domain']} {r['channel']} {r['family']} {r['bin']}" for r in res["regions"]
+             if r["significant"]][:2]  # sorted by their calibration gap
+    verdict = (f"\"{res['verdict']}\", {len(res.get('added', []))} added: {res['n_significant_calibration']} of "
+               f"{res['n_statistics']} statistics beyond the spread"
+               + (f" ({'; '.join(worst)})" if worst else "")
+               + f", held-out gap {res['heldout_gap_before']:.1f} against its critical "
+                 f"{res['heldout_gap_critical']:.1f}")
+    rows = [f"| workers N | the subset chosen for 1 worker | within {a.budget_minutes:g} min | the whole recording |",
+            "|---|---|---|---|"]
+    for r in report["workers"]:
+        rows.append(f"| {r['n']} | {r['chosen_minutes']:.1f} min | {r['within_budget']} "
+                    f"({r['within_budget_minutes']:.1f} min) | {r['whole_hours']:.1f} h |")
+    figures = {
+        "workload": (float(w["campaigns"]), f"{w['campaigns']} campaigns, {w['phase1_signatures']} Phase I and "
+                                            f"{w['phase2_signatures']} Phase II post-processings"),
+        "unit_costs": (c["capture"], f"Phase I capture {c['capture']:.2f} s (its statistics "
+                                     f"{c['capture_signature']:.2f} s of it); Phase II session's motion "
+                                     f"{c['session']:.1f} s; each run {c['run']:.2f} s (its statistics "
+                                     f"{c['run_signature']:.2f} s)"),
+        "calibration_s": (report["calibration_s"], f"{report['calibration_s']:.0f} s"),
+        "inventory_s": (report["inventory_s"], f"{report['inventory_s']:.1f} s"),
+        "subset_write_s": (m["subset_write_s"], f"{m['subset_write_s']:.1f} s"),
+        "chosen": (m["budget_minutes"], f"{m['size']} for {m['budget_minutes']:g} min on {m['workers']} worker(s)"),
+        "diagnosis": (m["wall_minutes"], f"{m['estimated_minutes']:.1f} / {m['wall_minutes']:.1f} min"),
+        "verdict": (float(res["n_significant_calibration"]), verdict),
+    }
+    record("bench_diagnose_campaign", scale=f"scenarios/paper-rtf.toml's layout, {a.budget_minutes:g} min on "
+           f"{a.workers} worker(s), {a.response_seeds} response seeds",
+           command=(f"taskset -c 1 .venv/bin/python benchmarks/bench_diagnose_campaign.py --out /tmp/b "
+                    f"--budget-minutes {a.budget_minutes:g} --workers {a.workers} --measure --record"),
+           figures=figures, tables={"workers": "\n".join(rows) + "\n"})
 
 
 if __name__ == "__main__":
