@@ -47,7 +47,7 @@ bench-check: $(STAMP)
 # the part of it that fits (make validate-ci, below: the benchmarks of VALIDATE_CI).
 VALIDATE_CI := benchmarks/bench_demo.py benchmarks/table3_phase1.py benchmarks/bench_phase1.py \
                benchmarks/bench_phase2_backlash.py benchmarks/bench_rail_passes.py \
-               benchmarks/bench_phase2_error_motions.py
+               benchmarks/bench_phase2_error_motions.py benchmarks/bench_prognosis.py
 VALIDATE := benchmarks/bench_diagnose.py benchmarks/sweep_tables.py benchmarks/fig13_paper.py $(VALIDATE_CI)
 validate: $(STAMP)
 	for b in $(VALIDATE); do $(PY) $$b --record || exit 1; done

@@ -17,7 +17,9 @@ procedure) and its error is predicted − true crossing hour. Printed: the media
 percentile of |error| in h and as a fraction of the hours still to go, and the fraction of cases
 whose 95 % band holds the truth; then |smoothed − truth| at the last session.
 
-Run: .venv/bin/python benchmarks/bench_prognosis.py [--seeds 20]
+``--record`` (``make validate``) stores the table docs/import.md quotes in docs/validation.json.
+
+Run: .venv/bin/python benchmarks/bench_prognosis.py [--seeds 20] [--record]
 """
 
 from __future__ import annotations
@@ -30,6 +32,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from analysis.phase2.prognosis import BacklashTrend, prognosis  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import record  # noqa: E402
 
 LIMIT = 10e-6
 
@@ -44,7 +49,16 @@ def laws() -> dict[str, tuple[np.ndarray, np.ndarray, float, float]]:
             "steps": (h6, np.array([0, 0, 2, 5, 10, 20]) * 1e-6, 500.0, 0.25e-6)}
 
 
-def run(seeds: int) -> None:
+#: The laws as docs/import.md's table names them.
+LAW_TEXT = {"linear": "linear to 10 µm at 8000 h, every 84 h, noise 0.5 µm",
+            "onset": "nothing until 2500 h, then quadratic to 10 µm at 8000 h",
+            "steps": "backlash-steps' six sessions, noise 0.25 µm"}
+
+
+def run(seeds: int) -> str:
+    """Print the figures; returns docs/import.md's table of them (Markdown)."""
+    rows = ["| growth law | q | prognoses | median \\|error\\| | 90 % \\|error\\| | median of the hours to go "
+            "| truth in the 95 % band |", "|---|---|---|---|---|---|---|"]
     for name, (hours, truth, crossing, noise) in laws().items():
         print(f"{name}: {hours.size} sessions, 10 µm at {crossing:g} h, noise {noise * 1e6:g} µm, {seeds} seeds")
         for q in ("auto", 1e-23, "ml"):
@@ -66,9 +80,18 @@ def run(seeds: int) -> None:
                   f"90 % {100 * np.percentile(frac, 90):6.1f} %; in the 95 % band {100 * np.mean(inside):5.1f} %; "
                   f"|smoothed - truth| at the last session median {np.median(last) * 1e6:.2f} µm, "
                   f"max {np.max(last) * 1e6:.2f} µm")
+            law = LAW_TEXT[name] if q == "auto" else ""
+            rows.append(f"| {law} | {q} | {errs.size} | {np.median(errs):.0f} h | {np.percentile(errs, 90):.0f} h | "
+                        f"{100 * np.median(frac):.1f} % | {100 * np.mean(inside):.1f} % |")
+    return "\n".join(rows) + "\n"
 
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=20)
-    run(ap.parse_args().seeds)
+    ap.add_argument("--record", action="store_true", help="store the table in docs/validation.json")
+    args = ap.parse_args()
+    table = run(args.seeds)
+    if args.record:
+        record("bench_prognosis", scale=f"three growth laws, {args.seeds} seeds", figures={}, tables={"errors": table},
+               command=f".venv/bin/python benchmarks/bench_prognosis.py --seeds {args.seeds} --record")
