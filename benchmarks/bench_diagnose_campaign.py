@@ -191,6 +191,7 @@ def record_figures(report: dict, res: dict, a: argparse.Namespace) -> None:
     from record import record
 
     c, m, w = report["unit_costs_s"], report["measured"], report["workload"]
+    ratio = m["wall_minutes"] / m["estimated_minutes"]
     worst = [f"{r['domain']} {r['channel']} {r['family']} {r['bin']}" for r in res["regions"]
              if r["significant"]][:2]  # sorted by their calibration gap
     verdict = (f"\"{res['verdict']}\", {len(res.get('added', []))} added: {res['n_significant_calibration']} of "
@@ -198,7 +199,8 @@ def record_figures(report: dict, res: dict, a: argparse.Namespace) -> None:
                + (f" ({'; '.join(worst)})" if worst else "")
                + f", held-out gap {res['heldout_gap_before']:.1f} against its critical "
                  f"{res['heldout_gap_critical']:.1f}")
-    rows = [f"| workers N | the subset chosen for 1 worker | within {a.budget_minutes:g} min | the whole recording |",
+    rows = [f"| workers N | the subset chosen for {a.workers} worker(s) | within {a.budget_minutes:g} min "
+            "| the whole recording |",
             "|---|---|---|---|"]
     for r in report["workers"]:
         rows.append(f"| {r['n']} | {r['chosen_minutes']:.1f} min | {r['within_budget']} "
@@ -214,12 +216,14 @@ def record_figures(report: dict, res: dict, a: argparse.Namespace) -> None:
         "inventory_s": (report["inventory_s"], f"{report['inventory_s']:.1f} s"),
         "subset_write_s": (m["subset_write_s"], f"{m['subset_write_s']:.1f} s"),
         "chosen": (m["budget_minutes"], f"{m['size']} for {m['budget_minutes']:g} min on {m['workers']} worker(s)"),
-        "diagnosis": (m["wall_minutes"], f"{m['estimated_minutes']:.1f} / {m['wall_minutes']:.1f} min"),
+        "diagnosis": (m["wall_minutes"], f"{m['estimated_minutes']:.1f} / {m['wall_minutes']:.1f} min (measured / "
+                                         f"estimated {ratio:.2f}; goal within 20 %: "
+                                         f"{'met' if abs(ratio - 1) <= 0.2 else 'not met'})"),
         "verdict": (float(res["n_significant_calibration"]), verdict),
     }
     record("bench_diagnose_campaign", scale=f"scenarios/paper-rtf.toml's layout, {a.budget_minutes:g} min on "
            f"{a.workers} worker(s), {a.response_seeds} response seeds",
-           command=(f"taskset -c 1 .venv/bin/python benchmarks/bench_diagnose_campaign.py --out /tmp/b "
+           command=(f".venv/bin/python benchmarks/bench_diagnose_campaign.py --out /tmp/b "
                     f"--budget-minutes {a.budget_minutes:g} --workers {a.workers} --measure --record"),
            figures=figures, tables={"workers": "\n".join(rows) + "\n"})
 
