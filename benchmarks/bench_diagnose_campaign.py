@@ -194,7 +194,7 @@ def record_figures(report: dict, res: dict, a: argparse.Namespace) -> None:
     ratio = m["wall_minutes"] / m["estimated_minutes"]
     worst = [f"{r['domain']} {r['channel']} {r['family']} {r['bin']}" for r in res["regions"]
              if r["significant"]][:2]  # sorted by their calibration gap
-    verdict = (f"\"{res['verdict']}\", {len(res.get('added', []))} added: {res['n_significant_calibration']} of "
+    verdict = (f"\"{res['verdict']}\", {len(res['added'])} added: {res['n_significant_calibration']} of "
                f"{res['n_statistics']} statistics beyond the spread"
                + (f" ({'; '.join(worst)})" if worst else "")
                + f", held-out gap {res['heldout_gap_before']:.1f} against its critical "
@@ -223,8 +223,9 @@ def record_figures(report: dict, res: dict, a: argparse.Namespace) -> None:
     }
     record("bench_diagnose_campaign", scale=f"scenarios/paper-rtf.toml's layout, {a.budget_minutes:g} min on "
            f"{a.workers} worker(s), {a.response_seeds} response seeds",
-           command=(f".venv/bin/python benchmarks/bench_diagnose_campaign.py --out /tmp/b "
-                    f"--budget-minutes {a.budget_minutes:g} --workers {a.workers} --measure --record"),
+           command=(f".venv/bin/python benchmarks/bench_diagnose_campaign.py --out {a.out} "
+                    f"--budget-minutes {a.budget_minutes:g} --workers {a.workers} "
+                    f"--response-seeds {a.response_seeds} --measure --record"),
            figures=figures, tables={"workers": "\n".join(rows) + "\n"})
 
 

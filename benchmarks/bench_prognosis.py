@@ -39,27 +39,21 @@ from record import record  # noqa: E402
 LIMIT = 10e-6
 
 
-def laws() -> dict[str, tuple[np.ndarray, np.ndarray, float, float]]:
-    """name -> (hours (n,), truth (n,) m, true crossing h, noise m)."""
+def laws() -> dict[str, tuple[np.ndarray, np.ndarray, float, float, str]]:
+    """name -> (hours (n,), truth (n,) m, true crossing h, noise m, the law in docs/import.md's words)."""
     h84 = np.arange(42.0, 8693.0, 84.0)
     onset = np.where(h84 < 2500.0, 0.0, LIMIT * ((h84 - 2500.0) / 5500.0) ** 2)
     h6 = np.arange(100.0, 700.0, 100.0)
-    return {"linear": (h84, LIMIT * h84 / 8000.0, 8000.0, 0.5e-6),
-            "onset": (h84, onset, 8000.0, 0.5e-6),
-            "steps": (h6, np.array([0, 0, 2, 5, 10, 20]) * 1e-6, 500.0, 0.25e-6)}
-
-
-#: The laws as docs/import.md's table names them.
-LAW_TEXT = {"linear": "linear to 10 µm at 8000 h, every 84 h, noise 0.5 µm",
-            "onset": "nothing until 2500 h, then quadratic to 10 µm at 8000 h",
-            "steps": "backlash-steps' six sessions, noise 0.25 µm"}
+    return {"linear": (h84, LIMIT * h84 / 8000.0, 8000.0, 0.5e-6, "linear to 10 µm at 8000 h, every 84 h"),
+            "onset": (h84, onset, 8000.0, 0.5e-6, "nothing until 2500 h, then quadratic to 10 µm at 8000 h"),
+            "steps": (h6, np.array([0, 0, 2, 5, 10, 20]) * 1e-6, 500.0, 0.25e-6, "backlash-steps' six sessions")}
 
 
 def run(seeds: int) -> str:
     """Print the figures; returns docs/import.md's table of them (Markdown)."""
     rows = ["| growth law | q | prognoses | median \\|error\\| | 90 % \\|error\\| | median of the hours to go "
             "| truth in the 95 % band |", "|---|---|---|---|---|---|---|"]
-    for name, (hours, truth, crossing, noise) in laws().items():
+    for name, (hours, truth, crossing, noise, words) in laws().items():
         print(f"{name}: {hours.size} sessions, 10 µm at {crossing:g} h, noise {noise * 1e6:g} µm, {seeds} seeds")
         for q in ("auto", 1e-23, "ml"):
             model = BacklashTrend(process_noise=q)
@@ -80,7 +74,7 @@ def run(seeds: int) -> str:
                   f"90 % {100 * np.percentile(frac, 90):6.1f} %; in the 95 % band {100 * np.mean(inside):5.1f} %; "
                   f"|smoothed - truth| at the last session median {np.median(last) * 1e6:.2f} µm, "
                   f"max {np.max(last) * 1e6:.2f} µm")
-            law = LAW_TEXT[name] if q == "auto" else ""
+            law = f"{words}, noise {noise * 1e6:g} µm" if q == "auto" else ""
             rows.append(f"| {law} | {q} | {errs.size} | {np.median(errs):.0f} h | {np.percentile(errs, 90):.0f} h | "
                         f"{100 * np.median(frac):.1f} % | {100 * np.mean(inside):.1f} % |")
     return "\n".join(rows) + "\n"
