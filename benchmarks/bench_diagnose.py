@@ -97,14 +97,36 @@ def misses_table(b: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def response_seed_cost() -> tuple[float, str]:
+    """What the response seeds cost on ``scenarios/diagnose-bench.toml`` with the default kinds
+    (:func:`twin.harness.diagnosis.budget.workload`: the twin's 8 seeds and every candidate's grid
+    points; the post-processings of both phases), with 1 response seed and with the default."""
+    from twin.harness.diagnosis import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
+    from twin.harness.diagnosis.budget import workload
+    from twin.harness.diagnosis.library import DEFAULT_KINDS
+    from twin.sim.scenario import load
+
+    nominal = load(REPO / "scenarios" / "diagnose-bench.toml")
+    one, default = (workload(nominal, DEFAULT_SEEDS, None, DEFAULT_KINDS, 0, 1, r)
+                    for r in (1, DEFAULT_RESPONSE_SEEDS))
+    post = [w.phase1_signatures + w.phase2_signatures for w in (one, default)]
+    return (default.campaigns - one.campaigns,
+            f"{default.campaigns - one.campaigns} more campaigns ({one.campaigns} → {default.campaigns}, the "
+            f"{DEFAULT_SEEDS} twin seeds' included) and {post[1] - post[0]} more post-processings "
+            f"({post[0]} → {post[1]})")
+
+
 def benchmark_figures(b: dict, wall_s: float, workers: int) -> dict[str, tuple[float | None, str]]:
     rows = b["cases"]
+    n_stats = sorted({r["n_statistics"] for r in rows if r["kind"] == "null"})
     ooe = [r for r in rows if r["kind"] in ("open_set", "edit")]
     t = b["wall_time_s"]
     n_false = sum(bool(r["false_attribution"]) for r in rows)
     changed = b["verdict_changed_by_resimulation"]
     return {
         "n_cases": (b["n_cases"], str(b["n_cases"])),
+        "n_statistics": (n_stats[-1], "–".join(dict.fromkeys(str(n) for n in (n_stats[0], n_stats[-1])))),
+        "response_seed_cost": response_seed_cost(),
         "nulls": (b["null_correct_fraction"], f"{_pct(b['null_correct_fraction'])} ({_of(rows, 'null')})"),
         "out_of_everything": (b["out_of_everything_unexplained_fraction"],
                               f"{_pct(b['out_of_everything_unexplained_fraction'])} "

@@ -18,7 +18,8 @@ gates). Printed:
    session, µm, and Eq. 9's change of backlash, µm. Without backlash the pitch's change is the
    scatter the origin alone causes.
 
-Run: ``python benchmarks/bench_eq9_stretch.py`` (about 3 minutes on one core).
+Run: ``python benchmarks/bench_eq9_stretch.py [--record]`` (about 3 minutes on one core;
+``--record``: the three tables into docs/validation.json, :mod:`record`).
 """
 
 from __future__ import annotations
@@ -36,6 +37,9 @@ from analysis.phase2.error_motions import session_error_motions
 from analysis.phase2.strokes import imu_run_segments
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from record import record  # noqa: E402
+
 SCENARIO = REPO / "scenarios/backlash-slow-reversal.toml"
 NOISE_FREE = ("sensors.imu_acc_noise_ug_per_rthz=0.0", "sensors.imu_gyro_noise_urad_s_per_rthz=0.0",
               "phase2.runs_per_session=1")
@@ -67,7 +71,8 @@ def cruises(path: Path, all_runs: bool = False) -> dict:
 
 
 def eq9(path: Path) -> dict:
-    """{(timing, method): [(session, pitch − first µm, Eq. 9 µm)]} on the IMU axis."""
+    """{(timing, method): [(session, pitch − first µm, Eq. 9 µm)]} on the IMU axis (Eq. 9 unbounded:
+    the estimator withholds a value beyond its bound, docs/import.md)."""
     out = {}
     with open_measurements(path / "measurements.h5") as m:
         for timing in TIMINGS:
@@ -77,13 +82,23 @@ def eq9(path: Path) -> dict:
                 est = BacklashEstimator(pitch_method=method).fit(ems[0])
                 rows = [est.estimate(e) for e in ems]
                 out[(timing, method)] = [(r.session, (r.observed_pitch_m - est.reference_pitch_m_) * 1e6,
-                                          r.delta_backlash_pitch_m * 1e6) for r in rows]
+                                          r.delta_backlash_pitch_raw_m * 1e6) for r in rows]
     return out
 
 
 def injected(path: Path) -> dict:
     with open_truth(path / "truth.h5") as t:
         return {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
+
+
+def _signed(v: float, digits: int) -> str:
+    """``v`` with its sign, a real minus."""
+    return f"{v:+.{digits}f}".replace("-", "−")
+
+
+def _fr(pair) -> str:
+    """'forward \\| reverse' of a pair (ms or µm already), for a Markdown cell."""
+    return " \\| ".join(_signed(v, 3) for v in pair)
 
 
 def main() -> None:
@@ -93,29 +108,37 @@ def main() -> None:
         noisy = simulate(Path(tmp) / "noisy")
         b = injected(steps)
         cw, cn = cruises(steps), cruises(none)
-        print("1. cruise shortened by the backlash, first run, forward | reverse (ms), noise-free")
-        print("session  b (µm)  b/v (ms)  " + "  ".join(f"{t:>22}" for t in TIMINGS))
-        for s in sorted(b):
-            cells = [" | ".join(f"{(n - w) * 1e3:+.3f}" for w, n in zip(cw[(s, t)][0], cn[(s, t)][0], strict=True))
+        shortened = ["| session | b (µm) | b/v (ms) | " + " | ".join(f"`{t}`" for t in TIMINGS) + " |",
+                     "|---" * (3 + len(TIMINGS)) + "|"]
+        for s in sorted(b)[1:]:
+            cells = [_fr([(n - w) * 1e3 for w, n in zip(cw[(s, t)][0], cn[(s, t)][0], strict=True)])
                      for t in TIMINGS]
-            print(f"{s}  {b[s]:6.1f}  {b[s] * 1e-6 / 0.02 * 1e3:8.3f}  " + "  ".join(f"{c:>22}" for c in cells))
+            shortened.append(f"| {s} | {b[s]:g} | {b[s] * 1e-6 / 0.02 * 1e3:.2f} | " + " | ".join(cells) + " |")
         cq = cruises(noisy, all_runs=True)
-        print("\n   without backlash: spread of the cruise over the sessions, forward | reverse (ms, "
-              "noise-free); run-to-run sd of the cruise with the IMU's noise (ms, the scenario)")
+        spread = ["| stroke timing | spread over the sessions, noise-free (ms) "
+                  "| run-to-run sd with the IMU's noise (ms) |", "|---|---|---|"]
         for t in ALL_TIMINGS:
-            spread = np.ptp(np.array([cn[(s, t)][0] for s in sorted(b)]), axis=0)
+            sp = np.ptp(np.array([cn[(s, t)][0] for s in sorted(b)]), axis=0)
             resid = np.concatenate([cq[(s, t)] - cq[(s, t)].mean(axis=0) for s in sorted(b)])
             dof = resid.size - 2 * len(b)
-            print(f"   {t:>13}: {spread[0] * 1e3:.3f} | {spread[1] * 1e3:.3f}   "
-                  f"sd {np.sqrt(np.sum(resid ** 2) / dof) * 1e3:.3f}")
-        print("\n2. observed pitch − first session (µm) and Eq. 9 (µm) per session, IMU axis")
+            spread.append(f"| `{t}` | {_fr(sp * 1e3)} | {np.sqrt(np.sum(resid ** 2) / dof) * 1e3:.3f} |")
+        pitch = ["| campaign | stroke timing + pitch method | observed pitch − the first session's (µm) | Eq. 9 (µm) |",
+                 "|---|---|---|---|"]
         for name, path in (("noise-free, backlash steps", steps), ("noise-free, no backlash", none),
                            ("the scenario (IMU noise, 4 runs)", noisy)):
-            inj = injected(path)
-            print(f"{name}: injected {[inj[s] for s in sorted(inj)]} µm")
             for (timing, method), rows in eq9(path).items():
-                print(f"  {timing:>13} + {method:<8}  pitch {' '.join(f'{p:+.4f}' for _, p, _ in rows)}"
-                      f"   Eq. 9 {' '.join(f'{e:+6.2f}' for _, _, e in rows)}")
+                pitches = ", ".join(_signed(p, 4) for _, p, _ in rows[1:])
+                pitch.append(f"| {name} | `{timing}` + `{method}` | {pitches} | "
+                             f"{', '.join(_signed(e, 2) for _, _, e in rows[1:])} |")
+        tables = {"cruise_shortened": "\n".join(shortened) + "\n", "cruise_spread": "\n".join(spread) + "\n",
+                  "pitch": "\n".join(pitch) + "\n"}
+        for v in tables.values():
+            print(v)
+        if "--record" in sys.argv[1:]:
+            record("bench_eq9_stretch", command=".venv/bin/python benchmarks/bench_eq9_stretch.py --record",
+                   scale="scenarios/backlash-slow-reversal.toml three times with the same origins: noise-free "
+                         "with 1 run per session, with and without its backlash steps; as it is (4 runs)",
+                   figures={"injected_um": (None, ", ".join(f"{b[s]:g}" for s in sorted(b)[1:]))}, tables=tables)
 
 
 if __name__ == "__main__":

@@ -12,17 +12,66 @@ deceleration and backlash only: every 5 ms from 50 ms before the first stop to 1
 screw's lag behind the command, its speed, the carriage's place in the gap and the servo torque).
 Usage:
 ``python benchmarks/bench_stop_travel.py [--damping-ratio 0.0003] [--friction-timeconst 0.0004]``.
+``--record`` runs the cases docs/error-motions.md quotes (:data:`RECORDED`) and stores their
+tables in docs/validation.json (:mod:`record`).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from twin.sim.campaign import condition_at, make_world
 from twin.sim.scenario import load
 from twin.sim.simulate import Simulator, phase2_trajectory, stroke_travels
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from record import record  # noqa: E402
+
+ACCELS = (19.6, 2.0, 0.5, 0.1, 0.05)
+STICKING = ("axis.friction_timeconst_ms=0.4", "axis.friction_impedance=0.999")
+LAST_FLANK = ('phase2.start_flank="last"',)
+#: The tables docs/error-motions.md quotes: name -> (settings, backlashes µm, decelerations m/s²).
+RECORDED = {
+    "default_friction": ((), (0.0, 10.0, 20.0), ACCELS),
+    "sticking_last_flank": ((*STICKING, *LAST_FLANK), (0.0, 5.0, 10.0, 20.0), ACCELS),
+    "sticking_20mm_s": ((*STICKING, *LAST_FLANK, "phase2.speeds_mm_s=[20.0]"), (0.0, 5.0, 10.0, 20.0), (0.05,)),
+}
+#: One setting at a time at 0.05 m/s² (reverse D − L): either friction key alone, or the time
+#: constant with the velocity loop's integral action removed.
+ALONE = {"`axis.friction_timeconst_ms=0.4`": (STICKING[0],),
+         "`axis.friction_impedance=0.999`": (STICKING[1],),
+         "`axis.friction_timeconst_ms=0.4`, `axis.velocity_integral_time_s=10`":
+             (STICKING[0], "axis.velocity_integral_time_s=10")}
+
+
+def _um(x: float) -> str:
+    return f"{x:+.2f}".replace("-", "−")
+
+
+def _cell(d: np.ndarray) -> str:
+    return f"{_um(d[0])} \\| {_um(d[1])}"
+
+
+def recorded_tables() -> dict[str, str]:
+    """The Markdown tables of :data:`RECORDED` and :data:`ALONE` (D − L, µm)."""
+    tables = {}
+    for name, (sets, backlashes, accels) in RECORDED.items():
+        rows = ["| deceleration | " + " | ".join(f"b = {b:g} µm" for b in backlashes) + " |",
+                "|---" * (1 + len(backlashes)) + "|"]
+        for acc in accels:
+            rows.append(f"| {acc:g} m/s² | " + " | ".join(_cell(d_minus_l_um(acc, b, None, None, sets))
+                                                       for b in backlashes) + " |")
+        tables[name] = "\n".join(rows) + "\n"
+    rows = ["| setting (0.05 m/s², reverse) | b = 0 | b = 10 µm | b = 20 µm |", "|---|---|---|---|"]
+    for label, sets in ALONE.items():
+        rows.append(f"| {label} | " + " | ".join(_um(d_minus_l_um(0.05, b, None, None, sets)[1])
+                                               for b in (0.0, 10.0, 20.0)) + " |")
+    tables["alone"] = "\n".join(rows) + "\n"
+    return tables
 
 
 def d_minus_l_um(accel_m_s2: float, backlash_um: float, damping_ratio: float | None,
@@ -70,7 +119,16 @@ def main() -> None:
     p.add_argument("--accel", type=float, nargs="+", default=[19.6, 2.0, 0.5, 0.1, 0.05])
     p.add_argument("--backlash", type=float, nargs="+", default=[0.0, 10.0, 20.0])
     p.add_argument("--trace", action="store_true")
+    p.add_argument("--record", action="store_true", help="run the documented cases, store their tables")
     a = p.parse_args()
+    if a.record:
+        tables = recorded_tables()
+        for v in tables.values():
+            print(v)
+        record("bench_stop_travel", command=".venv/bin/python benchmarks/bench_stop_travel.py --record",
+               scale="one run per case of a 20 mm stroke at 5 mm/s (quick scenario, dwell 1 s)", figures={},
+               tables=tables)
+        return
     if a.trace:
         d = d_minus_l_um(a.accel[0], a.backlash[0], a.damping_ratio, a.friction_timeconst,
                          tuple(a.set), trace=True)

@@ -7,12 +7,14 @@ x 2 seeds = 16 campaigns, each simulated, analysed and scored by
 :func:`twin.harness.chain.run_point` in a worker. Both runs go through ``twin sweep --workers N``
 (a fresh output directory each, so nothing is reused); the times include starting the cluster
 and the workers' imports. The two result tables are compared (they must be identical).
+With ``--record`` the times go into docs/validation.json (:mod:`record`).
 
-Usage: .venv/bin/python benchmarks/bench_sweep.py
+Usage: .venv/bin/python benchmarks/bench_sweep.py [--record]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -23,6 +25,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+from record import record  # noqa: E402
 
 SWEEP = REPO / "benchmarks" / "bench_sweep.toml"  # the 16 points (a sweep file, data)
 
@@ -45,6 +49,10 @@ def main() -> None:
     import numpy as np
     import pandas as pd
 
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--record", action="store_true", help="store the figures in docs/validation.json")
+    args = ap.parse_args()
+
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         times, per_task, loads = {}, {}, {}
@@ -65,6 +73,13 @@ def main() -> None:
               f"({len(a)} rows)")
         print(json.dumps({"wall_s_1": round(times[1], 1), "wall_s_2": round(times[2], 1),
                           "speedup": round(times[1] / times[2], 2)}))
+        if args.record:
+            speedup = times[1] / times[2]
+            record("bench_sweep", command=".venv/bin/python benchmarks/bench_sweep.py --record",
+                   scale=f"twin sweep benchmarks/bench_sweep.toml ({len(a)} points) on 1 and on 2 workers",
+                   figures={"times": (speedup, f"{times[1]:.0f} s on 1 worker, {times[2]:.0f} s on 2 "
+                                               f"({speedup:.2f}×; {np.mean(per_task[2]):.1f} s per point), "
+                                               "identical tables")})
 
 
 if __name__ == "__main__":

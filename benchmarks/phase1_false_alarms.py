@@ -9,9 +9,10 @@ alarms on healthy samples (issue 33; the figures in docs/ci-gate.md).
 2. On the no-wear campaign's raw captures (simulated into WORKDIR if missing): where the torque
    step at the end of each acceleration falls in the autoencoder's window, in samples at 10 kHz.
 
-Run: .venv/bin/python benchmarks/phase1_false_alarms.py [WORKDIR [GATE_CACHE]]   (defaults
-runs/phase1-false-alarms and the gate's default cache root; about 20 s with a warm gate cache).
-Not part of ``make bench``.
+Run: .venv/bin/python benchmarks/phase1_false_alarms.py [WORKDIR [GATE_CACHE]] [--record]
+(defaults runs/phase1-false-alarms and the gate's default cache root; about 20 s with a warm
+gate cache; ``--record``: the table of part 1 into docs/validation.json, :mod:`record`). Not part
+of ``make bench``.
 """
 
 from __future__ import annotations
@@ -27,6 +28,11 @@ from analysis.phase1 import pipeline
 from analysis.phase1.segmentation import segment_capture
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from record import record  # noqa: E402
+
+LABELS = {"gmm_md": "GMM-MD (MD²)", "som_mqe": "SOM-MQE (MQE)", "iforest": "Isolation Forest (s)",
+          "autoencoder": "autoencoder (loss)"}
 PAPER = {"gmm_md": {"limit": "paper"}, "som_mqe": {"limit": "paper"}, "iforest": {"limit": "paper"},
          "autoencoder": {"limit": "paper", "scaling": "scalar"}}
 
@@ -35,9 +41,16 @@ def _stats(x: np.ndarray) -> str:
     return f"mean {x.mean():.3g}, sd {x.std(ddof=1):.3g}, max {x.max():.3g}"
 
 
-def on_the_gate_cache(root: str | None) -> None:
+def _ms(x: np.ndarray) -> str:
+    return f"mean {x.mean():.3g}, sd {x.std(ddof=1):.3g}"
+
+
+def on_the_gate_cache(root: str | None) -> str:
+    """Part 1; returns its table (Markdown)."""
     from twin.harness import gate
 
+    rows = ["| detector | baseline, in-sample | baseline, held out | healthy new samples | paper's limit "
+            "| default limit |", "|---|---|---|---|---|---|"]
     cache = gate.ensure_cache(root, "standard")
     ref = cache.phase1(cache.suite.reference)
     _, selected = pipeline.select_features(ref.X, ref.labels)
@@ -57,10 +70,16 @@ def on_the_gate_cache(root: str | None) -> None:
                   f"scalar scaling {cv_only.threshold_:.4g}: "
                   f"{int(np.sum(cv_only.decision_function(data)[nb:] > cv_only.threshold_))} of {len(new)} above")
         default = pipeline.make_detector(name, 0).fit(data[:nb])
+        above = int(np.sum(new > det.threshold_))
+        above_default = int(np.sum(default.decision_function(data)[nb:] > default.threshold_))
         print(f"{name}: baseline in-sample {_stats(scores[:nb])}; held out {_stats(held)}; healthy new "
-              f"{_stats(scores[nb:])}; paper's limit {det.threshold_:.4g}: {int(np.sum(new > det.threshold_))} "
-              f"of {len(new)} new samples above; default limit {default.threshold_:.4g}: "
-              f"{int(np.sum(default.decision_function(data)[nb:] > default.threshold_))} above")
+              f"{_stats(scores[nb:])}; paper's limit {det.threshold_:.4g}: {above} "
+              f"of {len(new)} new samples above; default limit {default.threshold_:.4g}: {above_default} above")
+        new_scores = scores[nb:]
+        rows.append(f"| {LABELS[name]} | {_ms(scores[:nb])} | {_ms(held)} | mean {new_scores.mean():.3g}, "
+                    f"max {new_scores.max():.3g} | {det.threshold_:.3g}: {above} of {len(new)} above | "
+                    f"{default.threshold_:.3g}: {above_default} of {len(new)} above |")
+    return "\n".join(rows) + "\n"
 
 
 def torque_step_timing(work: Path) -> None:
@@ -92,9 +111,15 @@ def torque_step_timing(work: Path) -> None:
 
 
 def main() -> None:
-    work = Path(sys.argv[1]) if len(sys.argv) > 1 else REPO / "runs/phase1-false-alarms"
-    on_the_gate_cache(sys.argv[2] if len(sys.argv) > 2 else None)
+    args = [a for a in sys.argv[1:] if a != "--record"]
+    work = Path(args[0]) if args else REPO / "runs/phase1-false-alarms"
+    table = on_the_gate_cache(args[1] if len(args) > 1 else None)
+    print(table)
     torque_step_timing(work)
+    if "--record" in sys.argv[1:]:
+        record("phase1_false_alarms", command=".venv/bin/python benchmarks/phase1_false_alarms.py --record",
+               scale="the twin gate's standard cache: the no-wear campaign's 15 baseline and 27 healthy new samples",
+               figures={}, tables={"limits": table})
 
 
 if __name__ == "__main__":

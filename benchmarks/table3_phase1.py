@@ -75,6 +75,7 @@ def main() -> None:
     figures = {"onset_h": (onset, f"{onset:g}"), "n_selected": (len(sel), f"{len(sel)}"),
                "selected_features": (None, ", ".join(f"`{n}`" for n in sel)),
                "time_detection_s": (round(t2 - t1, 1), f"{t2 - t1:.0f} s")}
+    figures["truth"] = (None, truth_text(rtf / "truth.h5", onset, scores["pca_t2"]["hours"]))
     for m, r in det["methods"].items():
         s = scores[m]
         first = score_method(s["hours"], s["scores"], s["threshold"], nb, None)
@@ -98,6 +99,24 @@ def main() -> None:
                scale="paper-rtf at campaign.scale=0.2 (2 captures per 84-h sample, 8693 h, Phase II off); "
                      "paper-reference with 3 captures per sample",
                figures=figures, tables={"table3": table})
+
+
+def truth_text(path: Path, onset: float, sample_hours: list[float]) -> str:
+    """The injected truth the table is read against, in words: the preload (share of its
+    initial value) at the first three samples after the onset and at the paper's 2972 h, the
+    backlash until then, at 6000 h and at the end."""
+    import numpy as np
+
+    from analysis.dataset import open_truth
+
+    with open_truth(path) as t:
+        tl = t.timeline()
+    h, pre, bl = tl["hours"], tl["preload_N"] / tl["preload_N"][0], tl["backlash_um"]
+    at = [x for x in sample_hours if x > onset][:3] + [2972.0]
+    return (f"true preload at {'/'.join(f'{x:g}' for x in at)} h: "
+            f"{'/'.join(f'{100 * np.interp(x, h, pre):.0f}' for x in at)} % of the initial value, backlash "
+            f"≤ {bl[h <= at[-1]].max():.2f} µm until {at[-1]:g} h, {np.interp(6000.0, h, bl):.1f} µm at 6000 h, "
+            f"{bl[-1]:.0f} µm at the end ({h[-1]:g} h)")
 
 
 def _h(hours) -> str:

@@ -37,6 +37,7 @@ import numpy as np
 import pytest
 from conftest import REPO, TWIN
 
+from analysis.base import registry
 from analysis.phase1.detectors import PCAT2
 from analysis.phase2.backlash import BacklashEstimator, weighted_sum
 from twin.harness import gate
@@ -139,7 +140,14 @@ def test_cold_gate_passes_the_papers_methods_and_writes_junit(cold, quote):
         quote(name, value, text)
 
 
-def test_builtin_estimator_and_detectors(cold, cache):
+def _alarms(r) -> str:
+    """'fa/n' of a false-alarms result, '= rate' when not 0, and pass or fail."""
+    fa, n = re.search(r"\((\d+) false alarms on (\d+) healthy samples", r.figure).groups()
+    return f"{fa}/{n}" + (f" = {r.value:.3f}" if r.value else "") + (", pass" if r.passed else ", fail")
+
+
+@pytest.mark.quoted
+def test_builtin_estimator_and_detectors(cold, cache, quote):
     """The cold run above passed ``shift`` through every backlash check (its JUnit XML); here
     every built-in detector passes both detection checks with its default limit: detected one
     sample after the onset, at most 0.1 false alarms per healthy sample (figures:
@@ -161,10 +169,29 @@ def test_builtin_estimator_and_detectors(cold, cache):
 
     paper = [GMMMD(limit="paper"), SOMMQE(limit="paper"), IForest(limit="paper"),
              TorqueAutoencoder(limit="paper", scaling="scalar")]
-    for d in paper:
+    paper_fa = {}
+    for m, d in zip(("gmm_md", "som_mqe", "iforest", "autoencoder"), paper, strict=True):
         r = next(r for r in gate.run_detection_checks(d, cache) if r.check == "false-alarms")
         print(f"paper's limit: {'PASS' if r.passed else 'FAIL'} {r.check} [{type(d).__name__}]: {r.figure}")
         assert not r.passed and r.error is None
+        paper_fa[m] = _alarms(r)
+    same = {"pca_t2": "(the same F limit)", "ocsvm": "(the same limit, 0)"}
+    rows = ["| detector | `detection-delay` | `false-alarms`, default limit | `false-alarms`, paper's limit |",
+            "|---|---|---|---|"]
+    for m in ("pca_t2", "ocsvm", "gmm_md", "som_mqe", "iforest", "autoencoder"):
+        d = by[(m, "detection-delay")]
+        hours = re.search(r"detected at (\S+) h", d.figure)[1]
+        rows.append(f"| {registry.entries('detectors')[m].label} (`{m}`{', default' if m == 'pca_t2' else ''}) | "
+                    f"{d.value:.0f} sample ({hours} h), {'pass' if d.passed else 'fail'} | "
+                    f"{_alarms(by[(m, 'false-alarms')])} | {same.get(m) or paper_fa[m]} |")
+    quote.table("detectors", "\n".join(rows) + "\n")
+    # the autoencoder's one false alarm: the onset's sample, whose second capture is half an hour on
+    from analysis.dataset import open_truth
+
+    with open_truth(cache.folder / "campaigns" / cache.suite.fault / "truth.h5") as t:
+        tl, onset = t.timeline(), t.onset_hours
+    share = np.interp(onset + 0.5, tl["hours"], tl["preload_N"]) / tl["preload_N"][0]
+    quote("preload_half_an_hour_after_onset_pct", 100 * share, f"{100 * share:.1f} %")
 
 
 class Eq4(BacklashEstimator):

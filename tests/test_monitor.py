@@ -22,7 +22,7 @@ import pytest
 from analysis.base.files import write_json
 from tests.conftest import DEMO_SMALL, REFERENCE_SMALL, REPO, TWIN, run_twin, simulate_shared
 
-ENV = dict(os.environ, PYTHONPATH=str(REPO), TWIN_WORKERS="1")
+ENV = dict(os.environ, PYTHONPATH=str(REPO), TWIN_WORKERS="1", COLUMNS="200")  # a console line per event
 
 
 def _popen(*args):
@@ -153,6 +153,17 @@ def test_monitor_backlash_equals_twin_backlash(replay):
     assert last["prognosis"] == doc["prognosis"]
     assert last["trend"]["smoothed_um"] == doc["sessions"][-1]["smoothed_um"]
     assert "Phase II session s0002 at 250 h: change of backlash" in replay["monitor_stderr"]
+
+
+@pytest.mark.quoted
+def test_console_says_each_alarm_and_session(replay, quote):
+    """The console's event lines, one per alarm, request and session (docs/monitoring.md quotes
+    them): as many as the log's events."""
+    events = _events(replay["state"] / "events.jsonl")
+    lines = [s for s in replay["monitor_stderr"].splitlines() if s.startswith(("alarm", "Phase II"))]
+    said = [e for e in events if e["event"] in ("alarm", "alarm cleared", "Phase II requested", "Phase II estimated")]
+    assert len(lines) == len(said), lines
+    quote.table("console", "```\n" + "\n".join(lines) + "\n```\n")
 
 
 def test_kill_9_and_restart_gives_the_same_log(replay, tmp_path):

@@ -215,7 +215,7 @@ def _score_case(case: Case, res: dict) -> dict:
            "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated"),
            "heldout_gap_after_resimulated": (res.get("resimulation") or {}).get("heldout_gap_after"),
            "verdict_interpolated": res.get("verdict_interpolated", res["verdict"]),
-           "n_significant": res["n_significant_calibration"],
+           "n_significant": res["n_significant_calibration"], "n_statistics": res["n_statistics"],
            "top_region": ([top["domain"], top["channel"], top["family"], top["bin"]] if top else None)}
     values = {**case.effects, **case.artefacts}
 
