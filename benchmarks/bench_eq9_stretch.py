@@ -38,7 +38,7 @@ from analysis.phase2.strokes import imu_run_segments
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
-from record import record  # noqa: E402
+from record import record, text  # noqa: E402
 
 SCENARIO = REPO / "scenarios/backlash-slow-reversal.toml"
 NOISE_FREE = ("sensors.imu_acc_noise_ug_per_rthz=0.0", "sensors.imu_gyro_noise_urad_s_per_rthz=0.0",
@@ -91,14 +91,9 @@ def injected(path: Path) -> dict:
         return {s: t.session(s)[2]["backlash_um"] for s in t.sessions()}
 
 
-def _signed(v: float, digits: int) -> str:
-    """``v`` with its sign, a real minus."""
-    return f"{v:+.{digits}f}".replace("-", "−")
-
-
 def _fr(pair) -> str:
     """'forward \\| reverse' of a pair (ms or µm already), for a Markdown cell."""
-    return " \\| ".join(_signed(v, 3) for v in pair)
+    return " \\| ".join(text(v, "{:+.3f}") for v in pair)
 
 
 def main() -> None:
@@ -127,9 +122,9 @@ def main() -> None:
         for name, path in (("noise-free, backlash steps", steps), ("noise-free, no backlash", none),
                            ("the scenario (IMU noise, 4 runs)", noisy)):
             for (timing, method), rows in eq9(path).items():
-                pitches = ", ".join(_signed(p, 4) for _, p, _ in rows[1:])
+                pitches = ", ".join(text(p, "{:+.4f}") for _, p, _ in rows[1:])
                 pitch.append(f"| {name} | `{timing}` + `{method}` | {pitches} | "
-                             f"{', '.join(_signed(e, 2) for _, _, e in rows[1:])} |")
+                             + ", ".join(text(e, "{:+.2f}") for _, _, e in rows[1:]) + " |")
         tables = {"cruise_shortened": "\n".join(shortened) + "\n", "cruise_spread": "\n".join(spread) + "\n",
                   "pitch": "\n".join(pitch) + "\n"}
         for v in tables.values():

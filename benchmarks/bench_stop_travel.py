@@ -29,7 +29,7 @@ from twin.sim.scenario import load
 from twin.sim.simulate import Simulator, phase2_trajectory, stroke_travels
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from record import record  # noqa: E402
+from record import record, text  # noqa: E402
 
 ACCELS = (19.6, 2.0, 0.5, 0.1, 0.05)
 STICKING = ("axis.friction_timeconst_ms=0.4", "axis.friction_impedance=0.999")
@@ -48,12 +48,8 @@ ALONE = {"`axis.friction_timeconst_ms=0.4`": (STICKING[0],),
              (STICKING[0], "axis.velocity_integral_time_s=10")}
 
 
-def _um(x: float) -> str:
-    return f"{x:+.2f}".replace("-", "−")
-
-
 def _cell(d: np.ndarray) -> str:
-    return f"{_um(d[0])} \\| {_um(d[1])}"
+    return " \\| ".join(text(v, "{:+.2f}") for v in d[:2])
 
 
 def recorded_tables() -> dict[str, str]:
@@ -68,7 +64,7 @@ def recorded_tables() -> dict[str, str]:
         tables[name] = "\n".join(rows) + "\n"
     rows = ["| setting (0.05 m/s², reverse) | b = 0 | b = 10 µm | b = 20 µm |", "|---|---|---|---|"]
     for label, sets in ALONE.items():
-        rows.append(f"| {label} | " + " | ".join(_um(d_minus_l_um(0.05, b, None, None, sets)[1])
+        rows.append(f"| {label} | " + " | ".join(text(d_minus_l_um(0.05, b, None, None, sets)[1], "{:+.2f}")
                                                for b in (0.0, 10.0, 20.0)) + " |")
     tables["alone"] = "\n".join(rows) + "\n"
     return tables
