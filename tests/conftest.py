@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cli_server
 import pytest
 from threadpoolctl import threadpool_limits
 
@@ -34,7 +35,17 @@ REFERENCE_TINY = [*TINY_PHASE1, "--set", "phase1.sample_interval_hours=40"]
 
 
 def run_twin(*args, check=True, env=None, **kw):
+    """``python -m twin.cli ARGS`` in the repository with this process's environment (PYTHONPATH
+    the repository) or ``env``: the completed process, its output captured as text; with
+    ``check``, CalledProcessError on a non-zero exit. Forked from the test process's warm server
+    (:mod:`cli_server`); a new interpreter (:func:`subprocess.run`) with other keywords or when
+    TWIN_TEST_SUBPROCESS is set."""
     env = dict(os.environ, PYTHONPATH=str(REPO)) if env is None else env
+    if set(kw) <= {"timeout"} and not os.environ.get("TWIN_TEST_SUBPROCESS"):
+        proc = cli_server.call([*map(str, args)], env, REPO, REPO, kw.get("timeout"))
+        if check and proc.returncode:
+            raise subprocess.CalledProcessError(proc.returncode, proc.args, proc.stdout, proc.stderr)
+        return proc
     return subprocess.run([*TWIN, *map(str, args)], cwd=REPO, env=env, capture_output=True,
                           text=True, check=check, **kw)
 

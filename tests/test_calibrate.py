@@ -164,7 +164,8 @@ def _foreign_capture(**axis) -> tuple[dict, float]:
     return phase1_capture(sim, s.phase1, condition_at(s, 100.0), rng_for(0, KIND_PHASE1, 1)), s.phase1.fs_hz
 
 
-def test_suspension_mode_follows_the_trucks():
+@pytest.mark.quoted
+def test_suspension_mode_follows_the_trucks(quote):
     """The suspension modes read on the twin's nut accelerometers follow the trucks: the vertical
     one moves as √k (the vertical stiffness halved: the frequency / √2 within 3 %), the lateral
     one at least as much (/ 1.37–1.7: as the mode softens the motion's content below it pulls
@@ -201,6 +202,12 @@ def test_suspension_mode_follows_the_trucks():
           f"{z_loop:.1f}/{y_loop:.1f} Hz; the axial hump (x, 100-400 Hz) x{x_nut / x0:.2f} for the nut's 1/4, "
           f"x{x_loop / x0:.2f} for the velocity loop's 1/2; with a 0.1 m/s^2 line at 150 Hz "
           f"{z_line:.1f}/{y_line:.1f} Hz")
+    for name, v in (("vertical_mode_hz", z0), ("vertical_mode_soft_hz", z_soft), ("lateral_mode_hz", y0),
+                    ("lateral_mode_soft_hz", y_soft)):
+        quote(name, v, f"{v:.1f} Hz")
+    quote("lateral_mode_ratio", y0 / y_soft, f"{y0 / y_soft:.2f}")
+    quote("hump_nut_ratio", x_nut / x0, f"×{x_nut / x0:.2f}")
+    quote("hump_loop_ratio", x_loop / x0, f"×{x_loop / x0:.2f}")
     assert z0 / z_soft == pytest.approx(math.sqrt(2), rel=0.03)
     assert 1.37 <= y0 / y_soft <= 1.7
     for z, y in ((z_nut, y_nut), (z_loop, y_loop), (z_line, y_line)):
@@ -210,7 +217,8 @@ def test_suspension_mode_follows_the_trucks():
     assert min(abs(math.log(x_nut / x0)), abs(math.log(x_loop / x0))) > math.log(1.3)
 
 
-def test_speed_overshoot_follows_the_velocity_loop():
+@pytest.mark.quoted
+def test_speed_overshoot_follows_the_velocity_loop(quote):
     """The motor speed's overshoot at the ramps' ends falls as the velocity loop's bandwidth
     rises (× 1.5: at least 10 %) and moves far less with the position loop (× 1.5: under a
     quarter of that)."""
@@ -228,11 +236,15 @@ def test_speed_overshoot_follows_the_velocity_loop():
     o_pos = over(position_bandwidth_hz=1.5 * ax.position_bandwidth_hz)
     print(f"speed overshoot {100 * o0:.3f} %; velocity loop x1.5 {100 * o_vel:.3f} %; position loop x1.5 "
           f"{100 * o_pos:.3f} %")
+    for name, v in (("overshoot_pct", o0), ("overshoot_velocity_fast_pct", o_vel),
+                    ("overshoot_position_fast_pct", o_pos)):
+        quote(name, 100 * v, f"{100 * v:.3f} %")
     assert o_vel < 0.9 * o0
     assert abs(o_pos - o0) < 0.25 * abs(o_vel - o0)
 
 
-def test_imu_statistics_follow_the_velocity_loop_and_the_lateral_trucks():
+@pytest.mark.quoted
+def test_imu_statistics_follow_the_velocity_loop_and_the_lateral_trucks(quote):
     """On the IMU of a Phase II run: the gain from the commanded to the IMU's axial acceleration
     at 30-60 Hz (the velocity loop's statistic when the recording has runs) rises monotonically
     with the velocity loop's bandwidth (x0.5, x1, x1.4: each step more than 10 times its scatter
@@ -274,6 +286,17 @@ def test_imu_statistics_follow_the_velocity_loop_and_the_lateral_trucks():
           f"log10 RMS {r0[0]:.4f} (seed 2: {r0[1]:.4f}); velocity loop x1.2 {r_vel:.4f}; position loop x1.5 "
           f"{r_pos:.4f}; vertical trucks halved {r_vert:.4f}; IMU yaw mode {y0[0]:.1f} Hz (seed 2: {y0[1]:.1f}), "
           f"lateral trucks halved {y_lat:.1f} Hz, vertical halved {y_vert:.1f} Hz, velocity loop x1.2 {y_vel:.1f} Hz")
+    for name, v in (("gain", g0[0]), ("gain_velocity_slow", g_slow), ("gain_velocity_fast", g_fast),
+                    ("gain_position_fast", g_pos), ("gain_vertical_soft", g_vert),
+                    ("gain_scatter", abs(g0[1] - g0[0])), ("reversal", r0[0]), ("reversal_velocity_fast", r_vel),
+                    ("reversal_position_fast", r_pos), ("reversal_vertical_soft", r_vert),
+                    ("reversal_scatter", abs(r0[1] - r0[0]))):
+        quote(f"imu_{name}", v, f"{v:.4f}")
+    quote("imu_reversal_scatters", abs(r_vel - r0[0]) / abs(r0[1] - r0[0]),
+          f"{abs(r_vel - r0[0]) / abs(r0[1] - r0[0]):.0f}")
+    for name, v in (("yaw_mode_hz", y0[0]), ("yaw_mode_lateral_soft_hz", y_lat),
+                    ("yaw_mode_scatter_hz", abs(y0[1] - y0[0]))):
+        quote(name, v, f"{v:.1f} Hz")
     assert g_slow < g0[0] < g_fast
     assert min(g0[0] - g_slow, g_fast - g0[0]) > 10 * abs(g0[1] - g0[0])
     assert abs(r_vel - r0[0]) > 10 * abs(r0[1] - r0[0])

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, TWIN
+from conftest import REPO, run_twin
 
 from analysis.base import registry
 from analysis.phase1.detectors import PCAT2
@@ -66,10 +66,10 @@ class Biased(BacklashEstimator):
 
 
 def gate_cli(*args, env=None, **kw):
-    env = {**os.environ, "PYTHONPATH": str(REPO), **(env or {})}
+    """``twin gate ARGS`` (:func:`conftest.run_twin`, ``env`` added to this process's): (the
+    completed process, its seconds)."""
     t0 = time.perf_counter()
-    proc = subprocess.run([*TWIN, "gate", *map(str, args)], cwd=REPO, env=env, capture_output=True,
-                          text=True, **kw)
+    proc = run_twin("gate", *args, check=False, env=env and {**os.environ, "PYTHONPATH": str(REPO), **env}, **kw)
     return proc, time.perf_counter() - t0
 
 

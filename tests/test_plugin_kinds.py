@@ -20,7 +20,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import REPO, TWIN, simulate_shared
+from conftest import REPO, run_twin, simulate_shared
 
 from analysis.base import registry
 from analysis.dataset import open_truth
@@ -112,8 +112,7 @@ def _write(root) -> tuple[str, str]:
 
 def twin(*args, pythonpath: str = "", check: bool = True):
     path = os.pathsep.join(p for p in (str(REPO), pythonpath) if p)
-    r = subprocess.run([*TWIN, *map(str, args)], cwd=REPO, capture_output=True, text=True,
-                       env=dict(os.environ, PYTHONPATH=path, COLUMNS="400"), timeout=600)
+    r = run_twin(*args, check=False, env=dict(os.environ, PYTHONPATH=path, COLUMNS="400"), timeout=600)
     if check:
         assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     return r

@@ -20,7 +20,7 @@ import textwrap
 
 import pandas as pd
 import pytest
-from conftest import REFERENCE_TINY, REPO, TWIN, simulate_shared
+from conftest import REFERENCE_TINY, REPO, run_twin, simulate_shared
 
 from analysis.base import registry
 
@@ -97,8 +97,7 @@ REFERENCE = ["phase1.captures_per_sample=1", "phase1.capture_s=3.0", "phase1.sam
 
 def twin(*args, pythonpath: str | None = None, check: bool = True):
     path = os.pathsep.join(p for p in (str(REPO), pythonpath) if p)
-    r = subprocess.run([*TWIN, *map(str, args)], cwd=REPO, env=dict(os.environ, PYTHONPATH=path, COLUMNS="400"),
-                       capture_output=True, text=True, timeout=900)
+    r = run_twin(*args, check=False, env=dict(os.environ, PYTHONPATH=path, COLUMNS="400"), timeout=900)
     if check:
         assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     return r
