@@ -220,7 +220,8 @@ def test_eq4_alone_fails_the_drift_check(cache, quote):
     quote("eq4_alone_drift_um", worst, f"{worst:.2f} µm")
 
 
-def test_biased_estimator_fails_exactly_the_shift_checks(cold, tmp_path):
+@pytest.mark.quoted
+def test_biased_estimator_fails_exactly_the_shift_checks(cold, tmp_path, quote):
     (tmp_path / "biasedmod.py").write_text(BIASED)
     junit = tmp_path / "biased.xml"
     proc, seconds = gate_cli("--cache", cold[0], "--estimator", "biasedmod:Biased", "--junit", junit,
@@ -235,6 +236,29 @@ def test_biased_estimator_fails_exactly_the_shift_checks(cold, tmp_path):
     line = next(ln for ln in proc.stdout.splitlines() if "steps-command-100mm_s" in ln)
     worst = float(line.split("max |error| ")[1].split(" µm")[0])
     assert line.startswith("FAIL") and worst == pytest.approx(3.0, abs=0.2)
+    quote("biased_worst_um", worst, f"{worst:.2f} µm")
+
+
+@pytest.mark.quoted
+def test_pitch_estimator_passes_the_slow_reversal_only(cache, quote):
+    """The registered ``pitch`` estimator (Eq. 9 as its primary estimate) passes
+    ``slow-reversal-eq9`` and nothing else: at 100 mm/s on the command axis its estimate is NaN
+    (the check fails naming it), and where the carriage reverses at the paper's deceleration
+    (backlash-steps at 20 mm/s, on either axis) it does not travel D = L − b and Eq. 9 misses by
+    more than 5 µm."""
+    results = {r.check: r for r in gate.run_backlash_checks("pitch", cache)}
+    assert {k for k, r in results.items() if r.passed} == {"slow-reversal-eq9"}
+    for name in ("steps-command-100mm_s", "noise2-command-100mm_s", "noise4-command-100mm_s"):
+        assert results[name].error == "estimate(s0000).delta_backlash_pitch_m is nan", results[name].error
+    worst = {}
+    for name in ("steps-imu-20mm_s", "drift-eq5-command"):
+        r = results[name]
+        assert r.error is None
+        worst[name] = max(abs(e - i) for _, i, e, _ in r.rows)
+        assert worst[name] > 5.0, r.figure
+    print(f"\nEq. 9 ('pitch') misses: {worst}")
+    quote("pitch_miss_imu_um", worst["steps-imu-20mm_s"], f"{worst['steps-imu-20mm_s']:.1f} µm")
+    quote("pitch_miss_drift_um", worst["drift-eq5-command"], f"{worst['drift-eq5-command']:.1f} µm")
 
 
 class Raises(BacklashEstimator):
