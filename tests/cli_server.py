@@ -151,6 +151,7 @@ class CallServer:
     """The test process's handle on its server (:func:`call` starts it on first use)."""
 
     def __init__(self, repo: Path, env: dict[str, str]):
+        self.last_pid: int | None = None  # the last call's process
         self.dir = tempfile.mkdtemp(prefix="twin-calls-")
         self.path = os.path.join(self.dir, "socket")
         boot = f"import sys; sys.path.insert(0, {str(Path(__file__).parent)!r}); import cli_server; " \
@@ -177,7 +178,7 @@ class CallServer:
                 conn.sendall(json.dumps({"args": args, "env": env, "cwd": str(cwd), "out": out.name,
                                          "err": err.name}).encode() + b"\n")
                 buf = bytearray()
-                pid = json.loads(_recv_line(conn, buf))["pid"]
+                pid = self.last_pid = json.loads(_recv_line(conn, buf))["pid"]
                 conn.settimeout(timeout)
                 try:
                     code = json.loads(_recv_line(conn, buf))["returncode"]
