@@ -150,7 +150,7 @@ def serve(path: str) -> None:
 class CallServer:
     """The test process's handle on its server (:func:`call` starts it on first use)."""
 
-    def __init__(self, repo: Path, env: dict[str, str]):
+    def __init__(self, cwd: Path, env: dict[str, str]):
         self.last_pid: int | None = None  # the last call's process
         self.dir = tempfile.mkdtemp(prefix="twin-calls-")
         self.path = os.path.join(self.dir, "socket")
@@ -158,7 +158,7 @@ class CallServer:
                f"cli_server.serve({self.path!r})"
         # one BLAS thread where the libraries are loaded: the forked calls set their own limits
         # (twin.cli.main) and start their workers with the caller's environment
-        self.proc = subprocess.Popen([sys.executable, "-c", boot], stdin=subprocess.PIPE, cwd=repo,
+        self.proc = subprocess.Popen([sys.executable, "-c", boot], stdin=subprocess.PIPE, cwd=cwd,
                                      env={**env, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
         t0 = time.monotonic()
         while not os.path.exists(self.path):
@@ -210,13 +210,13 @@ class CallServer:
 _SERVER: CallServer | None = None
 
 
-def call(args: list[str], env: dict[str, str], cwd: Path, repo: Path,
+def call(args: list[str], env: dict[str, str], cwd: Path,
          timeout: float | None = None) -> subprocess.CompletedProcess:
     """``python -m twin.cli ARGS`` in ``cwd`` with ``env``, forked from this test process's
     server: (args, exit code, standard output, standard error) as :func:`subprocess.run` with
     ``capture_output=True, text=True`` gives them."""
     global _SERVER
     if _SERVER is None or _SERVER.proc.poll() is not None:
-        _SERVER = CallServer(repo, env)
+        _SERVER = CallServer(cwd, env)
         atexit.register(_SERVER.close)
     return _SERVER.run(args, env, cwd, timeout)

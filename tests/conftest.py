@@ -42,7 +42,7 @@ def run_twin(*args, check=True, env=None, **kw):
     TWIN_TEST_SUBPROCESS is set."""
     env = dict(os.environ, PYTHONPATH=str(REPO)) if env is None else env
     if set(kw) <= {"timeout"} and not os.environ.get("TWIN_TEST_SUBPROCESS"):
-        proc = cli_server.call([*map(str, args)], env, REPO, REPO, kw.get("timeout"))
+        proc = cli_server.call([*map(str, args)], env, REPO, kw.get("timeout"))
         if check and proc.returncode:
             raise subprocess.CalledProcessError(proc.returncode, proc.args, proc.stdout, proc.stderr)
         return proc

@@ -1,7 +1,7 @@
 """The suite's warm ``twin`` (tests/cli_server.py) is the command line a user runs: the same exit
-code, standard output and error as a new interpreter for a verb that works and one that refuses
-its input; the caller's working directory, environment and PYTHONPATH; a timeout that kills the
-call and the workers it started."""
+code, standard output and error as a new interpreter for a verb that works, one that refuses its
+input and ``--version``; the caller's environment; a call past its timeout raises TimeoutExpired
+and is killed. (The caller's PYTHONPATH: the plug-in tests load their modules from it.)"""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ def _fresh(args, env):
 def test_forked_call_equals_a_new_interpreter(args, tmp_path):
     env = dict(os.environ, PYTHONPATH=str(REPO), COLUMNS="150")
     done = []
-    for way, run in (("fresh", _fresh), ("forked", lambda a, e: cli_server.call(a, e, REPO, REPO))):
+    for way, run in (("fresh", _fresh), ("forked", lambda a, e: cli_server.call(a, e, REPO))):
         d = tmp_path / way
         d.mkdir()
         proc = run([a.format(tmp=d) for a in args], env)
@@ -41,7 +41,7 @@ def test_forked_call_takes_the_callers_environment(tmp_path):
     it, tests/test_plugins.py and tests/test_plugin_kinds.py.)"""
     env = dict(os.environ, PYTHONPATH=str(REPO), TWIN_WORKERS="0")
     args = ["simulate", "quick", "-o", str(tmp_path / "o")]
-    forked, fresh = cli_server.call(args, env, REPO, REPO), _fresh(args, env)
+    forked, fresh = cli_server.call(args, env, REPO), _fresh(args, env)
     assert forked.returncode == fresh.returncode == 2
     assert "TWIN_WORKERS" in forked.stderr and forked.stderr == fresh.stderr
 
@@ -51,8 +51,7 @@ def test_timeout_kills_the_call(tmp_path):
     gone (killed with its process group, and reaped)."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
     with pytest.raises(subprocess.TimeoutExpired):
-        cli_server.call(["simulate", "paper-rtf", "-o", str(tmp_path / "long"), "--workers", "1"], env, REPO, REPO,
-                        timeout=5)
+        cli_server.call(["simulate", "paper-rtf", "-o", str(tmp_path / "long"), "--workers", "1"], env, REPO, timeout=5)
     pid = cli_server._SERVER.last_pid
     for _ in range(100):
         try:

@@ -69,7 +69,8 @@ def gate_cli(*args, env=None, **kw):
     """``twin gate ARGS`` (:func:`conftest.run_twin`, ``env`` added to this process's): (the
     completed process, its seconds)."""
     t0 = time.perf_counter()
-    proc = run_twin("gate", *args, check=False, env=env and {**os.environ, "PYTHONPATH": str(REPO), **env}, **kw)
+    full = None if env is None else {**os.environ, "PYTHONPATH": str(REPO), **env}
+    proc = run_twin("gate", *args, check=False, env=full, **kw)
     return proc, time.perf_counter() - t0
 
 
