@@ -105,8 +105,10 @@ def test_diagnose_on_a_dask_scheduler_equals_local_processes(scheduler, tmp_path
     cands = [a for c in ("axis.carriage_mass_kg", "cogging", "gain:acc1") for a in ("--candidate", c)]
     docs = {}
     for label, where in (("local", ["--workers", "2"]), ("dask", ["--scheduler", scheduler])):
-        # 5 seeds: the minimum subset's 2 samples give the spread fewer degrees of freedom
-        args = ["diagnose", tmp_path / "real", "--scenario", bench, *sets, *cands, "--seeds", "5", *where,
+        # 5 seeds: the minimum subset's 2 samples give the spread fewer degrees of freedom; each
+        # candidate's response on one seed (the default 3 multiply its grid, not what runs where)
+        args = ["diagnose", tmp_path / "real", "--scenario", bench, *sets, *cands, "--seeds", "5",
+                "--response-seeds", "1", *where,
                 "-o", tmp_path / label, "--cache", tmp_path / f"cache-{label}"]
         # 0.6 s holds no subset: refused, naming the smallest budget that does (the minimum)
         r = run_twin(*args, "--budget-minutes", "0.01", check=False)
