@@ -306,7 +306,7 @@ def test_external_candidate_is_ranked_by_the_diagnosis(plugin, tmp_path, tmp_pat
     for spec in ("carriage_mass", f"{MODULE}:HEAVY"):
         out = tmp_path / f"diag-{len(results)}"
         r = twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, "--candidate", spec,
-                 "--candidate", "cogging", "--seeds", "3", "-o", out,
+                 "--candidate", "cogging", "--seeds", "3", "--response-seeds", "1", "-o", out,
                  "--cache", tmp_path / "cache", pythonpath=path)
         assert "carriage_mass" in flat(r.stdout)
         results[spec] = json.loads((out / "diagnosis.json").read_text())
@@ -332,7 +332,8 @@ def test_a_candidate_the_statistics_cannot_be_computed_for_is_left_out(plugin, t
     heavier_carriage(tmp_path_factory, tmp_path / "real")
     out = tmp_path / "diag"
     r = twin("diagnose", tmp_path / "real", "--scenario", bench, *sets, "--candidate", f"{MODULE}:HEAVY",
-             "--candidate", f"{MODULE}:SLOW_ACCEL", "--seeds", "3", "-o", out, pythonpath=src)
+             "--candidate", f"{MODULE}:SLOW_ACCEL", "--seeds", "3", "--response-seeds", "1", "-o", out,
+             pythonpath=src)
     res = json.loads((out / "diagnosis.json").read_text())
     why = res["candidates_left_out"]["slow_accel"]
     assert "FeatureError" in why and "no constant-speed segment of at least 0.2 s" in why
