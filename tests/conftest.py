@@ -213,11 +213,16 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(autouse=True, scope="session")
 def backlash_cache(tmp_path_factory):
-    """Every `twin backlash` the suite runs keeps its sessions' error motions in one folder per
-    test process (TWIN_BACKLASH_CACHE, the --cache default): the files run it on the same
-    recordings with other estimators and options. Keyed by the recording's bytes and the
-    error-motion options (analysis.phase2.error_motion_cache), so a changed recording misses;
+    """Every `twin backlash` the suite runs keeps its sessions' error motions in one folder that
+    the run's test processes share (TWIN_BACKLASH_CACHE, the --cache default): the files run it
+    on the same recordings (copies of a campaign simulated once, :func:`simulate_shared`) with
+    other estimators and options. Keyed by the recording's bytes and the error-motion options
+    (analysis.phase2.error_motion_cache), so a changed recording misses; each entry is written
+    atomically, so two processes computing the same session write the same file in turn;
     tests/test_phase2_cli.py proves the cached result equals the computed one."""
-    os.environ["TWIN_BACKLASH_CACHE"] = str(tmp_path_factory.mktemp("backlash-cache"))
+    base = tmp_path_factory.getbasetemp()
+    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "backlash-cache"
+    folder.mkdir(exist_ok=True)
+    os.environ["TWIN_BACKLASH_CACHE"] = str(folder)
     yield
     os.environ.pop("TWIN_BACKLASH_CACHE", None)
