@@ -50,15 +50,22 @@ def run_twin(*args, check=True, env=None, **kw):
                           text=True, check=check, **kw)
 
 
+def shared_dir(tmp_path_factory, name: str) -> Path:
+    """A folder ``name`` that every test process of this run sees (beside pytest-xdist's per-process
+    base temporary folders), created if missing."""
+    base = tmp_path_factory.getbasetemp()
+    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / name
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
 def made_once(tmp_path_factory, key: list, out, make) -> Path:
     """``make(master)`` once per test run for this ``key`` (the first test process to ask holds a
     file lock while the others wait), into a store shared by the run's test processes, then
     ``master`` copied to ``out``, so each caller may write into its copy. For what the twin makes
     deterministically (same inputs, same bytes: tests/test_campaign.py), so the copy is what the
     caller's own run would give."""
-    base = tmp_path_factory.getbasetemp()
-    store = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "shared-campaigns"
-    store.mkdir(exist_ok=True)
+    store = shared_dir(tmp_path_factory, "shared-campaigns")
     digest = hashlib.sha256(json.dumps([str(k) for k in key]).encode()).hexdigest()[:16]
     master = store / digest
     with open(store / f"{digest}.lock", "w") as lock:
@@ -220,9 +227,6 @@ def backlash_cache(tmp_path_factory):
     (analysis.phase2.error_motion_cache), so a changed recording misses; each entry is written
     atomically, so two processes computing the same session write the same file in turn;
     tests/test_phase2_cli.py proves the cached result equals the computed one."""
-    base = tmp_path_factory.getbasetemp()
-    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "backlash-cache"
-    folder.mkdir(exist_ok=True)
-    os.environ["TWIN_BACKLASH_CACHE"] = str(folder)
+    os.environ["TWIN_BACKLASH_CACHE"] = str(shared_dir(tmp_path_factory, "backlash-cache"))
     yield
     os.environ.pop("TWIN_BACKLASH_CACHE", None)
