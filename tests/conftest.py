@@ -20,6 +20,12 @@ os.environ.setdefault("TWIN_WORKERS", "1")
 # ... and one BLAS thread in the test process itself, as in the commands (twin.cli.main) and their
 # workers: the other core is the other test process's, and OpenBLAS's idle threads spin.
 threadpool_limits(1)
+# The suite starts a few hundred Python processes (the commands under test, their workers); where
+# the environment forbids bytecode files (PYTHONDONTWRITEBYTECODE, set on some CI images), each
+# compiles twin/ and analysis/ from source again. Python's default instead: compiled once into
+# __pycache__ (ignored by git), read back by the processes after.
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+sys.dont_write_bytecode = False
 REPO = Path(__file__).resolve().parents[1]
 TWIN = [sys.executable, "-m", "twin.cli"]
 # A small but complete campaign: every kind of unit, a few seconds of simulation.

@@ -26,7 +26,6 @@ line above a CSV header. :func:`start_time` reads when a file was recorded (TDMS
 from __future__ import annotations
 
 import contextlib
-import gc
 import logging
 import re
 import sys
@@ -248,29 +247,43 @@ def _from_asammdf(u) -> bool:
     return isinstance(u.exc_value, AttributeError) and any("asammdf" in f for f in files)
 
 
+def _drop_asammdf_del_errors() -> None:
+    """From the first MDF file read on: the ``AttributeError`` that asammdf's half-built ``MDF4``
+    (a file it failed to open) raises in ``__del__`` whenever it is collected is dropped instead of
+    printed as "Exception ignored ... Traceback" (the refusal already says what is wrong); every
+    other unraisable exception goes to the hook that was in place. Installed for good, so a
+    failed open needs no garbage collection of its own while a temporary hook is in place."""
+    old_hook = sys.unraisablehook
+    if getattr(old_hook, "drops_asammdf_del_errors", False):
+        return
+
+    def hook(u) -> None:
+        if not _from_asammdf(u):
+            old_hook(u)
+
+    hook.drops_asammdf_del_errors = True
+    sys.unraisablehook = hook
+
+
 @contextlib.contextmanager
 def _asammdf_quiet(path: Path):
     """asammdf on a damaged file: its log records are collected (not printed), its exception
-    becomes an :class:`ImportSpecError` naming ``path``, and the ``AttributeError`` its half-built
-    ``MDF4.__del__`` raises at garbage collection is dropped instead of printed as "Exception
-    ignored ... Traceback" (the refusal says what is wrong). Yields the collecting handler."""
+    becomes an :class:`ImportSpecError` naming ``path``, and the ``AttributeError`` of its
+    half-built ``MDF4`` is dropped (:func:`_drop_asammdf_del_errors`). Yields the collecting
+    handler."""
+    _drop_asammdf_del_errors()
     log, handler = logging.getLogger("asammdf"), _Collect()
-    old_hook, propagate = sys.unraisablehook, log.propagate
-    sys.unraisablehook = lambda u: None if _from_asammdf(u) else old_hook(u)
+    propagate = log.propagate
     log.addHandler(handler)
     log.propagate = False
-    err, failed = None, True
+    err = None
     try:
         yield handler
-        failed = False
     except ImportSpecError:
         raise
     except Exception as e:  # noqa: BLE001 - asammdf on a damaged file raises anything
         err = f"{path}: not a readable MDF file ({type(e).__name__}: {e})"
     finally:
-        if failed:  # a half-built MDF4 is collected while the hook is in place (a read that
-            gc.collect()  # succeeded leaves none: a full collection per file would cost 50 ms+)
-        sys.unraisablehook = old_hook
         log.removeHandler(handler)
         log.propagate = propagate
     if err is not None:
@@ -279,15 +292,13 @@ def _asammdf_quiet(path: Path):
 
 def _open_mdf(path: Path):
     """``asammdf.MDF(path)``, or :class:`ImportSpecError` naming the file; call it inside
-    :func:`_asammdf_quiet`. The half-built object of a failed open is collected here, after the
-    exception (whose traceback holds it) is gone, while the quiet hook is in place."""
+    :func:`_asammdf_quiet`."""
     from asammdf import MDF
 
     try:
         return MDF(path)
     except Exception as e:  # noqa: BLE001 - asammdf on a damaged file raises anything
         msg = f"{path}: not a readable MDF file ({type(e).__name__}: {e})"
-    gc.collect()
     raise ImportSpecError(msg)
 
 
