@@ -65,12 +65,10 @@ def shared_dir(tmp_path_factory, name: str) -> Path:
     return folder
 
 
-def made_once(tmp_path_factory, key: list, out, make) -> Path:
+def made_master(tmp_path_factory, key: list, make) -> Path:
     """``make(master)`` once per test run for this ``key`` (the first test process to ask holds a
-    file lock while the others wait), into a store shared by the run's test processes, then
-    ``master`` copied to ``out``, so each caller may write into its copy. For what the twin makes
-    deterministically (same inputs, same bytes: tests/test_campaign.py), so the copy is what the
-    caller's own run would give."""
+    file lock while the others wait), into a store shared by the run's test processes: the
+    ``master`` folder, which callers must not write into (:func:`made_once` copies it)."""
     store = shared_dir(tmp_path_factory, "shared-campaigns")
     digest = hashlib.sha256(json.dumps([str(k) for k in key]).encode()).hexdigest()[:16]
     master = store / digest
@@ -81,15 +79,35 @@ def made_once(tmp_path_factory, key: list, out, make) -> Path:
             make(master)
             master.mkdir(exist_ok=True)
             (store / f"{digest}.done").touch()
-    shutil.copytree(master, out)
+    return master
+
+
+def made_once(tmp_path_factory, key: list, out, make) -> Path:
+    """:func:`made_master` copied to ``out``, so each caller may write into its copy. For what the
+    twin makes deterministically (same inputs, same bytes: tests/test_campaign.py), so the copy is
+    what the caller's own run would give."""
+    shutil.copytree(made_master(tmp_path_factory, key, make), out)
     return Path(out)
 
 
 def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
     """``twin simulate SCENARIO -o OUT ARGS...`` for a campaign several test files simulate alike:
-    simulated once per test run (:func:`made_once`)."""
-    return made_once(tmp_path_factory, ["simulate", scenario, *args], out,
-                     lambda master: run_twin("simulate", scenario, "-o", master, *args))
+    simulated once per test run (:func:`made_once`); one the run's ``twin demo`` simulates
+    (:data:`DEMO_SIMULATES`) is resumed from the demo's units (:func:`demo_master`)."""
+    part = DEMO_SIMULATES.get((str(Path(scenario).resolve()), *map(str, args)))
+    if part is None:
+        return made_once(tmp_path_factory, ["simulate", scenario, *args], out,
+                         lambda master: run_twin("simulate", scenario, "-o", master, *args))
+
+    def resume(master: Path) -> None:
+        # the demo's units, then `twin simulate`, which checks that they are this scenario's
+        # (it refuses a folder simulated from another) and assembles the files from them
+        demo = demo_master(tmp_path_factory) / part
+        shutil.copytree(demo / ".parts", master / ".parts")
+        proc = run_twin("simulate", scenario, "-o", master, *args)
+        assert "0 units simulated" in " ".join(proc.stderr.split()), proc.stderr
+
+    return made_once(tmp_path_factory, ["simulate", scenario, *args], out, resume)
 
 
 DIAGNOSE_BENCH = REPO / "scenarios" / "diagnose-bench.toml"
@@ -176,17 +194,32 @@ DEMO_SMALL = ["--set", "campaign.total_hours=250", "--set", "phase2.session_hour
               "--set", "phase2.runs_per_session=3"]
 
 
-@pytest.fixture(scope="session")
-def demo_run(tmp_path_factory):
-    """``twin demo`` run once per test run (:func:`made_once`: the test processes share it), a
-    copy for this one: (directory, completed process)."""
+#: What `twin demo` at DEMO_SMALL simulates on its way, as `twin simulate` arguments (the
+#: scenario's resolved path, then the arguments): the folder of the demo's output that holds it.
+DEMO_SIMULATES = {(str(REPO / "scenarios" / "demo.toml"), *DEMO_SMALL): ".",
+                  (str(REPO / "scenarios" / "paper-reference.toml"), *REFERENCE_SMALL): "reference"}
+
+
+def demo_master(tmp_path_factory) -> Path:
+    """``twin demo -o MASTER`` at DEMO_SMALL, run once per test run (:func:`made_master`: the test
+    processes share it), with the process's exit code and output in ``demo-process.json``. The
+    units it simulates are those of `twin simulate` with the same arguments, which
+    :func:`simulate_shared` resumes from them instead of simulating them again."""
     def demo(master: Path) -> None:
         proc = run_twin("demo", "-o", master, *DEMO_SMALL, check=False, timeout=900)
         master.mkdir(parents=True, exist_ok=True)
         (master / "demo-process.json").write_text(json.dumps(
             {"returncode": proc.returncode, "stdout": proc.stdout, "stderr": proc.stderr}))
 
-    out = made_once(tmp_path_factory, ["demo", *DEMO_SMALL], tmp_path_factory.mktemp("demo") / "demo", demo)
+    return made_master(tmp_path_factory, ["demo", *DEMO_SMALL], demo)
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory):
+    """A copy of the run's ``twin demo`` (:func:`demo_master`) for this test process: (directory,
+    completed process)."""
+    out = tmp_path_factory.mktemp("demo") / "demo"
+    shutil.copytree(demo_master(tmp_path_factory), out)
     said = json.loads((out / "demo-process.json").read_text())
     (out / "demo-process.json").unlink()
     proc = subprocess.CompletedProcess(["twin", "demo"], said["returncode"], said["stdout"], said["stderr"])
