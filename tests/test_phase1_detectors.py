@@ -1,7 +1,9 @@
 """Check 5 of issue 3: the Phase I detectors follow the scikit-learn estimator contract.
 
 Every detector runs through ``sklearn.utils.estimator_checks.parametrize_with_checks`` with the
-paper's settings. Checks expected to fail are listed in ``EXPECTED_FAILED`` with the reason.
+paper's settings, apart from the sizes that only make each fit longer (``CONTRACT``: the SOM's
+iterations, the autoencoder's, the forest's trees). Checks expected to fail are listed in
+``EXPECTED_FAILED`` with the reason.
 """
 
 import numpy as np
@@ -22,13 +24,16 @@ EXPECTED_FAILED = {
 # score, and with 20 trees that estimate is noisy enough that on the draw of
 # test_predict_is_score_above_threshold it lay above the score of the far outlier (0.659 > 0.655).
 ESTIMATORS = [PCAT2(), GMMMD(), SOMMQE(n_iterations=200), IForest(), OCSVM(), TorqueAutoencoder(max_iter=200)]
+# The contract's checks fit each estimator some forty times on small generic data: the forest's
+# 20 trees run the same code as its 100 (a fifth of the time).
+CONTRACT = [IForest(n_estimators=20) if isinstance(e, IForest) else e for e in ESTIMATORS]
 
 
 def _expected(est):
     return EXPECTED_FAILED.get(type(est).__name__, {})
 
 
-@parametrize_with_checks(ESTIMATORS, expected_failed_checks=_expected)
+@parametrize_with_checks(CONTRACT, expected_failed_checks=_expected)
 def test_sklearn_contract(estimator, check):
     check(estimator)
 
