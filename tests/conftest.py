@@ -102,8 +102,10 @@ def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
     def resume(master: Path) -> None:
         # the demo's units, then `twin simulate`, which checks that they are this scenario's
         # (it refuses a folder simulated from another) and assembles the files from them
-        demo = demo_master(tmp_path_factory) / part
-        shutil.copytree(demo / ".parts", master / ".parts")
+        demo = demo_master(tmp_path_factory)
+        said = json.loads((demo / "demo-process.json").read_text())
+        assert said["returncode"] == 0, f"twin demo, whose units this campaign takes, failed:\n{said['stderr']}"
+        shutil.copytree(demo / part / ".parts", master / ".parts")
         proc = run_twin("simulate", scenario, "-o", master, *args)
         assert "0 units simulated" in " ".join(proc.stderr.split()), proc.stderr
 
