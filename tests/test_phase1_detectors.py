@@ -25,8 +25,8 @@ EXPECTED_FAILED = {
 # test_predict_is_score_above_threshold it lay above the score of the far outlier (0.659 > 0.655).
 ESTIMATORS = [PCAT2(), GMMMD(), SOMMQE(n_iterations=200), IForest(), OCSVM(), TorqueAutoencoder(max_iter=200)]
 # The contract's checks fit each estimator some forty times on small generic data: a forest of
-# 20 trees and an autoencoder of 50 iterations run the same code as the defaults (100 trees; the
-# 200 iterations above), in a fifth and a half of the time.
+# 20 trees and an autoencoder of 50 iterations run the same code as 100 trees (the default) and
+# 200 iterations (above) do, the forest in a fifth of the time, the autoencoder in half.
 CONTRACT = [PCAT2(), GMMMD(), SOMMQE(n_iterations=200), IForest(n_estimators=20), OCSVM(),
             TorqueAutoencoder(max_iter=50)]
 
