@@ -102,9 +102,8 @@ def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
     def resume(master: Path) -> None:
         # the demo's units, then `twin simulate`, which checks that they are this scenario's
         # (it refuses a folder simulated from another) and assembles the files from them
-        demo = demo_master(tmp_path_factory)
-        said = json.loads((demo / "demo-process.json").read_text())
-        assert said["returncode"] == 0, f"twin demo, whose units this campaign takes, failed:\n{said['stderr']}"
+        demo, said = demo_master(tmp_path_factory)
+        assert said.returncode == 0, f"twin demo, whose units this campaign takes, failed:\n{said.stderr}"
         shutil.copytree(demo / part / ".parts", master / ".parts")
         proc = run_twin("simulate", scenario, "-o", master, *args)
         assert "0 units simulated" in " ".join(proc.stderr.split()), proc.stderr
@@ -202,30 +201,35 @@ DEMO_SIMULATES = {(str(REPO / "scenarios" / "demo.toml"), *DEMO_SMALL): ".",
                   (str(REPO / "scenarios" / "paper-reference.toml"), *REFERENCE_SMALL): "reference"}
 
 
-def demo_master(tmp_path_factory) -> Path:
+DEMO_PROCESS = "demo-process.json"
+
+
+def demo_master(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
     """``twin demo -o MASTER`` at DEMO_SMALL, run once per test run (:func:`made_master`: the test
-    processes share it), with the process's exit code and output in ``demo-process.json``. The
-    units it simulates are those of `twin simulate` with the same arguments, which
-    :func:`simulate_shared` resumes from them instead of simulating them again."""
+    processes share it; the process's exit code and output kept in MASTER/:data:`DEMO_PROCESS`):
+    (MASTER, the completed process). The units it simulates are those of `twin simulate` with
+    the same arguments, which :func:`simulate_shared` resumes from them instead of simulating
+    them again."""
     def demo(master: Path) -> None:
         proc = run_twin("demo", "-o", master, *DEMO_SMALL, check=False, timeout=900)
         master.mkdir(parents=True, exist_ok=True)
-        (master / "demo-process.json").write_text(json.dumps(
+        (master / DEMO_PROCESS).write_text(json.dumps(
             {"returncode": proc.returncode, "stdout": proc.stdout, "stderr": proc.stderr}))
 
-    return made_master(tmp_path_factory, ["demo", *DEMO_SMALL], demo)
+    master = made_master(tmp_path_factory, ["demo", *DEMO_SMALL], demo)
+    said = json.loads((master / DEMO_PROCESS).read_text())
+    return master, subprocess.CompletedProcess(["twin", "demo"], said["returncode"], said["stdout"],
+                                               said["stderr"])
 
 
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory):
     """A copy of the run's ``twin demo`` (:func:`demo_master`) for this test process: (directory,
     completed process)."""
-    out = tmp_path_factory.mktemp("demo") / "demo"
-    shutil.copytree(demo_master(tmp_path_factory), out)
-    said = json.loads((out / "demo-process.json").read_text())
-    (out / "demo-process.json").unlink()
-    proc = subprocess.CompletedProcess(["twin", "demo"], said["returncode"], said["stdout"], said["stderr"])
+    master, proc = demo_master(tmp_path_factory)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    out = tmp_path_factory.mktemp("demo") / "demo"
+    shutil.copytree(master, out, ignore=lambda d, names: [DEMO_PROCESS] if Path(d) == master else [])
     return out, proc
 
 
