@@ -90,14 +90,15 @@ def made_once(tmp_path_factory, key: list, out, make) -> Path:
     return Path(out)
 
 
-def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
-    """``twin simulate SCENARIO -o OUT ARGS...`` for a campaign several test files simulate alike:
-    simulated once per test run (:func:`made_once`); one the run's ``twin demo`` simulates
-    (:data:`DEMO_SIMULATES`) is resumed from the demo's units (:func:`demo_master`)."""
+def simulated_master(tmp_path_factory, scenario, *args) -> Path:
+    """The run's one ``twin simulate SCENARIO -o MASTER ARGS...`` (:func:`made_master`; callers
+    must not write into it): simulated once per test run, or, for a campaign the run's
+    ``twin demo`` simulates (:data:`DEMO_SIMULATES`), resumed from the demo's units
+    (:func:`demo_master`)."""
+    key = ["simulate", scenario, *args]
     part = DEMO_SIMULATES.get((str(Path(scenario).resolve()), *map(str, args)))
     if part is None:
-        return made_once(tmp_path_factory, ["simulate", scenario, *args], out,
-                         lambda master: run_twin("simulate", scenario, "-o", master, *args))
+        return made_master(tmp_path_factory, key, lambda master: run_twin("simulate", scenario, "-o", master, *args))
 
     def resume(master: Path) -> None:
         # the demo's units, then `twin simulate`, which checks that they are this scenario's
@@ -108,7 +109,15 @@ def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
         proc = run_twin("simulate", scenario, "-o", master, *args)
         assert "0 units simulated" in " ".join(proc.stderr.split()), proc.stderr
 
-    return made_once(tmp_path_factory, ["simulate", scenario, *args], out, resume)
+    return made_master(tmp_path_factory, key, resume)
+
+
+def simulate_shared(tmp_path_factory, scenario, out, *args) -> Path:
+    """``twin simulate SCENARIO -o OUT ARGS...`` for a campaign several test files simulate alike:
+    a copy of :func:`simulated_master` (what the caller's own run would give: the twin's
+    campaigns are deterministic, tests/test_campaign.py)."""
+    shutil.copytree(simulated_master(tmp_path_factory, scenario, *args), out)
+    return Path(out)
 
 
 DIAGNOSE_BENCH = REPO / "scenarios" / "diagnose-bench.toml"

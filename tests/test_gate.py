@@ -1,7 +1,9 @@
 """``twin gate`` (issue 33): the recovery checks a method developer runs in their own CI.
 
 One cold cache is built per module (``twin gate`` with the paper's methods, through the command
-line: every check passes, JUnit XML written), then reused warm by every other test:
+line: every check passes, JUnit XML written; outside `make validate` from the units of the five
+campaigns other test files simulate alike, as a stopped build is resumed), then reused warm by
+every other test:
 
 - the built-in estimator passes every backlash check (the cold run), every built-in detector both
   detection checks (four of them only with their default limits for new samples, not with the
@@ -10,8 +12,8 @@ line: every check passes, JUnit XML written), then reused warm by every other te
   passes Eq. 9's (its pitch estimate is the built-in's);
 - estimators and detectors that raise, return NaN or the wrong type or shape fail their checks
   naming the exception or the value, and the checks after them still run;
-- the cache: a corrupt, missing or stale file is found and the cache rebuilt (on a one-campaign
-  suite, to keep it short);
+- the cache: a corrupt, missing or stale file is found and the cache rebuilt; a stopped build is
+  resumed (on one- and two-campaign suites, to keep it short);
 - the pytest plugin: a developer's test file calling ``assert_recovers_backlash`` and
   ``assert_detects_preload_loss`` with the ``twin_gate_cache`` fixture; it imports no NumPy or
   MuJoCo when pytest loads it;
@@ -26,6 +28,7 @@ import dataclasses
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -35,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, run_twin
+from conftest import REPO, run_twin, simulated_master
 
 from analysis.base import registry
 from analysis.phase1.detectors import PCAT2
@@ -80,13 +83,38 @@ def junit_cases(path) -> dict[str, ET.Element]:
     return {f"{tc.get('classname')}::{tc.get('name')}": tc for tc in root.iter("testcase")}
 
 
+#: The standard suite's campaigns that other test files simulate alike (test_phase2_backlash.py,
+#: test_phase1_end_to_end.py, the demo's reference set): outside `make validate` the cold build
+#: takes their units (:func:`conftest.simulated_master`) as it would those of a stopped build of
+#: its own, and simulates the other three; `make validate` (TWIN_RECORD, whose figures are the
+#: cold times) builds from nothing.
+SHARED = ("steps", "slow-reversal", "reference", "fault", "healthy")
+
+
+def seed_shared_units(tmp_path_factory, root: Path) -> tuple[str, ...]:
+    """Put the units of the :data:`SHARED` campaigns where a stopped build of the standard cache
+    under ``root`` would have left them; the campaigns seeded."""
+    if os.environ.get("TWIN_RECORD"):
+        return ()
+    building = gate.cache.building_dir(gate.cache_dir(root, SUITE), SUITE)
+    for c in SUITE.campaigns:
+        if c.key in SHARED:
+            master = simulated_master(tmp_path_factory, REPO / "scenarios" / f"{c.scenario}.toml",
+                                      *[a for o in c.overrides for a in ("--set", o)])
+            shutil.copytree(master / ".parts", building / "campaigns" / c.key / ".parts")
+    return SHARED
+
+
 @pytest.fixture(scope="module")
 def cold(tmp_path_factory):
-    """``twin gate --cache ROOT --junit FILE`` on an empty cache: (root, process, seconds, junit)."""
+    """``twin gate --cache ROOT --junit FILE`` on a cache without manifest, built from nothing
+    or from the :data:`SHARED` campaigns' units (:func:`seed_shared_units`): (root, process,
+    seconds, junit, the campaigns seeded)."""
     root = tmp_path_factory.mktemp("gate-cache")
+    seeded = seed_shared_units(tmp_path_factory, root)
     junit = root.parent / "cold-junit.xml"
     proc, seconds = gate_cli("--cache", root, "--junit", junit, timeout=1200)
-    return root, proc, seconds, junit
+    return root, proc, seconds, junit, seeded
 
 
 @pytest.fixture(scope="module")
@@ -96,10 +124,15 @@ def cache(cold):
 
 @pytest.mark.quoted
 def test_cold_gate_passes_the_papers_methods_and_writes_junit(cold, quote):
-    root, proc, seconds, junit = cold
+    root, proc, seconds, junit, seeded = cold
     print(f"\n{proc.stdout}{proc.stderr}\ncold gate (build + checks): {seconds:.0f} s (loaded machine)")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "no manifest.json; building it" in proc.stdout and "cache built in" in proc.stdout
+    kept = {k: (n, total) for k, n, total in re.findall(
+        r"simulated (\S+) \([^)]*\) in [0-9.]+ s; (\d+) of (\d+) units kept", " ".join(proc.stdout.split()))}
+    # the seeded campaigns' units all taken (their files are those a build from nothing gives:
+    # tests/test_campaign.py), the other campaigns simulated by the gate
+    assert set(kept) == set(seeded) and all(n == total for n, total in kept.values()), kept
     cases = junit_cases(junit)
     want = {f"twin.gate.backlash.shift::{c.name}" for c in SUITE.backlash} | {
         f"twin.gate.detection.pca_t2::{c.name}" for c in SUITE.detection}
@@ -410,6 +443,39 @@ def test_corrupt_missing_or_stale_cache_is_rebuilt(tmp_path):
     assert gate.verify(c.folder, other).endswith("(suite definition changed)")
     (c.folder / "manifest.json").write_text("{not json")
     assert gate.verify(c.folder, TINY).startswith("manifest.json unreadable (JSONDecodeError")
+
+
+def test_a_stopped_build_is_resumed(tmp_path, monkeypatch):
+    """A build stopped (Ctrl-C) after its first campaign was prepared and its second simulated
+    is resumed by the next one: the first campaign kept as it is, the second's units kept and
+    only its preparation done again; the cache verifies and its check passes."""
+    import twin.sim.campaign
+
+    two = dataclasses.replace(TINY, name="two", campaigns=(
+        TINY.campaigns[0], dataclasses.replace(TINY.campaigns[0], key="again")))
+    simulate = twin.sim.campaign.simulate_campaign
+
+    def stopped_after_simulating(s, out, *a, **kw):
+        done = simulate(s, out, *a, **kw)
+        if Path(out).name == "again":
+            raise KeyboardInterrupt
+        return done
+
+    monkeypatch.setattr(twin.sim.campaign, "simulate_campaign", stopped_after_simulating)
+    with pytest.raises(KeyboardInterrupt):
+        gate.ensure_cache(tmp_path, two, log=print)
+    monkeypatch.setattr(twin.sim.campaign, "simulate_campaign", simulate)
+    building = gate.cache_dir(tmp_path, two).with_name(gate.cache_dir(tmp_path, two).name + ".building")
+    assert sorted(p.name for p in (building / "campaigns").iterdir()) == ["again", "steps"]
+    lines: list[str] = []
+    c = gate.ensure_cache(tmp_path, two, log=lines.append)
+    text = "\n".join(lines)
+    assert "steps: kept, prepared by an interrupted build" in text
+    units = re.search(r"simulated again .*; (\d+) of (\d+) units kept from an interrupted build", text)
+    assert units and units[1] == units[2], text
+    assert "prepared again in" in text and not building.exists()
+    assert gate.verify(c.folder, two) is None
+    assert [r.passed for r in gate.run_backlash_checks("shift", c)] == [True]
 
 
 PLUGIN_TESTS = '''

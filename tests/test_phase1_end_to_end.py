@@ -18,7 +18,7 @@ import pytest
 from analysis.base import registry
 from analysis.dataset import open_truth
 from analysis.phase1 import detect, pipeline
-from tests.conftest import REFERENCE_SMALL, REPO, run_twin, simulate_shared
+from tests.conftest import REFERENCE_SMALL, REPO, simulate_shared
 
 NO_WEAR = ["--set", "degradation.wear_rate_um_per_kh=0", "--set", "campaign.total_hours=420"]
 #: How the candidate top features respond to preload loss on the twin (README, check 3):
@@ -32,8 +32,8 @@ def campaigns(tmp_path_factory):
     root = tmp_path_factory.mktemp("phase1")
     ref, fault, healthy = root / "reference", root / "fault", root / "healthy"
     simulate_shared(tmp_path_factory, REPO / "scenarios/paper-reference.toml", ref, *REFERENCE_SMALL)
-    run_twin("simulate", REPO / "scenarios/phase1-quick.toml", "-o", fault)
-    run_twin("simulate", REPO / "scenarios/phase1-quick.toml", "-o", healthy, *NO_WEAR)
+    simulate_shared(tmp_path_factory, REPO / "scenarios/phase1-quick.toml", fault)  # shared with the gate
+    simulate_shared(tmp_path_factory, REPO / "scenarios/phase1-quick.toml", healthy, *NO_WEAR)
     return {"reference": ref, "fault": fault, "healthy": healthy, "root": root}
 
 

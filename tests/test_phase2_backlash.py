@@ -376,10 +376,9 @@ REVERSAL = REPO / "scenarios/backlash-slow-reversal.toml"
 
 @pytest.fixture(scope="module")
 def reversal_campaign(tmp_path_factory):
-    """backlash-slow-reversal simulated once (one worker): 4 sessions, 0, 5, 10, 20 µm."""
-    out = tmp_path_factory.mktemp("reversal")
-    run_twin("simulate", REVERSAL, "-o", out, "--workers", "1")
-    return out
+    """backlash-slow-reversal simulated once per test run (shared with the gate's cold build,
+    test_gate.py): 4 sessions, 0, 5, 10, 20 µm."""
+    return simulate_shared(tmp_path_factory, REVERSAL, tmp_path_factory.mktemp("reversal") / "campaign")
 
 
 @pytest.mark.quoted

@@ -28,7 +28,9 @@ its ``truth.h5`` and what the methods read of its ``measurements.h5``: the sessi
 (``phase1.npz``). The measurements themselves (up to 0.45 GB for a 40-run campaign at 20 mm/s)
 are deleted once these are computed. ``manifest.json`` lists every file with its sha256 and the
 fingerprint of the suite's definition; before any use every file is checked against it, and a
-missing, altered or stale cache is rebuilt, never trusted. The npz files are read with
+missing, altered or stale cache is rebuilt, never trusted. A build works in
+``<folder>.building`` (a stopped build is resumed there) under the lock ``<folder>.lock``. The
+npz files are read with
 ``allow_pickle=False``: loading the cache executes no code from it.
 
 Units: SI inside; µm, h and samples in the printed figures and the JUnit XML.

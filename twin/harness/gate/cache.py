@@ -147,9 +147,26 @@ def _load_phase1(path: Path) -> Phase1Input:
                            frozen(z["labels"]) if "labels" in z else None)
 
 
+def _prepared(c: Campaign, folder: Path) -> bool:
+    """Whether campaign ``c`` in ``folder`` was simulated and reduced by an earlier build (its
+    outputs written, its units deleted: the last step of :func:`_build_campaign`)."""
+    return all((folder / n).is_file() for n in _outputs(c)) and not (folder / ".parts").exists()
+
+
+def _tidy(c: Campaign, folder: Path) -> None:
+    """Delete what campaign ``c`` wrote beside the files the checks read (its units last: while
+    they exist the campaign counts as unfinished, :func:`_prepared`)."""
+    (folder / "measurements.h5").unlink(missing_ok=True)
+    for extra in folder.iterdir():
+        if extra.is_file() and extra.name not in _outputs(c):
+            extra.unlink()
+    shutil.rmtree(folder / ".parts", ignore_errors=True)
+
+
 def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str], None]) -> None:
-    """Simulate campaign ``c`` into ``folder`` and compute what the checks read of it, then delete
-    the measurements (see the module docstring)."""
+    """Simulate campaign ``c`` into ``folder`` (the units an interrupted build stored there are
+    kept, :func:`twin.sim.campaign.simulate_campaign`) and compute what the checks read of it,
+    then delete the measurements (see the module docstring)."""
     from analysis.base.executors import mapper
     from analysis.dataset import open_measurements, open_truth
     from analysis.dataset.axis import axis_of
@@ -159,10 +176,15 @@ def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str]
     from twin.sim.campaign import simulate_campaign
     from twin.sim.scenario import load
 
+    if _prepared(c, folder):
+        _tidy(c, folder)
+        log(f"  {c.key}: kept, prepared by an interrupted build")
+        return
     t0 = time.perf_counter()
-    simulate_campaign(load(c.scenario, list(c.overrides)), folder)
+    done = simulate_campaign(load(c.scenario, list(c.overrides)), folder)
+    kept = f"; {done['skipped']} of {done['units']} units kept from an interrupted build" if done["skipped"] else ""
     log(f"  simulated {c.key} ({c.scenario}{''.join(' --set ' + o for o in c.overrides)}) "
-        f"in {time.perf_counter() - t0:.1f} s")
+        f"in {time.perf_counter() - t0:.1f} s{kept}")
     t0 = time.perf_counter()
     meas = folder / "measurements.h5"
     if c.phase2_references:
@@ -192,31 +214,63 @@ def _build_campaign(c: Campaign, suite: Suite, folder: Path, log: Callable[[str]
                 onset = t.onset_hours
         _save_phase1(folder / "phase1.npz", table, onset, labels)
     log(f"  prepared {c.key} in {time.perf_counter() - t0:.1f} s")
-    meas.unlink()
-    shutil.rmtree(folder / ".parts", ignore_errors=True)
-    for extra in folder.iterdir():  # anything else the campaign wrote beside truth.h5
-        if extra.is_file() and extra.name not in _outputs(c):
-            extra.unlink()
+    _tidy(c, folder)
 
 
-def build_cache(folder: Path, suite: Suite, log: Callable[[str], None] = print) -> float:
-    """Simulate and prepare every campaign of ``suite`` into ``folder`` (built beside it and moved
-    into place when complete, with its manifest written last). Returns the seconds taken."""
+BUILDING = "building.json"  # in a build's folder: the suite and package it is being built for
+
+
+def building_dir(folder: Path, suite: Suite, fresh: bool = False) -> Path:
+    """The folder a build of ``suite``'s cache ``folder`` works in (moved to ``folder`` when
+    complete), with :data:`BUILDING` saying what it is being built for, so a build interrupted
+    (killed, a CI job cancelled) is resumed by the next one; one built for another suite
+    definition or package version, or any with ``fresh``, is cleared first."""
+    tmp = folder.with_name(f"{folder.name}.building")
+    want = {"suite": suite.name, "suite_version": suite.version, "package_version": package_version(),
+            "suite_fingerprint": suite.fingerprint()}
+    try:
+        same = not fresh and json.loads((tmp / BUILDING).read_text()) == want
+    except (OSError, ValueError):
+        same = False
+    if not same:
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        (tmp / BUILDING).write_text(json.dumps(want))
+    return tmp
+
+
+def _build_lock(folder: Path, log: Callable[[str], None]):
+    """An exclusive lock beside ``folder`` for the life of the returned file: a second process
+    building the same cache waits for the first (then finds the cache built)."""
+    import fcntl
+
+    from analysis.base.files import exclusive_lock
+
+    path = folder.with_name(f"{folder.name}.lock")
+    try:
+        return exclusive_lock(path, "busy", error=BlockingIOError)
+    except BlockingIOError:
+        log(f"gate cache {folder}: another process is building it; waiting for it")
+        fh = open(path, "a+")  # noqa: SIM115 - held for the caller's life
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        return fh
+
+
+def build_cache(folder: Path, suite: Suite, log: Callable[[str], None] = print, fresh: bool = False) -> float:
+    """Simulate and prepare every campaign of ``suite`` into ``folder`` (built in
+    :func:`building_dir`, which keeps what an interrupted build finished, and moved into place
+    when complete, with its manifest written last; ``fresh`` keeps nothing). The caller holds
+    the build's lock (:func:`ensure_cache`). Returns the seconds taken."""
     t0 = time.perf_counter()
-    tmp = folder.with_name(f"{folder.name}.building-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
+    tmp = building_dir(folder, suite, fresh)
     for i, c in enumerate(suite.campaigns):
         log(f"campaign {i + 1}/{len(suite.campaigns)}: {c.key}: {c.what}")
         _build_campaign(c, suite, tmp / "campaigns" / c.key, log)
+    (tmp / BUILDING).unlink()
     (tmp / MANIFEST).write_text(json.dumps(_manifest(tmp, suite), indent=1) + "\n")
     if folder.exists():
         shutil.rmtree(folder)
-    try:
-        tmp.rename(folder)
-    except OSError:  # another process put a cache in place meanwhile: keep it if it verifies
-        if verify(folder, suite) is not None:
-            raise
-        shutil.rmtree(tmp, ignore_errors=True)
+    tmp.rename(folder)
     return time.perf_counter() - t0
 
 
@@ -254,7 +308,11 @@ def ensure_cache(root: str | Path | None = None, suite: str | Suite = "standard"
         return GateCache(folder, suite)
     log(f"gate cache {folder}: {why}; building it (simulates {len(suite.campaigns)} campaigns)")
     folder.parent.mkdir(parents=True, exist_ok=True)
-    seconds = build_cache(folder, suite, log)
+    with _build_lock(folder, log):
+        if not rebuild and verify(folder, suite) is None:  # built by the process it waited for
+            log(f"gate cache {folder}: verified ({len(suite.campaigns)} campaigns)")
+            return GateCache(folder, suite)
+        seconds = build_cache(folder, suite, log, fresh=rebuild)
     if (why := verify(folder, suite)) is not None:
         raise GateError(f"gate cache {folder}: just built, yet {why}")
     log(f"gate cache built in {seconds:.0f} s")
