@@ -32,6 +32,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -447,8 +448,9 @@ def test_corrupt_missing_or_stale_cache_is_rebuilt(tmp_path):
 
 def test_a_stopped_build_is_resumed(tmp_path, monkeypatch):
     """A build stopped (Ctrl-C) after its first campaign was prepared and its second simulated
-    is resumed by the next one: the first campaign kept as it is, the second's units kept and
-    only its preparation done again; the cache verifies and its check passes."""
+    is resumed by the next one, which first waits for the process that holds the build's lock:
+    the first campaign kept as it is, the second's units kept and only its preparation done
+    again; the cache verifies and its check passes."""
     import twin.sim.campaign
 
     two = dataclasses.replace(TINY, name="two", campaigns=(
@@ -467,8 +469,23 @@ def test_a_stopped_build_is_resumed(tmp_path, monkeypatch):
     monkeypatch.setattr(twin.sim.campaign, "simulate_campaign", simulate)
     building = gate.cache_dir(tmp_path, two).with_name(gate.cache_dir(tmp_path, two).name + ".building")
     assert sorted(p.name for p in (building / "campaigns").iterdir()) == ["again", "steps"]
+    # the next gate resumes it, once the process holding the build's lock lets go
     lines: list[str] = []
-    c = gate.ensure_cache(tmp_path, two, log=lines.append)
+    held = gate.cache._build_lock(gate.cache_dir(tmp_path, two), log=print)
+    resumed: dict = {}
+    thread = threading.Thread(target=lambda: resumed.update(c=gate.ensure_cache(tmp_path, two, log=lines.append)),
+                              daemon=True)
+    try:
+        thread.start()
+        deadline = time.monotonic() + 60
+        while not any("another process is building it; waiting" in line for line in lines):
+            assert time.monotonic() < deadline and thread.is_alive(), lines
+            time.sleep(0.05)
+        assert not any(line.startswith("campaign ") for line in lines), lines  # nothing built while it waits
+    finally:
+        held.close()
+    thread.join(timeout=600)
+    c = resumed["c"]
     text = "\n".join(lines)
     assert "steps: kept, prepared by an interrupted build" in text
     units = re.search(r"simulated again .*; (\d+) of (\d+) units kept from an interrupted build", text)
