@@ -1,6 +1,7 @@
 """Interrupts and odd arguments (issue 14, deliverable 6): Ctrl-C during ``twin simulate`` stops
 within 2 s, cancels the queued units, says how many finished parts are kept and how to resume,
-exits 130; the rerun resumes from those parts. ``--workers`` below 1 and an output path below a
+exits 130; the rerun resumes from those parts; Ctrl-C during ``twin gate``'s build exits 130
+saying how to resume. ``--workers`` below 1 and an output path below a
 regular file exit 2 with a message; ``twin detect`` without measurements.h5 says exactly that."""
 
 import os
@@ -14,6 +15,7 @@ import time
 import pytest
 
 from tests.conftest import REPO, SMALL, TWIN, run_twin
+from twin.harness import gate
 from twin.sim.campaign import plan
 from twin.sim.scenario import load
 
@@ -110,3 +112,27 @@ def test_detect_without_measurements_says_exactly_that(tmp_path, small_campaign)
     assert r.returncode == 2
     assert one_line(r.stderr) == (f"error: {ref / 'truth.h5'}: no such file; expected the reference data "
                                   "set's truth.h5 (its condition labels)")
+
+
+def test_ctrl_c_stops_a_gate_building_its_cache_saying_how_to_resume(tmp_path):
+    """Ctrl-C while `twin gate` builds its cache: exit 130, no traceback, what it finished kept in
+    the build's folder and the command to resume (without --rebuild, which would start over);
+    the resuming itself: tests/test_gate.py."""
+    args = ["gate", "--cache", str(tmp_path), "--rebuild"]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    p = subprocess.Popen([*TWIN, *args], cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # noqa: PLW1509
+    t0 = time.monotonic()
+    while not list(tmp_path.glob("*.building/campaigns/steps/.parts/*")):
+        assert p.poll() is None, p.communicate()
+        assert time.monotonic() - t0 < 300, "the build started no campaign in 300 s"
+        time.sleep(0.05)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 130, out + err
+    assert "Traceback" not in err
+    assert ("stopped; the campaigns the cache's build prepared and the units it simulated are kept, resume "
+            f"with: twin gate --cache {tmp_path}") in one_line(err)
+    folder = gate.cache_dir(tmp_path, gate.SUITES["standard"])
+    assert (folder.with_name(f"{folder.name}.building") / "campaigns" / "steps" / ".parts").is_dir()
+    assert not folder.exists()
