@@ -131,8 +131,8 @@ def test_ctrl_c_stops_a_gate_building_its_cache_saying_how_to_resume(tmp_path):
     out, err = p.communicate(timeout=60)
     assert p.returncode == 130, out + err
     assert "Traceback" not in err
-    assert ("stopped; the campaigns the cache's build prepared and the units it simulated are kept, resume "
-            f"with: twin gate --cache {tmp_path}") in one_line(err)
+    assert ("stopped; a build of the cache goes on from where it stopped when you run: "
+            f"twin gate --cache {tmp_path}") in one_line(err)
     folder = gate.cache_dir(tmp_path, gate.SUITES["standard"])
     assert (folder.with_name(f"{folder.name}.building") / "campaigns" / "steps" / ".parts").is_dir()
     assert not folder.exists()

@@ -289,9 +289,9 @@ def gate(
         code = command(estimator, detector, suite, junit, cache, check, rebuild)
     except GateError as exc:
         _fail(str(exc))
-    except KeyboardInterrupt:  # in the cache's build: what it finished is kept
-        console.print("stopped; the campaigns the cache's build prepared and the units it simulated are kept, "
-                      f"resume with: twin {shlex.join(a for a in sys.argv[1:] if a != '--rebuild')}",
+    except KeyboardInterrupt:  # a cache's build keeps what it finished (twin.harness.gate.cache)
+        console.print("stopped; a build of the cache goes on from where it stopped when you run: "
+                      f"twin {shlex.join(a for a in sys.argv[1:] if a != '--rebuild')}",
                       markup=False, highlight=False)
         raise typer.Exit(EXIT_INTERRUPTED) from None
     raise typer.Exit(code)
