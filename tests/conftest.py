@@ -68,7 +68,7 @@ def shared_dir(tmp_path_factory, name: str) -> Path:
 def made_master(tmp_path_factory, key: list, make) -> Path:
     """``make(master)`` once per test run for this ``key`` (the first test process to ask holds a
     file lock while the others wait), into a store shared by the run's test processes: the
-    ``master`` folder, which callers must not write into (:func:`made_once` copies it)."""
+    ``master`` folder, which callers must not write into (they copy it: :func:`simulate_shared`)."""
     store = shared_dir(tmp_path_factory, "shared-campaigns")
     digest = hashlib.sha256(json.dumps([str(k) for k in key]).encode()).hexdigest()[:16]
     master = store / digest
@@ -80,14 +80,6 @@ def made_master(tmp_path_factory, key: list, make) -> Path:
             master.mkdir(exist_ok=True)
             (store / f"{digest}.done").touch()
     return master
-
-
-def made_once(tmp_path_factory, key: list, out, make) -> Path:
-    """:func:`made_master` copied to ``out``, so each caller may write into its copy. For what the
-    twin makes deterministically (same inputs, same bytes: tests/test_campaign.py), so the copy is
-    what the caller's own run would give."""
-    shutil.copytree(made_master(tmp_path_factory, key, make), out)
-    return Path(out)
 
 
 def simulated_master(tmp_path_factory, scenario, *args) -> Path:
