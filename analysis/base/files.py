@@ -57,10 +57,12 @@ def atomic_write(path: str | os.PathLike, write: Callable[[Path], Any], *, fsync
     return path
 
 
-def exclusive_lock(path: str | os.PathLike, busy: str, error: type[Exception] = ValueError):
-    """An exclusive, non-blocking lock on ``path`` (created, its folder too), held while the
-    returned file stays open: the kernel releases it when the process dies, even by SIGKILL.
-    Raises ``error(busy)`` when another process holds it."""
+def exclusive_lock(path: str | os.PathLike, busy: str, error: type[Exception] = ValueError,
+                   wait: Callable[[str], None] | None = None):
+    """An exclusive lock on ``path`` (created, its folder too), held while the returned file
+    stays open: the kernel releases it when the process dies, even by SIGKILL. When another
+    process holds it: raises ``error(busy)``, or with ``wait`` calls ``wait(busy)`` and blocks
+    until it is free."""
     import fcntl
 
     path = Path(path)
@@ -69,8 +71,11 @@ def exclusive_lock(path: str | os.PathLike, busy: str, error: type[Exception] = 
     try:
         fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        fh.close()
-        raise error(busy) from None
+        if wait is None:
+            fh.close()
+            raise error(busy) from None
+        wait(busy)
+        fcntl.flock(fh, fcntl.LOCK_EX)
     return fh
 
 

@@ -242,18 +242,10 @@ def building_dir(folder: Path, suite: Suite, fresh: bool = False) -> Path:
 def _build_lock(folder: Path, log: Callable[[str], None]):
     """An exclusive lock beside ``folder`` for the life of the returned file: a second process
     building the same cache waits for the first (then finds the cache built)."""
-    import fcntl
-
     from analysis.base.files import exclusive_lock
 
-    path = folder.with_name(f"{folder.name}.lock")
-    try:
-        return exclusive_lock(path, "busy", error=BlockingIOError)
-    except BlockingIOError:
-        log(f"gate cache {folder}: another process is building it; waiting for it")
-        fh = open(path, "a+")  # noqa: SIM115 - held for the caller's life
-        fcntl.flock(fh, fcntl.LOCK_EX)
-        return fh
+    return exclusive_lock(folder.with_name(f"{folder.name}.lock"),
+                          f"gate cache {folder}: another process is building it; waiting for it", wait=log)
 
 
 def build_cache(folder: Path, suite: Suite, log: Callable[[str], None] = print, fresh: bool = False) -> float:
