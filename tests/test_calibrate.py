@@ -474,6 +474,34 @@ def test_calibrate_benchmark_meets_its_targets(tmp_path):
     assert sm["several_all_named"] >= 0.80 and sm["several_nothing_else"] >= 0.95
 
 
+
+def test_a_case_whose_diagnosis_changed_keeps_its_calibration(monkeypatch):
+    """The benchmark's calibration marker (``calibrated.json``) holds :func:`calibration_key`:
+    the draw and the benchmark's and the calibration's versions. A change of the diagnosis's
+    options (twin seeds, response seeds) changes every case's key, so the case is diagnosed again,
+    but not its calibration key, so its calibration is taken; a raised benchmark version changes
+    both; every draw has keys of its own."""
+    from twin.harness.calibration import benchmark as b
+    from twin.harness.calibration.benchmark_summary import CASE_KINDS
+
+    scenarios, additions = b.draws(4, 2026)
+
+    def keys(seeds: int = 6) -> tuple[list[str], list[str]]:
+        args = [(s, CASE_KINDS[i % len(CASE_KINDS)], *additions[i]) for i, s in enumerate(scenarios)]
+        return ([b.case_key(*a, diagnose=True, seeds=seeds) for a in args],
+                [b.calibration_key(*a) for a in args])
+
+    case, cal = keys()
+    assert len(set(case)) == len(set(cal)) == 4
+    assert b.RESPONSE_SEEDS == 3  # twin diagnose's default
+    monkeypatch.setattr(b, "RESPONSE_SEEDS", 1)
+    one_seed, cal_one_seed = keys()
+    assert all(x != y for x, y in zip(case, one_seed, strict=True)) and cal_one_seed == cal
+    fewer, cal_fewer = keys(seeds=4)
+    assert all(x != y for x, y in zip(one_seed, fewer, strict=True)) and cal_fewer == cal
+    monkeypatch.setattr(b, "BENCH_VERSION", b.BENCH_VERSION + 1)
+    assert all(x != y for x, y in zip(cal, keys()[1], strict=True))
+
 def test_the_recorded_calibrate_benchmark_is_this_codes():
     """The benchmark's cases recorded in benchmarks/results/calibrate-benchmark (its figures in
     docs/calibration.md) are what the current code measures: each entry's key is the one the

@@ -48,6 +48,7 @@ import numpy as np
 
 from analysis.base.files import write_json
 from twin.harness.calibration.benchmark_summary import CASE_KINDS, ROUTINE_KEYS, summarise
+from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS
 from twin.sim.scenario import Scenario, from_dict, load
 
 #: (Phase I format, Phase II format) of the cases in turn: every reader is used.
@@ -55,6 +56,11 @@ FORMATS = (("tdms", "csv"), ("mat", "mat"), ("mdf", "mdf"), ("csv", "tdms"))
 BENCH_VERSION = 2
 #: Twin seeds the diagnosis re-simulates with its added candidates (the re-simulated shrink).
 RESIM_SEEDS = 2
+#: Twin seeds each candidate's response is computed with, in the diagnosis and its oracle: those of
+#: ``twin diagnose`` as the owner runs it (its default), whose spread the diagnosis's footprint
+#: test allows for; with one seed it allows none, and a right candidate whose response varies
+#: from seed to seed (a mains line's phase, drawn per capture) is refused.
+RESPONSE_SEEDS = DEFAULT_RESPONSE_SEEDS
 
 
 #: Least Phase I cruise a drawn axis gets, s (the features' 0.2-s spectra plus the trims).
@@ -242,10 +248,11 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
              artefacts: dict | None = None, key: str | None = None) -> dict:
     """One case end to end in ``out/case-NNN``: the axis ``s`` with ``effects`` added to the
     machine and ``artefacts`` to its recording; returns its entry of the JSON. With ``key`` (the
-    case's :func:`case_key`), a finished calibration is marked with it in
-    ``case-NNN/calibrated.json``: a run stopped during the diagnosis goes on from the calibration
-    with the same key instead of calibrating again (the diagnosis's own cache, in the case's
-    directory too, keeps the twin simulations it had finished)."""
+    case's :func:`case_key`), a finished calibration is marked with its :func:`calibration_key`
+    in ``case-NNN/calibrated.json``: a run stopped during the diagnosis, or one whose diagnosis
+    options or statistics changed, goes on from the calibration with the same key instead of
+    calibrating again (the diagnosis's own cache, in the case's directory too, keeps the twin
+    simulations it had finished)."""
     from analysis.diagnosis.artefacts import apply
     from analysis.ingest import run_import
     from analysis.ingest.check import check_record, require_clean_recording
@@ -262,8 +269,9 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     added = ", ".join([*effects, *artefacts]) or "nothing added"
     step = lambda t: progress(f"case {i} ({kind}): {t}")  # noqa: E731 - a line per step, for a log
     marker = d / "calibrated.json"
+    cal_key = calibration_key(s, kind, effects, artefacts) if key is not None else None
     earlier = json.loads(marker.read_text()) if key is not None and marker.exists() else {}
-    if key is not None and earlier.get("key") == key:
+    if key is not None and earlier.get("key") == cal_key:
         rec = json.loads((d / "axis.calibration.json").read_text())
         t_sim = earlier["simulate_export_import_s"]
         step(f"calibrated by an earlier run ({marker}, the same key): taken, not calibrated again")
@@ -285,7 +293,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         rec = calibrate(d / "campaign", d / "axis.toml", workers=workers,
                         progress=lambda t: step(f"calibrate: {t}"), check=check)
         if key is not None:
-            write_json(marker, {"key": key, "simulate_export_import_s": t_sim})
+            write_json(marker, {"key": cal_key, "simulate_export_import_s": t_sim})
     cal = load(d / "axis.toml")
     entry = {"case": i, "kind": kind, "effects": effects, "artefacts": artefacts,
              "formats": [f1, f2], "scenario": json.loads(s.to_json()),
@@ -298,7 +306,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         t1 = time.perf_counter()
         try:
             res = run_diagnosis(d / "campaign", cal, d / "diagnosis", seeds=seeds, workers=workers,
-                                plots=False, response_seeds=1, resim_seeds=RESIM_SEEDS)
+                                plots=False, response_seeds=RESPONSE_SEEDS, resim_seeds=RESIM_SEEDS)
         except Exception as exc:  # noqa: BLE001 - one case's failure is a figure, not the end
             entry["diagnosis_error"] = f"{type(exc).__name__}: {exc}"
         else:
@@ -334,7 +342,7 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
     progress(f"case {entry['case']}: the oracle: diagnosing against the axis as drawn ({', '.join(added)} only)")
     t0 = time.perf_counter()
     res = run_diagnosis(d / "campaign", s, d / "oracle", seeds=seeds, workers=workers, plots=False,
-                        response_seeds=1, resim_seeds=0, library=added)
+                        response_seeds=RESPONSE_SEEDS, resim_seeds=0, library=added)
     named = [a["effect"] for a in res["added"]]
     row = {"verdict": res["verdict"], "named": named, "detected": res["verdict"] != NO_GAP,
            "names_all": all(n in named for n in added), "seconds": time.perf_counter() - t0}
@@ -350,7 +358,18 @@ def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose
     from twin.harness.calibration import CALIBRATE_VERSION
 
     text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, SIGNATURE_VERSION, s.to_json(), kind, effects,
-                       artefacts, bool(diagnose), int(seeds), RESIM_SEEDS], sort_keys=True, default=str)
+                       artefacts, bool(diagnose), int(seeds), RESIM_SEEDS, RESPONSE_SEEDS], sort_keys=True,
+                      default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def calibration_key(s: Scenario, kind: str, effects: dict, artefacts: dict) -> str:
+    """What makes a case's recording and calibration: its draw and the versions of the benchmark
+    and the calibration (not the diagnosis's options or statistics, which :func:`case_key` adds)."""
+    from twin.harness.calibration import CALIBRATE_VERSION
+
+    text = json.dumps(["calibration", BENCH_VERSION, CALIBRATE_VERSION, s.to_json(), kind, effects, artefacts],
+                      sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -417,5 +436,5 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     return doc
 
 
-__all__ = ["absorbed_effects", "case_key", "draw_additions", "draw_case", "draws", "run_benchmark",
+__all__ = ["absorbed_effects", "calibration_key", "case_key", "draw_additions", "draw_case", "draws", "run_benchmark",
            "run_oracle", "score_case", "score_diagnosis"]
