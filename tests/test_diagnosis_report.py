@@ -459,3 +459,69 @@ def test_drag_fit_tells_a_constant_from_a_viscous_drag():
     assert more_viscous * scale == pytest.approx([0.0, 0.34 * tc0], abs=2e-3)
     cruise = np.full(20_000, plateau)
     assert np.isnan(drag_fit(cruise, 0.5 + noise[:cruise.size], fs)).all()
+
+
+def test_error_scale_forgives_within_the_responses_seed_variation_only():
+    """t/√(1 + v) within Student's t (2 degrees of freedom: three response seeds) at 1 − α/2
+    (9.92 at α = 0.01) is divided by √(1 + v); beyond it, or without error, t stays."""
+    t = np.array([300.0, 70.0, 5.0, 2.0, np.nan])
+    v = np.array([45000.0, 8.0, 0.0, 3.0, 3.0])
+    s = at.error_scale(t, v, 0.01, 2)
+    assert s == pytest.approx([np.sqrt(45001.0), 1.0, 1.0, 2.0, 1.0])
+    # 19/2 = 9.5: within Student's 9.92, beyond the normal's 2.58 (no degrees of freedom given)
+    assert at.error_scale(np.array([19.0]), np.array([3.0]), 0.01, 2) == pytest.approx([2.0])
+    assert at.error_scale(np.array([19.0]), np.array([3.0]), 0.01, None) == pytest.approx([1.0])
+
+
+def _line_and_noise(sd, n_spec=10):
+    """Two candidates on a recording with a line (t = 10 on the ``n_spec`` "torque" band
+    statistics) and a transient's correlation moved by 300 σ on the two "corr" statistics. "line"
+    matches the bands exactly at p = 10 and moves the correlation by 100, 400 or 250 σ on its three
+    response seeds (the line's phase at each transient; fitted with the first); "noise" moves the
+    correlation by exactly 300 σ at p = 10 but the bands by 4 σ only."""
+    grid = (0.0, 20.0)
+    spec = np.r_[np.ones(n_spec), 0.0, 0.0]
+    line_seeds = [np.r_[np.ones(n_spec), c, c] for c in (10.0, 40.0, 25.0)]
+    per = {p: np.stack([np.stack([v * k * sd[p] for v in grid]) for k in line_seeds]) for p in sd}
+    line = at.CandidateResponse("line", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd}, per_seed=per)
+    k_noise = 0.4 * spec + np.r_[np.zeros(n_spec), 30.0, 30.0]
+    noise = at.CandidateResponse("noise", [at.ParamAxis("p", grid)],
+                                 {p: np.stack([v * k_noise * sd[p] for v in grid]) for p in sd})
+    return line, noise
+
+
+def test_a_candidate_random_where_the_gap_is_named_when_its_seeds_span_the_gap():
+    """The line leaves 200 σ on each correlation with its first seed's response, well within its
+    seeds' variation (error variance 2 × 22 500 σ²): it explains the recording (bands exact,
+    correlations within its spread) and is named first; "noise", which matches the correlations
+    but leaves 6 σ on every band, is not named. Without the error scaling the line's 2 × 200²
+    left on the correlations would lose to the noise's 10 × 6²."""
+    real, twin, regions, sd = _signatures({"torque": 10.0, "corr": 0.0}, n_hours=1)
+    regions = [Region("phase1", "torque", "band", f"{10 * i}-{10 * i + 10} Hz", 0.0) for i in range(10)] + \
+        [Region("phase1", "features", "feature", f"corr_tr_torque_{d}", 0.0) for d in ("fwd", "rev")]
+    rng = np.random.default_rng(5)
+    twin = {p: [Signature(rng.normal(0.0, 1.0, 12), regions) for _ in range(8)] for p in ("cal", "heldout")}
+    sp = {p: gap.spread(twin[p]) for p in twin}
+    sd = {p: sp[p].sd for p in sp}
+    t = np.r_[np.full(10, 10.0), 300.0, 300.0]
+    real = {p: Signature(sp[p].mean + t * sd[p], regions) for p in sp}
+    line, noise = _line_and_noise(sd)
+    assert at.response_dof(line) == 2 and at.response_dof(noise) is None
+    res, _ = at.diagnose(real, twin, [noise, line])
+    assert [a["effect"] for a in res["added"]] == ["line"] and res["refused"] == []
+    assert res["added"][0]["params"]["p"] == pytest.approx(10.0, abs=0.2)
+    assert res["verdict"] == at.EXPLAINED and res["heldout_shrink"] > 0.99
+
+
+def test_a_candidate_only_random_where_the_gap_is_does_not_explain_it():
+    """A candidate with no mean response whose three seeds move the 10 statistics by −2, 0 and
+    +2 σ (error variance 8 σ²) against a gap of 70 σ on each: 70/3 is far beyond its variation,
+    so dividing by √(1 + 8) would credit it with 8/9 of the gap; it is not added."""
+    real, twin, regions, sd = _signatures({"gyro": 70.0})
+    grid = (0.0, 1.0)
+    per = {p: np.stack([np.stack([v * c * np.ones(10) * sd[p] for v in grid]) for c in (0.0, -2.0, 2.0)])
+           for p in sd}
+    rand = at.CandidateResponse("random", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd}, per_seed=per)
+    res, _ = at.diagnose(real, twin, [rand])
+    assert res["added"] == [] and res["verdict"] == at.UNEXPLAINED
+    assert res["ranking"][0]["net_reduction"] == pytest.approx(0.0, abs=1e-6)

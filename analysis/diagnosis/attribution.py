@@ -44,15 +44,24 @@ already added, their responses added to them (the effects' responses are taken a
 **An explanation explains where it acts.** Once selected, each added candidate is checked on its
 *footprint*, the statistics of S its response moves by at least one standard deviation of the
 twin's spread (:func:`footprint_left`): with every added candidate in, the footprint's held-out
-Σ t², less what the twin's noise and the error of the candidate's response allow (1 + v_j per
-statistic, v_j from the response's seed-to-seed variation, :func:`response_error_var`), must be
-no more than 1 − ``explained_fraction`` (10 %) of its Σ t² before: the verdict's 90 % rule
+Σ t² (each t with the responses' error allowed for, below), less the twin's noise (1 per
+statistic), must be no more than 1 − ``explained_fraction`` (10 %) of its Σ t² before: the verdict's 90 % rule
 applied where the candidate acts. A candidate that leaves more approximates a gap whose shape it
 does not have (a resonance standing in for a speed-locked line, a drifting bias for a
 misalignment's constant offset): it is *refused* (``refused``, with the fraction it left) and the
 selection runs again without it, until every added candidate passes; what it would have absorbed
 stays unexplained (docs/gap-diagnosis.md gives the measured fractions of right and refused
 candidates).
+
+**The response's own error.** The recording's machine is another draw than the seeds a response
+was computed with (a mains line's phase at each transient moves a transient's correlation by
+hundreds of σ from seed to seed). Where a candidate acts (its response moves the statistic by at
+least ``FOOTPRINT_SIGMAS`` σ), its error variance v_j is twice its response's variance over the
+response seeds (:func:`response_error_var`); a t_j it leaves within that variation (Student's t
+with R − 1 degrees of freedom, :func:`error_scale`) counts as t_j/√(1 + v_j) in the fit (step 1),
+in G after it (step 2), in the regions it makes worse, in the footprint and in the verdict;
+beyond it, or where the candidate does not act, t_j counts whole (a candidate only random where
+the gap is does not explain the gap).
 
 The verdict: "no significant gap" when no statistic is significant on the calibration part after
 Holm's correction or the held-out gap over S does not exceed its χ²_|S|(1 − α) quantile;
@@ -97,8 +106,10 @@ from analysis.diagnosis.fit import (
     Fit,
     alternatives,
     chi2_quantile,
+    error_scale,
     fit_candidate,
     footprint_left,
+    response_dof,
     response_error_var,
     worse_regions,
 )
@@ -115,6 +126,8 @@ from analysis.diagnosis.response import CandidateResponse, ParamAxis, grid_edge,
 from analysis.diagnosis.signature import Signature
 
 NO_GAP, EXPLAINED, UNEXPLAINED = "no significant gap", "explained", "unexplained gap remains"
+#: Raised when the rules of the attribution change (a benchmark's recorded diagnoses are keyed on it).
+ATTRIBUTION_VERSION = 2
 
 
 def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
@@ -157,12 +170,10 @@ def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],
     # without it, until every added candidate explains its footprint.
     while True:
         added, ranking, z = _select(pool, real, sp, z0, select, alpha, regions, noise, min_gain, max_effects)
-        by_name = {c.name: c for c in pool}
         bad = []
         for f in added:
-            err = response_error_var(by_name[f.name], f.params, sd["heldout"])
             f.footprint_statistics, f.footprint_gap_left = footprint_left(
-                f.delta_heldout, sd["heldout"], sel_ho, z0["heldout"], z["heldout"], err)
+                f.delta_heldout, sd["heldout"], sel_ho, z0["heldout"], z["heldout"])
             if f.footprint_gap_left > 1.0 - explained_fraction:
                 bad.append(f)
         if not bad:
@@ -200,8 +211,11 @@ def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict,
     """Greedy forward selection among ``pool`` (steps 1–3 of the module's docstring): returns
     the added fits in order (zoomed, with their stated intervals and alternatives), the ranking
     of the last round and the t of both parts with the added candidates' responses."""
-    sd = {p: sp[p].sd for p in sp}
+    sd0 = {p: sp[p].sd for p in sp}
+    sd = dict(sd0)  # the current model's spread: the twin's and the added responses' errors
     delta = {p: np.zeros_like(z0[p]) for p in z0}
+    err_added = {p: np.zeros_like(z0[p]) for p in z0}
+    dof_added: int | None = None  # the least of the added responses' (error_scale)
     z = dict(z0)
     remaining = list(pool)
     added: list[Fit] = []
@@ -229,7 +243,12 @@ def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict,
         best.at_grid_edge = {a.name: grid_edge(a, best.params[a.name], best.interval[a.name]) for a in cand.params}
         added.append(best)
         delta = {"cal": delta["cal"] + best.delta_cal, "heldout": delta["heldout"] + best.delta_heldout}
+        err_added = {p: err_added[p] + response_error_var(cand, best.params, sd0[p], p) for p in sp}
         z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}
+        dof_added = min((d for d in (dof_added, response_dof(cand)) if d), default=None)
+        scale = {p: error_scale(z[p], err_added[p], alpha, dof_added) for p in sp}
+        sd = {p: sd0[p] * scale[p] for p in sp}
+        z = {p: z[p] / scale[p] for p in sp}
         remaining = [c for c in remaining if c.name != best.name]
     return added, ranking, z
 
@@ -250,9 +269,25 @@ def _gap_setup(real: dict[str, Signature], twin: dict[str, list[Signature]], alp
     return sp, z0, select, sel_ho, g_before, crit
 
 
+def added_error_var(candidates: list[CandidateResponse], added: list[dict],
+                    twin: dict[str, list[Signature]]) -> tuple[dict[str, np.ndarray], int | None]:
+    """({part: (n,)} the summed error variance of the ``added`` candidates' responses (entries of
+    the result's ``added``: effect, params) in units of the twin's spread squared
+    (:func:`response_error_var`): how far the recording's change by them may stand from the
+    twin's response to them; the least degrees of freedom of those estimates, :func:`response_dof`)."""
+    by_name = {c.name: c for c in candidates}
+    out = {}
+    for p in ("cal", "heldout"):
+        sd = g.spread(twin[p]).sd
+        out[p] = sum((response_error_var(by_name[a["effect"]], a["params"], sd, p) for a in added),
+                     np.zeros_like(sd))
+    return out, min((d for a in added if (d := response_dof(by_name[a["effect"]]))), default=None)
+
+
 def resimulated_gap(real: dict[str, Signature], twin: dict[str, list[Signature]],
                 resim: dict[str, list[Signature]], *, alpha: float = 0.01,
-                explained_fraction: float = 0.9) -> dict:
+                explained_fraction: float = 0.9,
+                error_var: tuple[dict[str, np.ndarray], int | None] | None = None) -> dict:
     """The held-out gap with the added candidates **re-simulated** instead of interpolated.
 
     ``resim``: {part: [signature of twin seed k with every added candidate applied at its fitted
@@ -260,8 +295,11 @@ def resimulated_gap(real: dict[str, Signature], twin: dict[str, list[Signature]]
     candidates' response is then Δ_j = mean over those seeds of (resim_k,j − twin_k,j) (common
     random numbers, as for the grid: with all K seeds it is the mean of the re-simulated twin
     minus the mean of the twin), and the statistic is the interpolated one with Δ in place of
-    the interpolated, additive response: G = Σ_{j∈S} ((r_j − μ_j − Δ_j)/σ_j)² over the same
-    statistics S, with the twin's own spread σ_j (a statistic no re-simulated seed could compute
+    the interpolated, additive response: G = Σ_{j∈S} (r_j − μ_j − Δ_j)²/(σ_j²(1 + v_j)) over the
+    same statistics S, with the twin's own spread σ_j and the error variance v_j of the added
+    responses where what is left is within it (``error_var``, :func:`added_error_var`: the
+    variances and their degrees of freedom; none when None; :func:`error_scale`), as for the
+    interpolated G (a statistic no re-simulated seed could compute
     gets Δ_j = 0, as a NaN of the grid's responses; ``n_statistics_resimulated`` counts the others).
     The verdict follows the rule of :func:`diagnose` on this G.
 
@@ -284,6 +322,8 @@ def resimulated_gap(real: dict[str, Signature], twin: dict[str, list[Signature]]
     delta = {p: np.where(finite[p], np.nanmean(np.where(finite[p], diffs[p], 0.0), axis=0), 0.0)
              for p in sp}
     z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}
+    if error_var is not None:
+        z = {p: z[p] / error_scale(z[p], error_var[0][p], alpha, error_var[1]) for p in sp}
     g_after = float(np.sum(z["heldout"][sel_ho] ** 2))
     shrink = 1.0 - g_after / g_before if g_before > 0 else 0.0
     residual_sig = g_after > crit
@@ -344,8 +384,9 @@ def _hours(regions, z_before, z_after, select) -> list[dict]:
 
 #: What the attribution offers, its parts' names included (:mod:`.response`, :mod:`.fit`,
 #: :mod:`.intervals`).
-__all__ = ["BOOTSTRAP_DRAWS", "EXPLAINED", "FOOTPRINT_SIGMAS", "INTERVAL_LEVEL", "NO_GAP", "TIE_FRACTION", "TIE_SIGMAS",
-           "UNEXPLAINED", "WORSE_FRACTION", "CandidateResponse", "Fit", "ParamAxis", "alternatives",
-           "bootstrap_interval", "chi2_quantile", "diagnose", "fit_candidate", "footprint_left", "grid_edge",
-           "interpolation_shift", "noise_interval", "resimulated_gap", "response_error_var", "search_step",
-           "seed_interval", "stated_interval", "merge_resimulation", "worse_regions"]
+__all__ = ["ATTRIBUTION_VERSION", "BOOTSTRAP_DRAWS", "EXPLAINED", "FOOTPRINT_SIGMAS", "INTERVAL_LEVEL", "NO_GAP",
+           "TIE_FRACTION", "TIE_SIGMAS", "UNEXPLAINED", "WORSE_FRACTION", "added_error_var", "alternatives",
+           "bootstrap_interval", "CandidateResponse", "chi2_quantile", "diagnose", "error_scale", "Fit",
+           "fit_candidate", "footprint_left", "grid_edge", "interpolation_shift", "merge_resimulation",
+           "noise_interval", "ParamAxis", "resimulated_gap", "response_dof", "response_error_var", "search_step",
+           "seed_interval", "stated_interval", "worse_regions"]

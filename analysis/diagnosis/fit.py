@@ -69,22 +69,22 @@ FOOTPRINT_SIGMAS = 1.0
 
 
 def footprint_left(delta_heldout: np.ndarray, sd_heldout: np.ndarray, sel: np.ndarray,
-                   z_before: np.ndarray, z_after: np.ndarray, error_var: np.ndarray) -> tuple[int, float]:
+                   z_before: np.ndarray, z_after: np.ndarray) -> tuple[int, float]:
     """What a candidate leaves of the gap where it acts, beyond what a right candidate leaves.
 
     Its footprint F: the statistics of ``sel`` (S, usable on the held-out part) whose t its
     response moves by at least :data:`FOOTPRINT_SIGMAS` (|Δ_j|/σ_j ≥ 1; ``delta_heldout``,
-    ``sd_heldout`` (n,), the statistic's units). With a right candidate, the residual t_j there is
-    the twin's own noise (variance 1) plus the error of its response (variance ``error_var`` v_j
-    (n,), :func:`response_error_var`), so the excess Σ_F (t_after² − 1 − v_j), floored at 0, is
-    what it leaves unexplained; returned as a fraction of Σ_F t_before² (``z_before``: the twin
-    as it is, ``z_after``: with every added candidate; (n,) each). Returns (|F|, the fraction;
-    0.0 for an empty footprint)."""
+    ``sd_heldout`` (n,), the statistic's units). ``z_after``: the held-out t with every added
+    candidate, each statistic standardised by the twin's spread and the error of the added
+    responses (:func:`response_error_var`), so that with right candidates it is noise of
+    variance 1; the excess Σ_F (t_after² − 1), floored at 0, is what the candidate leaves
+    unexplained; returned as a fraction of Σ_F t_before² (``z_before``: the twin as it is;
+    (n,) each). Returns (|F|, the fraction; 0.0 for an empty footprint)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         moved = np.abs(delta_heldout / sd_heldout) >= FOOTPRINT_SIGMAS
     foot = sel & moved & np.isfinite(z_before) & np.isfinite(z_after)
     before = float(np.sum(z_before[foot] ** 2))
-    excess = float(np.sum(z_after[foot] ** 2 - 1.0 - error_var[foot]))
+    excess = float(np.sum(z_after[foot] ** 2 - 1.0))
     return int(foot.sum()), (max(0.0, excess) / before if before > 0 else 0.0)
 
 
@@ -94,18 +94,52 @@ def response_error_var(cand: CandidateResponse, params: dict[str, float], sd: np
     taking ``cand``'s response at ``params`` (a fit's {name: value}) for the recording's on ``part``: the recording's
     machine is another draw than the seed the response was fitted with, so twice the variance
     of the response over its seeds (``per_seed``, sample variance), or its ``spread`` squared
-    for a response averaged over the seeds; zeros for a one-seed response."""
-    p = np.array([params[a.name] for a in cand.params])
+    for a response averaged over the seeds; zeros for a one-seed response, and where the
+    response moves the statistic by less than :data:`FOOTPRINT_SIGMAS` σ: where the candidate
+    does not act, the scatter of its seeds is not what explains a gap (a mains line of the least
+    amplitude scatters a transient's correlation by several σ from seed to seed without moving
+    it)."""
+    return _error_var_at(cand, np.array([[params[a.name] for a in cand.params]]), sd, part)[0]
+
+
+def _error_var_at(cand: CandidateResponse, points: np.ndarray, sd: np.ndarray, part: str) -> np.ndarray:
+    """(m, n) :func:`response_error_var` at each of the parameter ``points`` (m, k)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         if cand.per_seed is not None and cand.per_seed[part].shape[0] > 1:
-            per = np.stack([_interpolator(cand.params, np.nan_to_num(d))(p[None, :])[0]
-                            for d in cand.per_seed[part]])
+            per = np.stack([_interpolator(cand.params, np.nan_to_num(d))(points) for d in cand.per_seed[part]])
             v = 2.0 * per.var(axis=0, ddof=1) / sd ** 2
         elif cand.spread is not None:
-            v = (_interpolator(cand.params, np.nan_to_num(cand.spread[part]))(p[None, :])[0] / sd) ** 2
+            v = (_interpolator(cand.params, np.nan_to_num(cand.spread[part]))(points) / sd) ** 2
         else:
-            v = np.zeros_like(sd)
-    return np.nan_to_num(v)
+            v = np.zeros((len(points), sd.size))
+        acts = np.abs(_interpolator(cand.params, np.nan_to_num(cand.delta[part]))(points) / sd) >= FOOTPRINT_SIGMAS
+    return np.where(acts, np.nan_to_num(v), 0.0)
+
+
+def response_dof(cand: CandidateResponse) -> int | None:
+    """The degrees of freedom of :func:`response_error_var`'s estimate for ``cand``: its response
+    seeds less one (None: a one-seed response, no error estimated)."""
+    k = cand.per_seed["heldout"].shape[0] if cand.per_seed is not None else 1
+    return k - 1 if k > 1 else None
+
+
+def error_scale(t: np.ndarray, error_var: np.ndarray, alpha: float, dof: int | None) -> np.ndarray:
+    """(n,) what each t of a model with added candidates is divided by: √(1 + v_j) (``error_var``
+    v_j (n,), the added responses' error, :func:`response_error_var`, estimated with ``dof``
+    degrees of freedom) where what is left is within the responses' seed-to-seed variation, else 1.
+
+    The recording's change is another draw than the response's seeds (a mains line of random
+    phase moves a transient's correlation by hundreds of σ from seed to seed): within that
+    variation when t_j/√(1 + v_j) lies within the two-sided 1 − α quantile of Student's t with
+    ``dof`` degrees of freedom (v_j is itself estimated from a few seeds; the normal quantile
+    without them). Beyond it the response's error does not account for what is left: a candidate
+    that is only random where the gap is does not explain the gap. ``t`` (n,): the t with the
+    responses, standardised by the twin's spread."""
+    q = float(stats.t.ppf(1.0 - alpha / 2.0, dof)) if dof else float(stats.norm.ppf(1.0 - alpha / 2.0))
+    s = np.sqrt(1.0 + error_var)
+    with np.errstate(invalid="ignore"):
+        within = np.abs(t / s) <= q
+    return np.where(within, s, 1.0)
 
 
 @dataclass
@@ -203,20 +237,27 @@ def alternatives(best: Fit, fits: list[Fit], sel: np.ndarray, sd_ho: np.ndarray,
 
 
 def _calibration_residuals(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: np.ndarray, n_fine: int,
-                           method: str = "linear", zoom: bool = True):
+                           method: str = "linear", zoom: bool = True, alpha: float = 0.01):
     """The parameter values searched for ``cand`` and what is left of the calibration part at
     each: (points (m, k), the calibration response's interpolator, residual t (m, n), zero where
-    a statistic is not finite). The points are the fine grid (every grid value and an even
-    subdivision of each continuous parameter's range in ``n_fine`` values) and, with ``zoom``, a
+    a statistic is not finite, each divided by :func:`error_scale` at its point with ``alpha``:
+    a statistic the recording moves within the response's seed-to-seed variation does not pull
+    the fit to the one seed's or the seeds' mean response there). The points are the fine grid
+    (every grid value and an even subdivision of each continuous parameter's range in ``n_fine``
+    values) and, with ``zoom``, a
     zoomed grid around its best point (:func:`_zoom_axes`, ten times finer): a fitted value is not
     rounded to the fine grid's step. ``method``: the response's interpolation (:func:`_interpolator`)."""
     fine = _fine_axes(cand.params, n_fine)
     ok = np.isfinite(z_cal)
     z = np.where(ok, z_cal, 0.0)[None, :]
     f_cal = _interpolator(cand.params, np.nan_to_num(cand.delta["cal"]), method)
+    dof = response_dof(cand)
 
     def resid(pts: np.ndarray) -> np.ndarray:
-        return z - np.where(ok, f_cal(pts) / sd_cal, 0.0)  # (m, n)
+        r = z - np.where(ok, f_cal(pts) / sd_cal, 0.0)  # (m, n)
+        if dof is None and cand.spread is None:
+            return r
+        return r / error_scale(r, _error_var_at(cand, pts, sd_cal, "cal"), alpha, dof)
 
     coarse = _points(fine)
     r = resid(coarse)
@@ -237,7 +278,7 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
     looked for without them); zoom: search ten times finer around the fine grid's best point
     (the added candidate's final fit; the ranking compares the candidates on the fine grid).
     """
-    grid, f_cal, resid = _calibration_residuals(cand, z_cal, sd["cal"], n_fine, zoom=zoom)
+    grid, f_cal, resid = _calibration_residuals(cand, z_cal, sd["cal"], n_fine, zoom=zoom, alpha=alpha)
     ok_cal = np.isfinite(z_cal)
     chi2 = np.sum(resid ** 2, axis=1)
     best = int(np.argmin(chi2))
@@ -266,21 +307,19 @@ def fit_candidate(cand: CandidateResponse, z_cal: np.ndarray, z_ho: np.ndarray,
     d_cal = f_cal(p_best[None, :])[0]
     f_ho = _interpolator(cand.params, np.nan_to_num(cand.delta["heldout"]))
     d_ho = f_ho(p_best[None, :])[0]
+    params = {a.name: float(v) for a, v in zip(cand.params, p_best, strict=True)}
+    # The recording's change is another draw than the response's seeds (error_scale).
+    z_after = z_ho - d_ho / sd["heldout"]
+    z_after = z_after / error_scale(z_after, response_error_var(cand, params, sd["heldout"]), alpha,
+                                    response_dof(cand))
     sel = select & np.isfinite(z_ho)
     before = float(np.sum(z_ho[sel] ** 2))
     dt = d_ho[sel] / sd["heldout"][sel]
-    after = float(np.sum((z_ho[sel] - dt) ** 2))
+    after = float(np.sum(z_after[sel] ** 2))
     noise = 2.0 * float(np.sqrt(np.sum(dt ** 2)))
     threshold = chi2_quantile(1.0 - alpha, max(len(cand.params), 1)) + 3.0 * noise
-    params = {a.name: float(v) for a, v in zip(cand.params, p_best, strict=True)}
     worse, penalty = [], 0.0
     if regions is not None:
-        z_after = z_ho - d_ho / sd["heldout"]
-        if cand.spread is not None:
-            # A response averaged over the seeds: the recording's change is one seed's draw around
-            # it, so a statistic is only made worse beyond that spread as well as the twin's.
-            s_ho = _interpolator(cand.params, np.nan_to_num(cand.spread["heldout"]))(p_best[None, :])[0]
-            z_after = z_after * sd["heldout"] / np.sqrt(sd["heldout"] ** 2 + s_ho ** 2)
         worse = worse_regions(z_ho, z_after, regions, alpha)
         penalty = _penalty(z_ho, z_after, regions, select, worse)
     return Fit(name=cand.name, params=params,

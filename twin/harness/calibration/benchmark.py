@@ -353,12 +353,13 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
 
 def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose: bool, seeds: int) -> str:
     """What makes a case's result: its draw, the options and the versions of the benchmark, the
-    calibration and the diagnosis's statistics (a case with the same key is not run again)."""
+    calibration and the diagnosis's statistics and rules (a case with the same key is not run again)."""
+    from analysis.diagnosis.attribution import ATTRIBUTION_VERSION
     from analysis.diagnosis.signature import SIGNATURE_VERSION
     from twin.harness.calibration import CALIBRATE_VERSION
 
-    text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, SIGNATURE_VERSION, s.to_json(), kind, effects,
-                       artefacts, bool(diagnose), int(seeds), RESIM_SEEDS, RESPONSE_SEEDS], sort_keys=True,
+    text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, SIGNATURE_VERSION, ATTRIBUTION_VERSION, s.to_json(), kind,
+                       effects, artefacts, bool(diagnose), int(seeds), RESIM_SEEDS, RESPONSE_SEEDS], sort_keys=True,
                       default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 

@@ -112,7 +112,8 @@ def add_resimulation(result: dict, real: dict[str, Signature], ens: TwinEnsemble
     if resim is None:
         return attribution.merge_resimulation(result, None, "not asked for (0 re-simulation seeds)")
     rs = attribution.resimulated_gap(real, ens.twin, resim, alpha=alpha,
-                                 explained_fraction=result.get("explained_fraction", 0.9))
+                                     explained_fraction=result.get("explained_fraction", 0.9),
+                                     error_var=attribution.added_error_var(ens.candidates, result["added"], ens.twin))
     rs["twin_seeds"] = ens.seeds[:rs["seeds"]]
     return attribution.merge_resimulation(result, rs)
 
