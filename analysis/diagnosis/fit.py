@@ -244,9 +244,9 @@ def _calibration_residuals(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: n
     a statistic the recording moves within the response's seed-to-seed variation does not pull
     the fit to the one seed's or the seeds' mean response there). The points are the fine grid
     (every grid value and an even subdivision of each continuous parameter's range in ``n_fine``
-    values) and, with ``zoom``, a
-    zoomed grid around its best point (:func:`_zoom_axes`, ten times finer): a fitted value is not
-    rounded to the fine grid's step. ``method``: the response's interpolation (:func:`_interpolator`)."""
+    values) and, with ``zoom``, a zoomed grid around its best point (:func:`_zoom_axes`, ten times
+    finer): a fitted value is not rounded to the fine grid's step. ``method``: the response's
+    interpolation (:func:`_interpolator`)."""
     fine = _fine_axes(cand.params, n_fine)
     ok = np.isfinite(z_cal)
     z = np.where(ok, z_cal, 0.0)[None, :]
