@@ -499,8 +499,14 @@ def test_a_case_whose_diagnosis_changed_keeps_its_calibration(monkeypatch):
     assert all(x != y for x, y in zip(case, one_seed, strict=True)) and cal_one_seed == cal
     fewer, cal_fewer = keys(seeds=4)
     assert all(x != y for x, y in zip(one_seed, fewer, strict=True)) and cal_fewer == cal
+    import analysis.diagnosis.attribution as attribution
+
+    monkeypatch.setattr(attribution, "ATTRIBUTION_VERSION", attribution.ATTRIBUTION_VERSION + 1)
+    rules, cal_rules = keys(seeds=4)
+    assert all(x != y for x, y in zip(fewer, rules, strict=True)) and cal_rules == cal
     monkeypatch.setattr(b, "BENCH_VERSION", b.BENCH_VERSION + 1)
     assert all(x != y for x, y in zip(cal, keys()[1], strict=True))
+
 
 def test_the_recorded_calibrate_benchmark_is_this_codes():
     """The benchmark's cases recorded in benchmarks/results/calibrate-benchmark (its figures in
@@ -610,8 +616,9 @@ def test_calibrate_benchmark_split_between_runs_and_recorded_is_taken_not_run(tm
 def test_calibrate_benchmark_stopped_in_a_diagnosis_goes_on_from_its_calibration(tmp_path, monkeypatch):
     """A case stopped after its calibration (in its diagnosis) is not calibrated again when the
     benchmark runs again with the same key: the twin is not simulated again either, and the entry
-    carries the first run's calibration and times; with another key (another version) the case
-    starts over."""
+    carries the first run's calibration and times; with another case key and the same calibration
+    key (the diagnosis changed) it is diagnosed again from that calibration; with another
+    calibration key (a raised benchmark version) the case starts over."""
     import analysis.ingest
     import analysis.ingest.check
     import twin.harness.calibration
@@ -661,7 +668,10 @@ def test_calibrate_benchmark_stopped_in_a_diagnosis_goes_on_from_its_calibration
     assert entry["calibrate_s"] == 123.0 and entry["parameters"]["axis.carriage_mass_kg"]["inside"]
     assert entry["diagnosis"]["correct"]
     bm.run_case(0, s, tmp_path, **case, key="k2")
-    assert calls == {"simulate": 2, "calibrate": 2, "diagnose": 3}
+    assert calls == {"simulate": 1, "calibrate": 1, "diagnose": 3}
+    monkeypatch.setattr(bm, "BENCH_VERSION", bm.BENCH_VERSION + 1)
+    bm.run_case(0, s, tmp_path, **case, key="k2")
+    assert calls == {"simulate": 2, "calibrate": 2, "diagnose": 4}
 
 
 def test_an_effect_the_calibration_absorbed_counts_as_found():

@@ -236,8 +236,9 @@ def test_candidates_are_not_told_apart_within_the_error_of_their_responses():
     leaves 0.83 ∓ 2.75 (Σ r² = 82.6). That difference exceeds three standard deviations of the
     twin's noise on it (2·√Σ(d_a − d_b)² = 2·√82.6 = 18.2), so from one seed's responses 'b' is
     told apart. When b's three response seeds answer (1.3, 1, 1.6) and (0.7, 1, 0.4) times p
-    (error variance 2·0.09·p² per statistic), the difference's standard deviation becomes
-    2·√(82.6 + Σ r²·v) = 73: 'b' is not told apart from 'a'."""
+    (error variance 2·0.09·p² per statistic), its residuals lie within that error: it fits p = 10,
+    leaves ∓3 counted as 9/19 each, and the difference of the gains, 10·9/19, is well within its
+    standard deviation 2·√(Σ r² + Σ r²·v): 'b' is not told apart from 'a'."""
     from test_diagnosis_report import _response, _signatures
 
     from analysis.diagnosis import attribution as at
@@ -256,12 +257,13 @@ def test_candidates_are_not_told_apart_within_the_error_of_their_responses():
     alt = res3["added"][0]["alternatives"]
     assert [x["effect"] for x in alt] == ["b"]
     p_b = alt[0]["params"]["p"]
-    assert abs(p_b - 100.0 / 10.9) <= 20.0 / 60  # the fine grid's step: an alternative is not zoomed
+    # its residuals (∓3 at p = 10) within its seeds' variation count divided by √(1 + v): fitted at
+    # p = 10, not pulled to 9.17 (to the fine grid's step: an alternative is not zoomed)
+    assert abs(p_b - 10.0) <= 20.0 / 60
     r = 10.0 - p_b * shapes[0]  # b's residual; a leaves none, so d_a − d_b = r
-    assert alt[0]["gain_difference"] == pytest.approx(np.sum(r ** 2), rel=1e-3)
     v = 2.0 * np.var(np.stack([p_b * k for k in shapes]), axis=0, ddof=1)
+    assert alt[0]["gain_difference"] == pytest.approx(np.sum(r ** 2 / (1.0 + v)), rel=1e-3)
     assert alt[0]["difference_sd"] == pytest.approx(2.0 * np.sqrt(np.sum(r ** 2) + np.sum(r ** 2 * v)), rel=1e-3)
-    assert alt[0]["gain_difference"] > at.TIE_SIGMAS * 2.0 * np.sqrt(np.sum(r ** 2))
 
 
 def test_a_same_recording_alternative_is_said_so():
