@@ -57,9 +57,10 @@ BENCH_VERSION = 2
 #: Twin seeds the diagnosis re-simulates with its added candidates (the re-simulated shrink).
 RESIM_SEEDS = 2
 #: Twin seeds each candidate's response is computed with, in the diagnosis and its oracle: those of
-#: ``twin diagnose`` as the owner runs it (its default), whose spread the diagnosis's footprint
-#: test allows for; with one seed it allows none, and a right candidate whose response varies
-#: from seed to seed (a mains line's phase, drawn per capture) is refused.
+#: ``twin diagnose`` as the owner runs it (its default), whose spread the diagnosis allows for
+#: (:func:`analysis.diagnosis.fit.error_scale`); with one seed it allows none, and a right
+#: candidate whose response varies from seed to seed (a mains line's phase, drawn per capture)
+#: loses to one that matches only its mean or is refused.
 RESPONSE_SEEDS = DEFAULT_RESPONSE_SEEDS
 
 
@@ -250,7 +251,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     machine and ``artefacts`` to its recording; returns its entry of the JSON. With ``key`` (the
     case's :func:`case_key`), a finished calibration is marked with its :func:`calibration_key`
     in ``case-NNN/calibrated.json``: a run stopped during the diagnosis, or one whose diagnosis
-    options or statistics changed, goes on from the calibration with the same key instead of
+    options, statistics or rules changed, goes on from the calibration with the same key instead of
     calibrating again (the diagnosis's own cache, in the case's directory too, keeps the twin
     simulations it had finished)."""
     from analysis.diagnosis.artefacts import apply
@@ -366,7 +367,8 @@ def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose
 
 def calibration_key(s: Scenario, kind: str, effects: dict, artefacts: dict) -> str:
     """What makes a case's recording and calibration: its draw and the versions of the benchmark
-    and the calibration (not the diagnosis's options or statistics, which :func:`case_key` adds)."""
+    and the calibration (not the diagnosis's options, statistics or rules, which :func:`case_key`
+    adds)."""
     from twin.harness.calibration import CALIBRATE_VERSION
 
     text = json.dumps(["calibration", BENCH_VERSION, CALIBRATE_VERSION, s.to_json(), kind, effects, artefacts],
