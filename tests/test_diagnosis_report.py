@@ -220,6 +220,30 @@ def test_resimulated_shrink_uses_the_same_statistic_and_sets_the_verdict(tmp_pat
         at.resimulated_gap(real, twin, runs(10.0, 8) | {"heldout": runs(10.0, 9)["heldout"] + [twin["heldout"][0]]})
 
 
+def test_resimulated_gap_allows_for_the_added_responses_error():
+    """Re-simulated runs carrying half the response leave t = 5 on the 10 torque statistics (250 of
+    1000). When the added candidate's three response seeds answer 1, 1.4 and 0.6 times p there
+    (error variance 2 × 16 = 32 at p = 10, 2 degrees of freedom: ``added_error_var``; none on the
+    speed, where it does not act), 5/√33 lies within Student's 9.92: each counts 25/33 and the
+    re-simulated verdict is "explained"; a one-seed response (no error) leaves 250."""
+    real, twin, regions, sd = _signatures({"torque": 10.0, "speed": 0.0})
+    grid = (0.0, 20.0)
+    shapes = [np.repeat([c, 0.0], 10) for c in (1.0, 1.4, 0.6)]
+    per = {p: np.stack([np.stack([v * k * sd[p] for v in grid]) for k in shapes]) for p in sd}
+    cand = at.CandidateResponse("c", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd}, per_seed=per)
+    added = [{"effect": "c", "params": {"p": 10.0}}]
+    err = at.added_error_var([cand], added, twin)
+    assert err[1] == 2 and err[0]["heldout"] == pytest.approx(np.repeat([32.0, 0.0], 10))
+    k = np.repeat([1.0, 0.0], 10)
+    half = {p: [Signature(s.values + 5.0 * k * sd[p], regions) for s in twin[p][:2]] for p in twin}
+    assert at.resimulated_gap(real, twin, half)["heldout_gap_after"] == pytest.approx(250.0, rel=1e-9)
+    within = at.resimulated_gap(real, twin, half, error_var=err)
+    assert within["heldout_gap_after"] == pytest.approx(250.0 / 33.0, rel=1e-9)
+    assert within["verdict"] == at.EXPLAINED
+    one = at.CandidateResponse("c", [at.ParamAxis("p", grid)], {p: per[p][0] for p in sd})
+    assert at.added_error_var([one], added, twin)[1] is None
+
+
 def test_nothing_added_is_not_resimulated():
     """No candidate added (or no gap): no re-simulation, said so; the verdict stays."""
     real, twin, regions, sd = _signatures({"torque": 10.0})
