@@ -214,8 +214,7 @@ def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict,
     sd0 = {p: sp[p].sd for p in sp}
     sd = dict(sd0)  # the current model's spread: the twin's and the added responses' errors
     delta = {p: np.zeros_like(z0[p]) for p in z0}
-    err_added = {p: np.zeros_like(z0[p]) for p in z0}
-    dof_added: int | None = None  # the least of the added responses' (error_scale)
+    added_responses: list[tuple[CandidateResponse, dict[str, float]]] = []
     z = dict(z0)
     remaining = list(pool)
     added: list[Fit] = []
@@ -243,9 +242,9 @@ def _select(pool: list[CandidateResponse], real: dict[str, Signature], sp: dict,
         best.at_grid_edge = {a.name: grid_edge(a, best.params[a.name], best.interval[a.name]) for a in cand.params}
         added.append(best)
         delta = {"cal": delta["cal"] + best.delta_cal, "heldout": delta["heldout"] + best.delta_heldout}
-        err_added = {p: err_added[p] + response_error_var(cand, best.params, sd0[p], p) for p in sp}
+        added_responses.append((cand, best.params))
+        err_added, dof_added = _summed_error(added_responses, sd0)
         z = {p: g.zscores(real[p], sp[p], delta[p]) for p in sp}
-        dof_added = min((d for d in (dof_added, response_dof(cand)) if d), default=None)
         scale = {p: error_scale(z[p], err_added[p], alpha, dof_added) for p in sp}
         sd = {p: sd0[p] * scale[p] for p in sp}
         z = {p: z[p] / scale[p] for p in sp}
@@ -269,19 +268,24 @@ def _gap_setup(real: dict[str, Signature], twin: dict[str, list[Signature]], alp
     return sp, z0, select, sel_ho, g_before, crit
 
 
+def _summed_error(responses: list[tuple[CandidateResponse, dict[str, float]]],
+                  sd: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], int | None]:
+    """({part: (n,)} the summed :func:`response_error_var` of the candidates at their parameters
+    ``responses`` [(candidate, {name: value})], in units of ``sd`` {part: (n,)} squared; the least
+    degrees of freedom of those estimates, :func:`response_dof`)."""
+    err = {p: sum((response_error_var(c, params, sd[p], p) for c, params in responses), np.zeros_like(sd[p]))
+           for p in sd}
+    return err, min((d for c, _ in responses if (d := response_dof(c))), default=None)
+
+
 def added_error_var(candidates: list[CandidateResponse], added: list[dict],
                     twin: dict[str, list[Signature]]) -> tuple[dict[str, np.ndarray], int | None]:
-    """({part: (n,)} the summed error variance of the ``added`` candidates' responses (entries of
-    the result's ``added``: effect, params) in units of the twin's spread squared
-    (:func:`response_error_var`): how far the recording's change by them may stand from the
-    twin's response to them; the least degrees of freedom of those estimates, :func:`response_dof`)."""
+    """:func:`_summed_error` of the ``added`` candidates (entries of the result's ``added``: effect,
+    params) against the twin's spread: how far the recording's change by them may stand from the
+    twin's response to them, and the degrees of freedom of that estimate."""
     by_name = {c.name: c for c in candidates}
-    out = {}
-    for p in ("cal", "heldout"):
-        sd = g.spread(twin[p]).sd
-        out[p] = sum((response_error_var(by_name[a["effect"]], a["params"], sd, p) for a in added),
-                     np.zeros_like(sd))
-    return out, min((d for a in added if (d := response_dof(by_name[a["effect"]]))), default=None)
+    return _summed_error([(by_name[a["effect"]], a["params"]) for a in added],
+                         {p: g.spread(twin[p]).sd for p in ("cal", "heldout")})
 
 
 def resimulated_gap(real: dict[str, Signature], twin: dict[str, list[Signature]],

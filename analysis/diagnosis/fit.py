@@ -102,8 +102,10 @@ def response_error_var(cand: CandidateResponse, params: dict[str, float], sd: np
     return _error_var_at(cand, np.array([[params[a.name] for a in cand.params]]), sd, part)[0]
 
 
-def _error_var_at(cand: CandidateResponse, points: np.ndarray, sd: np.ndarray, part: str) -> np.ndarray:
-    """(m, n) :func:`response_error_var` at each of the parameter ``points`` (m, k)."""
+def _error_var_at(cand: CandidateResponse, points: np.ndarray, sd: np.ndarray, part: str,
+                  response: np.ndarray | None = None) -> np.ndarray:
+    """(m, n) :func:`response_error_var` at each of the parameter ``points`` (m, k); ``response``:
+    the candidate's response (``part``) at those points when the caller has it (m, n)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         if cand.per_seed is not None and cand.per_seed[part].shape[0] > 1:
             per = np.stack([_interpolator(cand.params, np.nan_to_num(d))(points) for d in cand.per_seed[part]])
@@ -112,7 +114,9 @@ def _error_var_at(cand: CandidateResponse, points: np.ndarray, sd: np.ndarray, p
             v = (_interpolator(cand.params, np.nan_to_num(cand.spread[part]))(points) / sd) ** 2
         else:
             v = np.zeros((len(points), sd.size))
-        acts = np.abs(_interpolator(cand.params, np.nan_to_num(cand.delta[part]))(points) / sd) >= FOOTPRINT_SIGMAS
+        if response is None:
+            response = _interpolator(cand.params, np.nan_to_num(cand.delta[part]))(points)
+        acts = np.abs(response / sd) >= FOOTPRINT_SIGMAS
     return np.where(acts, np.nan_to_num(v), 0.0)
 
 
@@ -254,10 +258,13 @@ def _calibration_residuals(cand: CandidateResponse, z_cal: np.ndarray, sd_cal: n
     dof = response_dof(cand)
 
     def resid(pts: np.ndarray) -> np.ndarray:
-        r = z - np.where(ok, f_cal(pts) / sd_cal, 0.0)  # (m, n)
+        d = f_cal(pts)  # (m, n)
+        r = z - np.where(ok, d / sd_cal, 0.0)
         if dof is None and cand.spread is None:
             return r
-        return r / error_scale(r, _error_var_at(cand, pts, sd_cal, "cal"), alpha, dof)
+        # where the candidate acts is judged on its linear response (the fit's) whatever ``method``
+        return r / error_scale(r, _error_var_at(cand, pts, sd_cal, "cal", d if method == "linear" else None),
+                               alpha, dof)
 
     coarse = _points(fine)
     r = resid(coarse)
