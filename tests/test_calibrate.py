@@ -710,6 +710,13 @@ def test_a_flagged_channel_keeps_its_defaults():
     assert flagged["axis.carriage_mass_kg"] == ("twin check flags the channel torque (/phase1/c000003/torque: "
                                                 "clipping: 12 samples at the maximum 2.5): nothing fitted to it")
     assert flagged_keys(None) == {}
+    # a finding on one axis of a three-axis channel flags the channel
+    imu = flagged_keys({"errors": [], "warnings": [{"level": "warning", "where": "/phase2/s0000/r0001/imu_acc[x]",
+                                                    "what": "clipping: 12 samples at the maximum 25"}]})
+    assert set(imu) == {"axis.torque_ripple_Nm", "axis.velocity_bandwidth_hz", "sensors.imu_acc_noise_ug_per_rthz",
+                        "sensors.imu_acc_bandwidth_hz"}
+    assert imu["sensors.imu_acc_noise_ug_per_rthz"].startswith("twin check flags the channel imu_acc "
+                                                               "(/phase2/s0000/r0001/imu_acc[x]: clipping")
 
 
 def test_calibrate_refuses_a_recording_check_rejects(round_trip, tmp_path):

@@ -288,6 +288,26 @@ def test_check_finds_injected_problems(clean, tmp_path, edit, level, where, what
     assert r.returncode == (1 if level == "error" else 0) and "Traceback" not in r.stderr
 
 
+def test_check_finds_a_sensor_that_saturates_only_at_its_peaks():
+    """A long run clipped at its peaks only (37 of 50 000 samples at the rail: below the 0.1 %
+    rule) piles up at the rail and is flagged; the same signal not clipped, as floats or quantised
+    (2.5 to 10 steps per noise sigma), thins out towards its extremes and is not."""
+    from analysis.ingest.check import _clipped
+
+    t = np.arange(50_000) / 1000.0
+    x = 20.0 * np.sin(2 * np.pi * 0.5 * t) + np.random.default_rng(0).normal(0.0, 0.5, t.size)
+    clipped = np.clip(x, -21.0, 21.0)
+    k = int(np.count_nonzero(clipped == 21.0))
+    assert 8 <= k < 50
+    assert _clipped(clipped, "maximum") == (
+        f"clipping: {k} samples at the maximum 21 against 1 at the next value inside "
+        f"({x[x < 21.0].max():g}): a pile-up at a converter's rail (the sensor saturates at its peaks)")
+    assert _clipped(clipped, "minimum").startswith("clipping: 48 samples at the minimum -21 against 1 ")
+    for q in (None, 0.05, 0.1, 0.2):
+        xq = x if q is None else np.round(x / q) * q
+        assert _clipped(xq, "maximum") is None and _clipped(xq, "minimum") is None, q
+
+
 def test_scenario_init_refusals(tmp_path, clean):
     r = run_twin("scenario", "init", tmp_path / "nowhere", "-o", tmp_path / "s.toml", check=False)
     assert r.returncode == 2 and "Traceback" not in r.stderr and "measurements.h5" in r.stderr

@@ -1,16 +1,16 @@
 """``twin check``: what a recording (``measurements.h5``) holds and what is wrong or suspicious.
 
-:func:`check_recording` reads every capture and run through the validating reader and looks at
-the signals: NaN or inf (the reader's refusal, naming the index), flat lines, clipping at the
-converter's range, dropouts (a sensor's value held for many samples), operating hours that are
-negative or go back in time, sessions that share their hours, sampling rates that differ between
-captures or runs, a run (capture) whose duration is an outlier among its siblings (a file cut
-short), and an IMU accelerometer that does not see gravity (about 9.81 m/s², on its z axis, at
-standstill). Next to an imported recording, ``import.json`` (:mod:`analysis.ingest.convert`)
-gives the names the laboratory gave its sessions and samples; their order must agree with the
-order of the operating hours (hours typed in the wrong order reorder the sessions silently).
-Findings are *errors* (the analysis would fail or be wrong: ``twin check`` exits 1) or
-*warnings* (suspicious; worth a look).
+:func:`check_recording` reads every capture and run through the validating reader and looks at the
+signals: NaN or inf (the reader's refusal, naming the index), flat lines, clipping at the
+converter's range (many samples at one extreme, or a pile-up there), dropouts (a sensor's value
+held for many samples), operating hours that are negative or go back in time, sessions that share
+their hours, sampling rates that differ between captures or runs, a run (capture) whose duration is
+an outlier among its siblings (a file cut short), and an IMU accelerometer that does not see
+gravity (about 9.81 m/s², on its z axis, at standstill). Next to an imported recording,
+``import.json`` (:mod:`analysis.ingest.convert`) gives the names the laboratory gave its sessions
+and samples; their order must agree with the order of the operating hours (hours typed in the wrong
+order reorder the sessions silently). Findings are *errors* (the analysis would fail or be wrong:
+``twin check`` exits 1) or *warnings* (suspicious; worth a look).
 """
 
 from __future__ import annotations
@@ -31,6 +31,11 @@ G = 9.80665
 DROPOUT_SAMPLES = 10
 #: Samples at one extreme value (and at least 3) that make a clipping warning.
 CLIP_FRACTION = 1e-3
+#: A pile-up at a converter's rail: at least this many samples at one extreme value, and at least
+#: CLIP_PILEUP_RATIO times as many as at the next value inside it (a signal that is not clipped
+#: thins out towards its extremes; one clipped only at its peaks, a few samples a run, piles up).
+CLIP_PILEUP_MIN = 8
+CLIP_PILEUP_RATIO = 4
 #: Accepted deviation of the IMU's mean |acceleration| from 1 g.
 GRAVITY_TOLERANCE = 0.1
 #: A run or capture whose duration differs from its siblings' median by more than this fraction
@@ -82,6 +87,30 @@ def _longest_run(x: np.ndarray) -> tuple[int, int]:
     return int(ends[k] - starts[k]) + 1, int(starts[k]) - 1
 
 
+def _clipped(c: np.ndarray, name: str) -> str | None:
+    """The clipping warning of (n,) samples ``c`` at their ``name`` ("maximum" or "minimum"), or
+    None: many samples at that one value (:data:`CLIP_FRACTION` of them, and at least 3), or a
+    pile-up there (:data:`CLIP_PILEUP_MIN` and :data:`CLIP_PILEUP_RATIO`)."""
+    v = c.max() if name == "maximum" else c.min()
+    k = int(np.count_nonzero(c == v))
+    if k < 3:
+        return None
+    what = f"clipping: {k} samples at the {name} {v:g}"
+    if k >= CLIP_FRACTION * c.size:
+        return what
+    if k < CLIP_PILEUP_MIN:
+        return None
+    inside = c[c < v] if name == "maximum" else c[c > v]
+    if inside.size == 0:
+        return None
+    nxt = inside.max() if name == "maximum" else inside.min()
+    k_next = int(np.count_nonzero(c == nxt))
+    if k < CLIP_PILEUP_RATIO * k_next:
+        return None
+    return (f"{what} against {k_next} at the next value inside ({nxt:g}): a pile-up at a converter's "
+            f"rail (the sensor saturates at its peaks)")
+
+
 def _signal(rep: CheckReport, key: str, x: np.ndarray, *, sensor: bool, range_si: float | None) -> None:
     cols = x.reshape(len(x), -1)
     names = "xyz" if cols.shape[1] == 3 else [""]
@@ -97,10 +126,10 @@ def _signal(rep: CheckReport, key: str, x: np.ndarray, *, sensor: bool, range_si
         if run >= DROPOUT_SAMPLES:
             rep.findings.append(Finding("warning", where, f"dropout: {run} samples in a row hold {c[start]:g} "
                                                           f"from index {start}"))
-        for name, v in (("maximum", c.max()), ("minimum", c.min())):
-            k = int(np.count_nonzero(c == v))
-            if k >= max(3, CLIP_FRACTION * c.size):
-                rep.findings.append(Finding("warning", where, f"clipping: {k} samples at the {name} {v:g}"))
+        for name in ("maximum", "minimum"):
+            what = _clipped(c, name)
+            if what:
+                rep.findings.append(Finding("warning", where, what))
         if range_si is not None and np.abs(c).max() >= 0.99 * range_si:
             rep.findings.append(Finding("error", where, f"clipping: |value| reaches {np.abs(c).max():g}, the "
                                                         f"sensor's range is {range_si:g} (axis contract)"))
@@ -305,7 +334,7 @@ def _gravity(rep: CheckReport, key: str, acc: np.ndarray) -> None:
 
 
 #: Bumped when the checks change, so that a cached report is not reused.
-CHECK_VERSION = 2
+CHECK_VERSION = 3
 CACHE_NAME = ".twin-check.json"
 
 

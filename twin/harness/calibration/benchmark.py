@@ -353,26 +353,29 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
 
 
 def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose: bool, seeds: int) -> str:
-    """What makes a case's result: its draw, the options and the versions of the benchmark, the
-    calibration and the diagnosis's statistics and rules (a case with the same key is not run again)."""
+    """What makes a case's result: its draw, the options and the versions of the benchmark, of
+    ``twin check``, of the calibration and of the diagnosis's statistics and rules (a case with the
+    same key is not run again)."""
     from analysis.diagnosis.attribution import ATTRIBUTION_VERSION
     from analysis.diagnosis.signature import SIGNATURE_VERSION
+    from analysis.ingest.check import CHECK_VERSION
     from twin.harness.calibration import CALIBRATE_VERSION
 
-    text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, SIGNATURE_VERSION, ATTRIBUTION_VERSION, s.to_json(), kind,
-                       effects, artefacts, bool(diagnose), int(seeds), RESIM_SEEDS, RESPONSE_SEEDS], sort_keys=True,
-                      default=str)
+    text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, CHECK_VERSION, SIGNATURE_VERSION, ATTRIBUTION_VERSION,
+                       s.to_json(), kind, effects, artefacts, bool(diagnose), int(seeds), RESIM_SEEDS,
+                       RESPONSE_SEEDS], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
 def calibration_key(s: Scenario, kind: str, effects: dict, artefacts: dict) -> str:
-    """What makes a case's recording and calibration: its draw and the versions of the benchmark
-    and the calibration (not the diagnosis's options, statistics or rules, which :func:`case_key`
-    adds)."""
+    """What makes a case's recording and calibration: its draw and the versions of the benchmark,
+    of ``twin check`` (what it flags is not fitted) and of the calibration (not the diagnosis's
+    options, statistics or rules, which :func:`case_key` adds)."""
+    from analysis.ingest.check import CHECK_VERSION
     from twin.harness.calibration import CALIBRATE_VERSION
 
-    text = json.dumps(["calibration", BENCH_VERSION, CALIBRATE_VERSION, s.to_json(), kind, effects, artefacts],
-                      sort_keys=True, default=str)
+    text = json.dumps(["calibration", BENCH_VERSION, CALIBRATE_VERSION, CHECK_VERSION, s.to_json(), kind, effects,
+                       artefacts], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 

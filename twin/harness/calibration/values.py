@@ -7,7 +7,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 
-CALIBRATE_VERSION = 17
+CALIBRATE_VERSION = 18
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -124,10 +124,11 @@ CHANNELS = {
 def flagged_keys(check: dict | None) -> dict[str, str]:
     """{calibrated key: why it keeps its default} for the channels that ``check`` (the record of
     ``twin check``: :func:`analysis.ingest.check.check_record`) flags: a finding whose HDF5 key
-    ends in a channel's name flags that channel."""
+    ends in a channel's name flags that channel (one of its axes, ``imu_acc[x]``, the whole
+    channel)."""
     out: dict[str, str] = {}
     for f in (check or {}).get("errors", []) + (check or {}).get("warnings", []):
-        ch = str(f["where"]).rstrip("/").rsplit("/", 1)[-1]
+        ch = str(f["where"]).rstrip("/").rsplit("/", 1)[-1].split("[", 1)[0]
         for key, chans in CHANNELS.items():
             if ch in chans and key not in out:
                 out[key] = f"twin check flags the channel {ch} ({f['where']}: {f['what']}): nothing fitted to it"
