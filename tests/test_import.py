@@ -288,6 +288,15 @@ def test_check_finds_injected_problems(clean, tmp_path, edit, level, where, what
     assert r.returncode == (1 if level == "error" else 0) and "Traceback" not in r.stderr
 
 
+def test_a_dropout_is_located_at_its_first_held_sample():
+    from analysis.ingest.check import _longest_run
+
+    assert _longest_run(np.array([1.0, 2, 2, 2, 3])) == (3, 1)
+    assert _longest_run(np.array([5.0, 5, 5, 1, 2])) == (3, 0)
+    assert _longest_run(np.array([1.0, 2, 3, 3])) == (2, 2)
+    assert _longest_run(np.array([1.0, 2, 3])) == (1, 0)
+
+
 def test_check_finds_a_sensor_that_saturates_only_at_its_peaks():
     """A long run clipped at its peaks only (37 of 50 000 samples at the rail: below the 0.1 %
     rule) piles up at the rail and is flagged; the same signal not clipped, as floats or quantised

@@ -84,7 +84,7 @@ def _longest_run(x: np.ndarray) -> tuple[int, int]:
         return 1, 0
     starts, ends = edges[::2], edges[1::2]
     k = int(np.argmax(ends - starts))
-    return int(ends[k] - starts[k]) + 1, int(starts[k]) - 1
+    return int(ends[k] - starts[k]) + 1, int(starts[k])
 
 
 def _clipped(c: np.ndarray, name: str) -> str | None:
