@@ -155,11 +155,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{k:40s} {t}")
     print(case_table(entries))
     if a.record:
+        from analysis.ingest.check import CHECK_VERSION
         from twin.harness.calibration import CALIBRATE_VERSION
 
         record("calibrate_benchmark", command=COMMAND,
                scale=(f"cases {figs['case_list'][1]} of {CASES} (seed {SEED}, --diagnose, {TWIN_SEEDS} twin "
-                      f"seeds), CALIBRATE_VERSION {CALIBRATE_VERSION}"),
+                      f"seeds), CALIBRATE_VERSION {CALIBRATE_VERSION}, CHECK_VERSION {CHECK_VERSION}"),
                figures=figs, tables={"cases": case_table(entries)})
     return 0
 
