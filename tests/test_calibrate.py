@@ -775,6 +775,37 @@ def test_the_twin_seeds_draw_the_calibrated_values_from_their_joint_distribution
     assert math.sqrt(rec["log"][1][1]) == pytest.approx(math.log(0.0042 / 0.0038) / (2 * 1.6448536269514722))
 
 
+def test_a_twin_seed_never_draws_a_carriage_the_integrator_cannot_carry():
+    """A calibration that keeps the carriage mass at the axis description's value with a wide
+    prior (calibrate-benchmark case 19: a seed drew 9.3 kg on 504 N/µm trucks and MuJoCo's
+    simulation diverged) draws again where the suspension's ω·Δt reaches 2; a seed whose first
+    draw is carried keeps it (the same values as the first stream gives), and a covariance no
+    draw of which is carried is refused naming its keys."""
+    from twin.harness.calibration.uncertainty import DRAW_STREAM, draw_calibrated, suspension_step_product
+    from twin.sim.scenario import load
+
+    data = load("foreign-16mm").model_dump(mode="json")
+    data["axis"]["carriage_mass_kg"], data["axis"]["truck_stiffness_vertical_N_per_um"] = 20.0, 500.0
+    assert suspension_step_product(data) == pytest.approx(math.sqrt(4 * 500e6 / 20.0) * 2e-4)
+    cov = {"keys": ["axis.carriage_mass_kg"], "log": [[(math.log(4.0) / 1.6448536269514722) ** 2]]}
+    redrawn = 0
+    for seed in range(300):
+        d = draw_calibrated(json.loads(json.dumps(data)), {"covariance": cov}, seed)
+        assert suspension_step_product(d) < 2.0
+        z0 = np.random.default_rng([seed, DRAW_STREAM]).standard_normal(1)[0]
+        first = 20.0 * math.exp(math.sqrt(cov["log"][0][0]) * z0)
+        if math.sqrt(4 * 500e6 / first) * 2e-4 < 2.0:
+            assert d["axis"]["carriage_mass_kg"] == pytest.approx(first, rel=1e-12)
+        else:
+            redrawn += 1
+    assert 30 < redrawn < 150  # P(m < 10 kg) = P(z < -1.19) = 12 % of the seeds
+    light = json.loads(json.dumps(data))
+    light["axis"]["carriage_mass_kg"] = 2.0
+    with pytest.raises(ValueError, match=r"seed 3: none of 100 draws of the calibrated values "
+                                         r"\(axis.carriage_mass_kg\)"):
+        draw_calibrated(light, {"covariance": {"keys": ["axis.carriage_mass_kg"], "log": [[1e-4]]}}, 3)
+
+
 def _linear_twin(tmp_path_factory, tmp_path, monkeypatch, clock: list[float] | None = None):
     """Layer (c)'s twin replaced by a linear stand-in: each statistic the log of its parameter,
     plus a seed's scatter of 0.01, except that the vertical trucks barely move their statistic

@@ -79,11 +79,33 @@ def check_drawable(calibration: dict | None, where: str) -> None:
             "twin's default) or remove the covariance entry")
 
 
+#: Draws of one seed before :func:`draw_calibrated` gives up on a twin its integrator can carry.
+MAX_DRAWS = 100
+
+
+def suspension_step_product(data: dict) -> float:
+    """ω·Δt of the carriage's stiffest suspension mode in scenario ``data`` (a scenario's JSON
+    dict): ω = √(4·k/m) of the carriage (``carriage_mass_kg``) on its four trucks' springs (the
+    vertical or the lateral stiffness, the larger), Δt the larger of the Phase I and Phase II
+    simulation steps. MuJoCo's implicitfast integrator takes the springs explicitly, and the
+    semi-implicit (symplectic) Euler step is stable for an undamped oscillator only while
+    ω·Δt < 2 (E. Hairer, C. Lubich, G. Wanner, "Geometric Numerical Integration", 2nd ed., 2006,
+    ch. I.5): beyond it the simulation diverges in a few steps."""
+    ax = data["axis"]
+    k = 1e6 * max(float(ax["truck_stiffness_vertical_N_per_um"]), float(ax["truck_stiffness_lateral_N_per_um"]))
+    dt = max(float(data["phase1"]["timestep_s"]), float(data["phase2"]["timestep_s"]))
+    return math.sqrt(4.0 * k / float(ax["carriage_mass_kg"])) * dt
+
+
 def draw_calibrated(data: dict, calibration: dict | None, seed: int) -> dict:
     """Scenario ``data`` (a scenario's JSON dict, changed in place and returned) with every key
     of ``calibration``'s ``covariance`` (the scenario's ``[calibration]`` table) drawn from the
     joint log-normal centred on the scenario's value, from the stream [``seed``,
-    :data:`DRAW_STREAM`]; unchanged without a covariance."""
+    :data:`DRAW_STREAM`]; unchanged without a covariance. A draw whose carriage the integrator
+    cannot carry (:func:`suspension_step_product` ≥ 2: a light carriage drawn on stiff trucks)
+    is drawn again, from the streams [``seed``, :data:`DRAW_STREAM`, 1], [..., 2], ...: the
+    distribution is truncated to the twins that can be simulated. Raises ValueError, naming the
+    keys, when none of :data:`MAX_DRAWS` draws is."""
     cov = (calibration or {}).get("covariance")
     if not cov:
         return data
@@ -92,10 +114,18 @@ def draw_calibrated(data: dict, calibration: dict | None, seed: int) -> dict:
     # a covariance that rounding left slightly indefinite: its eigenvalues clipped at 0
     w, v = np.linalg.eigh((c + c.T) / 2)
     root = v * np.sqrt(np.clip(w, 0.0, None))
-    z = root @ np.random.default_rng([int(seed) % 2**32, DRAW_STREAM]).standard_normal(len(keys))
-    for key, dz in zip(keys, z, strict=True):
-        set_dotted(data, key, float(get_dotted(data, key)) * math.exp(float(dz)), source="calibration draw")
-    return data
+    centre = {key: float(get_dotted(data, key)) for key in keys}
+    for attempt in range(MAX_DRAWS):
+        stream = [int(seed) % 2**32, DRAW_STREAM] + ([attempt] if attempt else [])
+        z = root @ np.random.default_rng(stream).standard_normal(len(keys))
+        for key, dz in zip(keys, z, strict=True):
+            set_dotted(data, key, centre[key] * math.exp(float(dz)), source="calibration draw")
+        if suspension_step_product(data) < 2.0:
+            return data
+    raise ValueError(f"seed {seed}: none of {MAX_DRAWS} draws of the calibrated values ({', '.join(keys)}) "
+                     "gives a carriage the simulation can carry (the suspension's omega * timestep below 2); "
+                     "the [calibration] covariance spans too far: calibrate again")
 
 
-__all__ = ["DRAW_STREAM", "MAX_DRAW_FACTOR", "check_drawable", "draw_calibrated", "joint_covariance"]
+__all__ = ["DRAW_STREAM", "MAX_DRAWS", "MAX_DRAW_FACTOR", "check_drawable", "draw_calibrated", "joint_covariance",
+           "suspension_step_product"]
