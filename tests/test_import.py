@@ -286,6 +286,7 @@ def test_check_finds_injected_problems(clean, tmp_path, edit, level, where, what
     assert [f.level for f in hits] == [level], rep.findings
     r = run_twin("check", tmp_path, check=False)
     assert r.returncode == (1 if level == "error" else 0) and "Traceback" not in r.stderr
+    assert where.rsplit("/", 1)[-1] in r.stdout  # the table keeps the axis: imu_gyro[z], not imu_gyro
 
 
 def test_a_dropout_is_located_at_its_first_held_sample():

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -169,7 +170,7 @@ def check(
         print(_json.dumps(rep.to_json(), indent=2))
     else:
         s = rep.summary
-        table = Table(title=f"{rep.file}")
+        table = Table(title=escape(rep.file))
         table.add_column("what")
         table.add_column("value")
         p1, p2 = s["phase1"], s["phase2"]
@@ -191,7 +192,8 @@ def check(
             for col in ("level", "where", "what"):
                 ft.add_column(col)
             for f in rep.findings[:200]:
-                ft.add_row(f.level, f.where, f.what, style="red" if f.level == "error" else "yellow")
+                # escaped: a key names an axis as imu_acc[x], which Rich would take for markup
+                ft.add_row(f.level, escape(f.where), escape(f.what), style="red" if f.level == "error" else "yellow")
             Console(width=max(100, Console().width)).print(ft)
             if len(rep.findings) > 200:
                 console.print(f"... and {len(rep.findings) - 200} more (--json lists all)")
