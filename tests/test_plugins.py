@@ -157,6 +157,8 @@ def _run_everything(root, camp, ref, det: str, est: str, det_name: str, est_name
     r = twin("score", camp, pythonpath=pythonpath)
     text = flat_text(r)
     assert "kNN distance" in text and "Scaled shift" in text and "Signal shifts" in text
+    # each estimator's name beside its label, not taken for Rich markup ([shift] would be)
+    assert f"[{est_name}]" in text and "Signal shifts (Eq. 6) [shift]" in text
     sc = json.loads((camp / "score.json").read_text())
     assert set(sc["phase1"]["methods"]) == {"pca_t2", det_name}
     assert list(sc["phase2_estimators"]) == ["shift", est_name]

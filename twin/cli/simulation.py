@@ -10,6 +10,7 @@ from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
@@ -135,7 +136,7 @@ def _score_tables(doc: dict) -> list[Table]:
                     "vs lost motion µm", "prognosis error h"):
             t.add_column(col)
         for name, r in ests.items():
-            t.add_row(f"{r.get('label') or name} [{name}]", str(r["n_sessions"]),
+            t.add_row(escape(f"{r.get('label') or name} [{name}]"), str(r["n_sessions"]),  # [name]: not markup
                       fmt(r["rms_error_um"], "{:.2f}"), fmt(r["max_abs_error_um"], "{:.2f}"),
                       fmt(r["bias_um"], "{:+.2f}"), fmt(r.get("rms_error_vs_lost_motion_um"), "{:.2f}"),
                       fmt((r.get("prognosis") or {}).get("error_hours"), "{:+.0f}"))
