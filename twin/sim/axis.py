@@ -133,6 +133,12 @@ class Carriage:
     com_height: float = 0.08
     nut_height: float = 0.03
 
+    @property
+    def suspension_omega(self) -> float:
+        """ω = √(4·k/m), rad/s, of the carriage bouncing on its four trucks' springs, k the
+        stiffer of the vertical and the lateral stiffness: its stiffest translational mode."""
+        return math.sqrt(4.0 * max(self.truck_stiffness_vertical, self.truck_stiffness_lateral) / self.mass)
+
     @staticmethod
     def inertia_of(mass: float) -> tuple[float, float, float]:
         """Principal inertia (Ixx, Iyy, Izz) in kg·m² of a carriage of ``mass`` kg: the reference

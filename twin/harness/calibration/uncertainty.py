@@ -85,16 +85,15 @@ MAX_DRAWS = 100
 
 def suspension_step_product(data: dict) -> float:
     """ω·Δt of the carriage's stiffest suspension mode in scenario ``data`` (a scenario's JSON
-    dict): ω = √(4·k/m) of the carriage (``carriage_mass_kg``) on its four trucks' springs (the
-    vertical or the lateral stiffness, the larger), Δt the larger of the Phase I and Phase II
-    simulation steps. MuJoCo's implicitfast integrator takes the springs explicitly, and the
-    semi-implicit (symplectic) Euler step is stable for an undamped oscillator only while
-    ω·Δt < 2 (E. Hairer, C. Lubich, G. Wanner, "Geometric Numerical Integration", 2nd ed., 2006,
-    ch. I.5): beyond it the simulation diverges in a few steps."""
-    ax = data["axis"]
-    k = 1e6 * max(float(ax["truck_stiffness_vertical_N_per_um"]), float(ax["truck_stiffness_lateral_N_per_um"]))
-    dt = max(float(data["phase1"]["timestep_s"]), float(data["phase2"]["timestep_s"]))
-    return math.sqrt(4.0 * k / float(ax["carriage_mass_kg"])) * dt
+    dict): ω its carriage's :attr:`twin.sim.axis.Carriage.suspension_omega`, Δt the larger of the
+    Phase I and Phase II simulation steps. MuJoCo's implicitfast integrator takes the springs
+    explicitly, and the semi-implicit (symplectic) Euler step is stable for an undamped oscillator
+    only while ω·Δt < 2 (E. Hairer, C. Lubich, G. Wanner, "Geometric Numerical Integration", 2nd
+    ed., 2006, ch. I.5): beyond it the simulation diverges in a few steps."""
+    from twin.sim.scenario import from_dict, to_axis
+
+    s = from_dict(data)
+    return to_axis(s).carriage.suspension_omega * max(s.phase1.timestep_s, s.phase2.timestep_s)
 
 
 def draw_calibrated(data: dict, calibration: dict | None, seed: int) -> dict:
