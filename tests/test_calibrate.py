@@ -719,6 +719,52 @@ def test_a_flagged_channel_keeps_its_defaults():
                                                                "(/phase2/s0000/r0001/imu_acc[x]: clipping")
 
 
+def test_a_clipped_imu_is_calibrated_without_and_named_from_twin_check(round_trip, tmp_path):
+    """The round trip with its IMU accelerometer clipped below its peaks (a converter range too
+    small): `twin calibrate` fits nothing to it (the velocity loop, the ripple and the lateral
+    trucks read on Phase I instead, within their intervals), and `twin diagnose` names
+    clipping:imu_acc at the rail from `twin check`'s evidence, leaves the channel out and finds the
+    rest of the recording within the calibrated twin's spread."""
+    import shutil
+
+    from analysis.dataset import open_measurements
+    from analysis.diagnosis.artefacts import apply
+
+    tmp, _, _ = round_trip
+    clipped = tmp_path / "clipped"
+    shutil.copytree(tmp / "campaign", clipped, ignore=shutil.ignore_patterns(".twin-check.json", "diagnosis"))
+    h5 = clipped / "measurements.h5"
+    with open_measurements(h5) as m:
+        peak = max(float(np.abs(m.phase2(s, r).imu_acc[:, 0]).max())
+                   for s in m.phase2_sessions() for r in m.phase2_runs(s))
+    level = round(0.8 * peak, 3)  # at 80 % of the axial peak: tens of samples of each run at the rails
+    apply(h5, h5.with_name("clipped.h5"), {"clipping:imu_acc": {"range": level}}, 1).replace(h5)
+    run_twin("calibrate", clipped, "-o", tmp_path / "axis.toml", "--workers", "1")
+    rec = json.loads((tmp_path / "axis.calibration.json").read_text())
+    got = {v["key"]: v for v in rec["values"]}
+    truth = _truth(tmp)
+    for key in ("axis.velocity_bandwidth_hz", "axis.torque_ripple_Nm", "axis.truck_stiffness_lateral_N_per_um"):
+        if key in got:  # read on Phase I: fitted within its interval, or kept (the TOML says why)
+            assert "the Phase II runs left out: twin check flags imu_acc" in got[key]["note"], key
+            section, name = key.split(".")
+            assert got[key]["low"] <= truth[section][name] <= got[key]["high"], (key, got[key])
+    assert "axis.velocity_bandwidth_hz" in got
+    defaults = {d["key"]: d["why"] for d in rec["defaults"]}
+    assert defaults["sensors.imu_acc_noise_ug_per_rthz"].startswith("twin check flags the channel imu_acc")
+    r = run_twin("diagnose", clipped, "--scenario", tmp_path / "axis.toml", "-o", tmp_path / "diag", "--seeds", "6",
+                 "--candidate", "gain:torque", "--resim-seeds", "0", "--response-seeds", "1", "--workers", "1")
+    res = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
+    found = res["found_by_check"]
+    assert [f["effect"] for f in found] == ["clipping:imu_acc"]
+    assert found[0]["params"]["range"] == pytest.approx(level, rel=1e-6)
+    assert found[0]["statistics_left_out"] > 0 and found[0]["n_findings"] >= 2
+    assert res["verdict"] == "no significant gap"  # the rest is the calibrated twin's
+    said = " ".join(r.stdout.split())
+    assert "found by twin check: twin check finds imu_acc clipped at ±" in said and "left out of the comparison" in said
+    page = (tmp_path / "diag" / "report" / "index.html").read_text()
+    assert "Found by twin check" in page and "clipping:imu_acc" in page
+
+
 def test_calibrate_refuses_a_recording_check_rejects(round_trip, tmp_path):
     import shutil
 

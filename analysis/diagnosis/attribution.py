@@ -127,7 +127,7 @@ from analysis.diagnosis.signature import Signature
 
 NO_GAP, EXPLAINED, UNEXPLAINED = "no significant gap", "explained", "unexplained gap remains"
 #: Raised when the rules of the attribution change (a benchmark's recorded diagnoses are keyed on it).
-ATTRIBUTION_VERSION = 2
+ATTRIBUTION_VERSION = 3  # 3: twin check's clipped or flat channels left out and named (flagged.py)
 
 
 def diagnose(real: dict[str, Signature], twin: dict[str, list[Signature]],

@@ -293,10 +293,34 @@ def answer(result: dict) -> str:
     return " ".join(f"{head}: {text}" if head else text for head, text in answer_parts(result))
 
 
+def check_phrase(result: dict) -> str | None:
+    """What ``twin check`` found and the diagnosis left out (``found_by_check``), in one
+    sentence; None when it found nothing that leaves a channel out."""
+    found = result.get("found_by_check") or []
+    if not found:
+        return None
+    parts = []
+    for f in found:
+        what = (f"{f['channel']} clipped at ±{number(f['params']['range'])}" if f["params"].get("range") is not None
+                else f"{f['channel']} {f['finding']}")
+        named = f" (the artefact {f['effect']})" if f.get("effect") else ""
+        parts.append(f"{what}{named}, {f['n_findings']} finding{'s' if f['n_findings'] != 1 else ''} "
+                     f"({f['findings'][0]}), its {f['statistics_left_out']} statistics left out of the comparison")
+    return ("twin check finds " + "; ".join(parts) + ": a saturated or flat channel cannot be compared with the "
+            "twin, so it is named from the check's evidence and the rest of the recording diagnosed without it.")
+
+
 def answer_parts(result: dict) -> list[tuple[str, str]]:
-    """:func:`answer` as (heading, sentence) pairs ("Where", "What", "How sure", "How much",
-    "What is left"; an empty heading when there is no gap), for the page to set the headings
-    in bold."""
+    """:func:`answer` as (heading, sentence) pairs ("Found by twin check", "Where", "What",
+    "How sure", "How much", "What is left"; an empty heading when there is no gap), for the page
+    to set the headings in bold."""
+    found = check_phrase(result)
+    head = [("Found by twin check", found)] if found else []
+    return head + _gap_parts(result)
+
+
+def _gap_parts(result: dict) -> list[tuple[str, str]]:
+    """:func:`answer_parts` of the statistics compared (those ``twin check`` did not leave out)."""
     n, k = result["n_statistics"], result["n_significant_calibration"]
     g0, g1 = result["heldout_gap_before"], result["heldout_gap_after"]
     crit = result["heldout_gap_critical"]

@@ -56,6 +56,12 @@ class Finding:
     what: str
 
 
+def finding_channel(where: str) -> str:
+    """The recording's channel a finding's HDF5 key names: ``/phase2/s000/r001/imu_acc[x]`` ->
+    ``imu_acc`` (one axis of a three-axis channel names the channel)."""
+    return str(where).rstrip("/").rsplit("/", 1)[-1].split("[", 1)[0]
+
+
 @dataclass
 class CheckReport:
     """What :func:`check_recording` found: ``summary`` (counts, rates, durations, hours span)

@@ -161,11 +161,13 @@ def _progress_callback(progress: Progress, tasks: dict):
 
 
 def _print_diagnosis(res: dict) -> None:
-    from analysis.diagnosis.wording import added_phrase, refused_phrase, subset_phrase
+    from analysis.diagnosis.wording import added_phrase, check_phrase, refused_phrase, subset_phrase
 
     out = Console(width=max(110, Console().width))
     if res.get("subset"):
         out.print(subset_phrase(res), markup=False, highlight=False)
+    if res.get("found_by_check"):
+        out.print(f"found by twin check: {check_phrase(res)}", markup=False, highlight=False)
     out.print(f"[bold]{res['verdict']}[/]: {res['n_significant_calibration']} of "
               f"{res['n_statistics']} statistics beyond the twin's seed-to-seed spread on the "
               f"calibration part (Holm, α = {res['alpha']:g}); held-out gap "
@@ -296,7 +298,7 @@ def diagnose(
                                 on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
                                 scheduler=scheduler, resim_seeds=resim_seeds,
                                 on_resim_progress=lambda d, n: cb("re-simulation with the added candidates", d, n),
-                                budget_minutes=budget_minutes, response_seeds=response_seeds)
+                                budget_minutes=budget_minutes, response_seeds=response_seeds, check=checked)
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

@@ -183,9 +183,10 @@ def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, absorb
     ``nothing_else`` (every added candidate is something that was added, or makes the same
     recording)."""
     from analysis.diagnosis.attribution import NO_GAP
+    from analysis.diagnosis.flagged import named
     from twin.harness.diagnosis.benchmark import same_answer
 
-    added = res["added"]
+    added = named(res)  # what twin check found first, then the attribution's
     values = {**effects, **artefacts}
 
     def names(name: str, v: dict, a: dict) -> bool:
@@ -200,7 +201,7 @@ def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, absorb
            "nothing_else": all(any(names(n, v, a) for n, v in values.items()) for a in added),
            "absorbed": list(absorbed)}
     if kind == "null":
-        row["correct"] = res["verdict"] == NO_GAP
+        row["correct"] = res["verdict"] == NO_GAP and not added
     elif kind in ("effect", "artefact"):
         name, v = next(iter(values.items()))
         row["correct"] = name in absorbed or (bool(added) and names(name, v, added[0]))
@@ -336,6 +337,7 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
     of the lead; a short capture hides a small time offset) is invisible here, whatever the
     calibration. Returns ``{"verdict", "named", "detected", "names_all", "seconds"}``."""
     from analysis.diagnosis.attribution import NO_GAP
+    from analysis.diagnosis.flagged import named as named_by
     from twin.harness.diagnosis.runner import run_diagnosis
 
     d = out / f"case-{entry['case']:03d}"
@@ -344,8 +346,8 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
     t0 = time.perf_counter()
     res = run_diagnosis(d / "campaign", s, d / "oracle", seeds=seeds, workers=workers, plots=False,
                         response_seeds=RESPONSE_SEEDS, resim_seeds=0, library=added)
-    named = [a["effect"] for a in res["added"]]
-    row = {"verdict": res["verdict"], "named": named, "detected": res["verdict"] != NO_GAP,
+    named = [a["effect"] for a in named_by(res)]
+    row = {"verdict": res["verdict"], "named": named, "detected": res["verdict"] != NO_GAP or bool(named),
            "names_all": all(n in named for n in added), "seconds": time.perf_counter() - t0}
     progress(f"case {entry['case']}: the oracle (the axis as drawn, the added candidates only): "
              f"{row['verdict']}, named {', '.join(named) or 'nothing'}")

@@ -24,6 +24,8 @@ from twin.harness.calibration.values import (
     CONVERGED_CHI2,
     EXTRA_STATS,
     FIT_CAPTURES,
+    FIT_CHANNELS,
+    FIT_CHANNELS_PHASE1,
     FIT_RUNS,
     FIT_SEEDS,
     FITTED,
@@ -33,6 +35,7 @@ from twin.harness.calibration.values import (
     MAX_STEPS,
     MIN_SEEN,
     PRIOR_FACTOR,
+    RUN_CHANNELS,
     SPREAD_SEEDS,
     T90,
     Z90,
@@ -40,6 +43,9 @@ from twin.harness.calibration.values import (
     Value,
     _OutOfTime,
     _progress,
+    fit_note,
+    flagged_channels,
+    flagged_keys,
 )
 from twin.sim.config import get_dotted, set_dotted
 from twin.sim.scenario import Scenario, from_dict
@@ -91,13 +97,17 @@ def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_
 def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float | None,
                  workers: int, scheduler: str | None = None,
                  progress: Callable[[str], None] = _progress, spent_s: float = 0.0,
-                 sensors: dict[str, Measured] | None = None) -> FitResult:
+                 sensors: dict[str, Measured] | None = None, check: dict | None = None) -> FitResult:
     """Layer (c) of the module docstring on ``recording`` against ``base`` (layers a and b
     applied). Raises :class:`CalibrationError` when ``budget_s`` (the whole calibration's, of
     which ``spent_s`` is spent) cannot hold: after timing the twin's first simulations, with the
     estimate and the smallest budget that would do. ``sensors``: layer (b) as measured; the
     spread at the solution is simulated with their first correction set
-    (:func:`corrected_sensor_values`), so its instruments give the second."""
+    (:func:`corrected_sensor_values`), so its instruments give the second. ``check``: the record of
+    ``twin check`` on the recording: nothing is fitted to a channel it flags (the parameter read
+    on it keeps its start, its statistic out of the fit), and a flagged IMU or command leaves the
+    Phase II runs out (the ripple, the lateral mode and the velocity loop read on Phase I:
+    :data:`FIT_CHANNELS_PHASE1`)."""
     from analysis.base.executors import run_tasks
 
     t0 = time.perf_counter()
@@ -113,12 +123,21 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         runs = [(sessions[0], r) for r in m.phase2_runs(sessions[0])[:FIT_RUNS]] if sessions else []
         if runs and getattr(m.phase2(*runs[0]), "position_cmd", None) is None:
             runs = []  # the motor angle needs the command: the ripple is read on the torque
+        flags = flagged_channels(check)
+        run_flag = next((c for c in RUN_CHANNELS if c in flags), None) if runs else None
+        if run_flag:
+            runs = []
+            progress(f"layer c: the Phase II runs left out: twin check flags {run_flag} ({flags[run_flag]}); "
+                     "the ripple, the lateral mode and the velocity loop read on Phase I")
         session_h = m.session_hours(sessions[0]) if runs else None
         real, real_se = _statistics(m, caps, runs, base)
     skipped: dict[str, str] = {}
     use = []
+    flagged = flagged_keys(check, FIT_CHANNELS if runs else FIT_CHANNELS_PHASE1)
     for i, (key, stat, _) in enumerate(FITTED):
-        if not np.isfinite(real[i]):
+        if key in flagged:
+            skipped[key] = flagged[key]
+        elif not np.isfinite(real[i]):
             skipped[key] = (
                 "the ripple's order is above half the IMU accelerometer's bandwidth at every Phase II speed, or "
                 "no cruise spans 4 of its periods" if stat == "ripple" and runs else
@@ -456,25 +475,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     for jj, j in enumerate(free):
         k, x, i = keys[j], xs[j], use[j]
         stat = FITTED[i][1]
-        if stat in ("accel", "dwell"):
-            note = f"fitted through the twin's servo to the moves of {len(caps)} Phase I captures"
-        elif stat == "loop_response" and runs:
-            note = (f"fitted jointly to the gain from the commanded to the IMU's axial acceleration at "
-                    f"{VELOCITY_BAND_HZ[0]:g}-{VELOCITY_BAND_HZ[1]:g} Hz and its ringing at the starts and stops "
-                    f"in {len(runs)} Phase II runs at {session_h:g} h")
-        elif stat == "loop_response":
-            note = f"fitted jointly to the motor speed's overshoot at the ramps' ends in {len(caps)} Phase I captures"
-        elif stat == "lateral_mode" and runs:
-            note = f"fitted jointly to the IMU's yaw mode in {len(runs)} Phase II runs at {session_h:g} h"
-        elif stat.endswith("_mode"):
-            note = (f"fitted jointly to the {stat.split('_')[0]} suspension mode of the nut accelerometers in "
-                    f"{len(caps)} Phase I captures at {hours:g} h")
-        elif stat == "ripple" and runs:
-            note = (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {len(runs)} Phase II "
-                    f"runs at {session_h:g} h")
-        else:
-            note = (f"fitted jointly to the torque's {stat.replace('_', ' ')} of {len(caps)} Phase I captures "
-                    f"at {hours:g} h")
+        note = fit_note(stat, len(caps), hours, len(runs), session_h, run_flag)
         w = T90 * sd[jj]
         low, high = (float(np.exp(x - w)), float(np.exp(x + w))) if np.isfinite(w) else (None, None)
         values.append(Value(k, float(np.exp(x)), "fitted", low, high, note + widened))

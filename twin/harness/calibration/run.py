@@ -18,7 +18,14 @@ from twin.harness.calibration.sensors import (
     sensor_values,
 )
 from twin.harness.calibration.uncertainty import joint_covariance
-from twin.harness.calibration.values import CALIBRATE_VERSION, NOT_INFORMED, CalibrationError, _progress, flagged_keys
+from twin.harness.calibration.values import (
+    CALIBRATE_VERSION,
+    NOT_INFORMED,
+    SENSOR_CHANNELS,
+    CalibrationError,
+    _progress,
+    flagged_keys,
+)
 from twin.sim.config import set_dotted
 from twin.sim.scenario import Scenario, ScenarioError, from_dict, load
 
@@ -61,7 +68,7 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
         set_dotted(data, key, float(f"{v.value:.6g}"), source="calibrate")
     base_b = from_dict(data)
     fit = fit_physical(base_b, recording, cache / "fit", budget_s, workers, scheduler, progress,
-                       spent_s=time.perf_counter() - t0, sensors=measured)
+                       spent_s=time.perf_counter() - t0, sensors=measured, check=check)
     if fit.first_sensors:
         # the second step: the calibrated twin, set to the first step's floors, measured again
         sens = corrected_sensor_values(measured, fit.first_sensors, fit.instruments)
@@ -70,7 +77,7 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     values = sens + fit.values
     defaults = {k: why for k, why in NOT_INFORMED.items()}
     defaults.update(fit.skipped)
-    flagged = {**beyond, **flagged_keys(check)}
+    flagged = {**beyond, **flagged_keys(check, SENSOR_CHANNELS)}  # layer (c)'s are in fit.skipped
     values = [v for v in values if v.key not in flagged]
     defaults.update(flagged)
     covariance = joint_covariance(fit.covariance, [v for v in sens if v.key not in flagged], set(flagged))

@@ -7,7 +7,10 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 
-CALIBRATE_VERSION = 18
+from analysis.calibration.drive import VELOCITY_BAND_HZ
+from analysis.ingest.check import finding_channel
+
+CALIBRATE_VERSION = 19
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -108,31 +111,81 @@ FLOOR_SPAN_DATASHEET = 1.5
 
 #: The channels each calibrated key is fitted or measured on: a key whose channel `twin check`
 #: flags keeps the twin's default (nothing is fitted to a flagged channel).
-CHANNELS = {
-    "axis.carriage_mass_kg": ("speed", "torque"), "axis.rail_friction_N": ("speed", "torque"),
-    "axis.drag_viscous_Nm_s_per_rad": ("speed", "torque"), "axis.torque_ripple_Nm": ("imu_acc", "position_cmd"),
-    "phase1.accel_mm_s2": ("speed",), "phase1.dwell_s": ("speed",),
-    "axis.velocity_bandwidth_hz": ("speed", "imu_acc", "position_cmd"),
-    "axis.truck_stiffness_vertical_N_per_um": ("acc1", "acc2"),
-    "axis.truck_stiffness_lateral_N_per_um": ("acc1", "acc2", "imu_gyro"),
+#: The channels each calibrated value is read on: layer (b)'s, and layer (c)'s when the fit reads
+#: Phase II runs (:data:`FIT_CHANNELS`). Without runs (none recorded, or the IMU or the command
+#: flagged by `twin check`) the fit reads the ripple on the torque, the lateral mode on the nut
+#: accelerometers and the velocity loop on the speed's overshoot (:data:`FIT_CHANNELS_PHASE1`).
+SENSOR_CHANNELS = {
     "sensors.imu_acc_noise_ug_per_rthz": ("imu_acc",), "sensors.imu_acc_bandwidth_hz": ("imu_acc",),
     "sensors.imu_gyro_noise_urad_s_per_rthz": ("imu_gyro",), "sensors.imu_gyro_bandwidth_hz": ("imu_gyro",),
     "sensors.nut_acc_noise_ug_per_rthz": ("acc1", "acc2"), "sensors.torque_noise_Nm": ("torque",),
 }
+_DRIVE = {
+    "axis.carriage_mass_kg": ("speed", "torque"), "axis.rail_friction_N": ("speed", "torque"),
+    "axis.drag_viscous_Nm_s_per_rad": ("speed", "torque"),
+    "phase1.accel_mm_s2": ("speed",), "phase1.dwell_s": ("speed",),
+    "axis.truck_stiffness_vertical_N_per_um": ("acc1", "acc2"),
+}
+FIT_CHANNELS = {**_DRIVE, "axis.torque_ripple_Nm": ("imu_acc", "position_cmd"),
+                "axis.velocity_bandwidth_hz": ("imu_acc", "position_cmd"),
+                "axis.truck_stiffness_lateral_N_per_um": ("imu_gyro",)}
+FIT_CHANNELS_PHASE1 = {**_DRIVE, "axis.torque_ripple_Nm": ("speed", "torque"),
+                       "axis.velocity_bandwidth_hz": ("speed",),
+                       "axis.truck_stiffness_lateral_N_per_um": ("acc1", "acc2")}
+#: Every value and its channels when the recording has Phase II runs (the owner's usual case).
+CHANNELS = {**FIT_CHANNELS, **SENSOR_CHANNELS}
+#: The Phase II channels layer (c) reads on its runs: one flagged, the fit leaves the runs out.
+RUN_CHANNELS = ("imu_acc", "imu_gyro", "position_cmd")
 
 
-def flagged_keys(check: dict | None) -> dict[str, str]:
-    """{calibrated key: why it keeps its default} for the channels that ``check`` (the record of
-    ``twin check``: :func:`analysis.ingest.check.check_record`) flags: a finding whose HDF5 key
-    ends in a channel's name flags that channel (one of its axes, ``imu_acc[x]``, the whole
-    channel)."""
+def flagged_channels(check: dict | None) -> dict[str, str]:
+    """{channel: its first finding, "where: what"} of the channels ``check`` (the record of ``twin
+    check``: :func:`analysis.ingest.check.check_record`) flags: a finding whose HDF5 key ends in a
+    channel's name flags that channel (one of its axes, ``imu_acc[x]``, the whole channel)."""
     out: dict[str, str] = {}
     for f in (check or {}).get("errors", []) + (check or {}).get("warnings", []):
-        ch = str(f["where"]).rstrip("/").rsplit("/", 1)[-1].split("[", 1)[0]
-        for key, chans in CHANNELS.items():
-            if ch in chans and key not in out:
-                out[key] = f"twin check flags the channel {ch} ({f['where']}: {f['what']}): nothing fitted to it"
+        out.setdefault(finding_channel(f["where"]), f"{f['where']}: {f['what']}")
     return out
+
+
+def flagged_keys(check: dict | None, channels: dict[str, tuple[str, ...]] | None = None) -> dict[str, str]:
+    """{calibrated key: why it keeps its default} for the keys of ``channels`` ({key: the channels
+    it is read on}; default :data:`CHANNELS`) read on a channel ``check`` flags
+    (:func:`flagged_channels`)."""
+    flags = flagged_channels(check)
+    out: dict[str, str] = {}
+    for key, chans in (CHANNELS if channels is None else channels).items():
+        ch = next((c for c in chans if c in flags), None)
+        if ch is not None:
+            out[key] = f"twin check flags the channel {ch} ({flags[ch]}): nothing fitted to it"
+    return out
+
+
+def fit_note(stat: str, captures: int, hours: float, runs: int, session_h: float | None,
+             run_flag: str | None = None) -> str:
+    """How a layer (c) value was fitted, for the TOML: its statistic ``stat`` (:data:`STAT_NAMES`)
+    on ``captures`` Phase I captures at ``hours`` and ``runs`` Phase II runs at ``session_h``;
+    ``run_flag``: the channel `twin check` flags for which the runs were left out."""
+    without = f" (the Phase II runs left out: twin check flags {run_flag})" if run_flag else ""
+    if stat in ("accel", "dwell"):
+        return f"fitted through the twin's servo to the moves of {captures} Phase I captures"
+    if stat == "loop_response" and runs:
+        return (f"fitted jointly to the gain from the commanded to the IMU's axial acceleration at "
+                f"{VELOCITY_BAND_HZ[0]:g}-{VELOCITY_BAND_HZ[1]:g} Hz and its ringing at the starts and stops "
+                f"in {runs} Phase II runs at {session_h:g} h")
+    if stat == "loop_response":
+        return (f"fitted jointly to the motor speed's overshoot at the ramps' ends in {captures} Phase I "
+                f"captures{without}")
+    if stat == "lateral_mode" and runs:
+        return f"fitted jointly to the IMU's yaw mode in {runs} Phase II runs at {session_h:g} h"
+    if stat.endswith("_mode"):
+        return (f"fitted jointly to the {stat.split('_')[0]} suspension mode of the nut accelerometers in "
+                f"{captures} Phase I captures at {hours:g} h" + (without if stat == "lateral_mode" else ""))
+    if stat == "ripple" and runs:
+        return (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {runs} Phase II "
+                f"runs at {session_h:g} h")
+    return (f"fitted jointly to the torque's {stat.replace('_', ' ')} of {captures} Phase I captures "
+            f"at {hours:g} h" + (without if stat == "ripple" else ""))
 
 
 class _OutOfTime(Exception):

@@ -18,7 +18,10 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
    the seeds of the spread (signal artefacts post-processed on those campaigns) and measures
    the held-out gap on it: the re-simulated shrink the verdict follows (:func:`simulate_with_added`,
    :func:`analysis.diagnosis.attribution.resimulated_gap`);
-6. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
+6. takes ``twin check``'s findings into it (:mod:`analysis.diagnosis.flagged`): a channel the check
+   finds clipped or flat is left out of the comparison, and its clipping named from the finding
+   (``found_by_check``);
+7. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
 
 Every simulation is a campaign of the scenario, cached by the hash of its scenario under
 ``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
@@ -39,6 +42,8 @@ from pathlib import Path
 from analysis.base.executors import parallel_slots
 from analysis.base.files import write_json
 from analysis.diagnosis import attribution
+from analysis.diagnosis.artefacts import ARTEFACTS
+from analysis.diagnosis.flagged import found_by_check, leave_out
 from analysis.diagnosis.gap_report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, signature
 from twin.harness.calibration.uncertainty import check_drawable
@@ -90,7 +95,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                   scheduler: str | None = None, resim_seeds: int | None = None,
                   on_resim_progress: Callable[[int, int], None] | None = None,
                   budget_minutes: float | None = None,
-                  response_seeds: int = DEFAULT_RESPONSE_SEEDS) -> dict:
+                  response_seeds: int = DEFAULT_RESPONSE_SEEDS, check: dict | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
     twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
@@ -98,7 +103,10 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     ``budget_minutes`` the diagnosis is that of a subset of the recording sized to that time
     (:func:`prepare_subset`; ``subset`` in the result), else of the whole recording.
     ``response_seeds``: the twin seeds each candidate's response is computed with
-    (:func:`build_ensemble`)."""
+    (:func:`build_ensemble`). ``check``: ``twin check``'s record of the recording
+    (:func:`analysis.ingest.check.check_record`; None: checked here, every finding)."""
+    from analysis.ingest.check import cached_check, check_record
+
     check_response_seeds(response_seeds, seeds)
     t0 = time.perf_counter()
     calibration = calibration_entry(nominal, kinds, library)
@@ -108,12 +116,16 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     # an unknown candidate or kind stops before anything is simulated
     artefacts = resolve_library(library, kinds)[1]
     recording, sub = str(real_dir), None
+    if check is None:
+        check = check_record(cached_check(real_dir).findings, True)
     if budget_minutes is not None:
         real_dir, nominal, sub = prepare_subset(
             real_dir, nominal, out, cache, budget_minutes, seeds=seeds, library=library, kinds=kinds,
             resim_seeds=resim_seeds, workers=parallel_slots(workers, scheduler), response_seeds=response_seeds)
     check_layout(real_dir, nominal, cache, keep=bool(artefacts))  # the artefacts' first base
     real = {p: signature(Path(real_dir) / "measurements.h5", p) for p in PARTS}
+    found = found_by_check(check, real["cal"].regions + real["heldout"].regions, ARTEFACTS)
+    real = {p: leave_out(s, [f["channel"] for f in found]) for p, s in real.items()}
     ens = build_ensemble(nominal, cache, seeds, workers, library, on_progress, kinds, scheduler,
                          response_seeds)
     result, t_heldout = diagnose_signatures(real, ens, library, alpha)
@@ -126,7 +138,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
               "response_seeds": response_seeds, "calibration": calibration,
               "kinds": sorted({c.kind for c in ens.candidates}),
               "library": library_json([c.name for c in ens.candidates], ens.effects, nominal),
-              **result}
+              "found_by_check": found, **result}
     if ens.left_out:
         result["candidates_left_out"] = ens.left_out
     if sub is not None:
