@@ -64,6 +64,38 @@ def test_delay_shifts_by_the_stated_samples():
     np.testing.assert_array_equal(a.delay(x, -2), [2, 3, 4, 5, 6, 7, 8, 9, 9, 9])
     x2 = np.column_stack([x, -x])
     np.testing.assert_array_equal(a.delay(x2, 3)[3:], x2[:-3])
+    # a machine's recording: the signal mirrored at the edge, no held value for twin check's dropout rule
+    np.testing.assert_array_equal(a.delay(x, 3, "mirror"), [3, 2, 1, 0, 1, 2, 3, 4, 5, 6])
+    np.testing.assert_array_equal(a.delay(x, -2, "mirror"), [2, 3, 4, 5, 6, 7, 8, 9, 8, 7])
+    np.testing.assert_array_equal(a.delay(x2, 3, "mirror")[:3], x2[3:0:-1])
+    with pytest.raises(ValueError, match="delay: edge 'wrap'; expected 'hold' or 'mirror'"):
+        a.delay(x, 1, "wrap")
+
+
+def test_a_time_offset_written_as_a_machine_records_it_is_no_dropout(tmp_path):
+    """The calibrate benchmark writes a time offset into a recording with the signal mirrored at
+    the edge: twin check finds no dropout there, where the held edge of the candidates' transform
+    is one (calibrate-benchmark case 19's IMU, 16 samples at the start of every run)."""
+    import h5py
+
+    from analysis.ingest.check import _longest_run
+
+    rng = np.random.default_rng(0)
+    src = tmp_path / "measurements.h5"
+    with h5py.File(src, "w") as f:
+        g = f.create_group("phase2/s0000/r0000")
+        ds = g.create_dataset("imu_acc", data=rng.normal(0.0, 1e-3, (2000, 3)).astype(np.float32))
+        ds.attrs["fs_hz"] = 2000.0
+        g.create_dataset("imu_gyro", data=rng.normal(0.0, 1e-3, (2000, 3)).astype(np.float32)).attrs["fs_hz"] = 2000.0
+    offset = {"time_offset:imu": {"offset_ms": 8.0}}
+    held = a.apply(src, tmp_path / "held.h5", offset, 1)
+    mirrored = a.apply(src, tmp_path / "mirrored.h5", offset, 1, edge="mirror")
+    with h5py.File(held) as fh, h5py.File(mirrored) as fm, h5py.File(src) as f0:
+        x0 = f0["phase2/s0000/r0000/imu_acc"][:, 0]
+        xh, xm = fh["phase2/s0000/r0000/imu_acc"][:, 0], fm["phase2/s0000/r0000/imu_acc"][:, 0]
+    assert _longest_run(xh) == (17, 0)  # 16 samples shifted in, and the first: a dropout to twin check
+    assert _longest_run(xm)[0] == 1
+    np.testing.assert_array_equal(xm[16:], x0[:-16])
 
 
 def test_bias_drift_is_linear_in_hours():

@@ -26,7 +26,7 @@ The candidates (:data:`ARTEFACTS`, one per artefact and target; name ``artefact:
   (zero at 0 h), per 1000 h;
 - ``time_offset``: the target's channels delayed (positive) or advanced against the others of
   their capture or run by a whole number of samples (the offset in ms rounded at each channel's
-  rate; the first or last value held at the edge);
+  rate; the first or last value held at the edge, or the signal mirrored there: :func:`delay`);
 - ``clipping``: every column clipped at ± the converter's range (0: no clipping; discrete).
 
 Each parameter has a prior range (where the blind benchmark draws a present artefact), a fit
@@ -108,9 +108,14 @@ def bias_drift(x: np.ndarray, hours: float, rate_per_kh: float) -> np.ndarray:
     return np.asarray(x, float) + rate_per_kh * hours / 1000.0
 
 
-def delay(x: np.ndarray, samples: int) -> np.ndarray:
-    """x shifted later by ``samples`` (earlier when negative): y[i] = x[i − samples], the first
-    (last) value held where the shift leaves no sample."""
+def delay(x: np.ndarray, samples: int, edge: str = "hold") -> np.ndarray:
+    """x shifted later by ``samples`` (earlier when negative): y[i] = x[i − samples]. Where the
+    shift leaves no sample, ``edge`` "hold" holds the first (last) value; "mirror" continues the
+    signal mirrored about its first (last) sample, as a recording made with a clock offset shows
+    the motion just before (after) its window rather than one value held (which ``twin check``
+    calls a dropout)."""
+    if edge not in ("hold", "mirror"):
+        raise ValueError(f"delay: edge {edge!r}; expected 'hold' or 'mirror'")
     x = np.asarray(x, float)
     n = int(samples)
     if n == 0 or x.shape[0] == 0:
@@ -120,10 +125,10 @@ def delay(x: np.ndarray, samples: int) -> np.ndarray:
         y[:] = x[0] if n > 0 else x[-1]
     elif n > 0:
         y[n:] = x[:-n]
-        y[:n] = x[0]
+        y[:n] = x[n:0:-1] if edge == "mirror" else x[0]
     else:
         y[:n] = x[-n:]
-        y[n:] = x[-1]
+        y[n:] = x[-2:n - 2:-1] if edge == "mirror" else x[-1]
     return y
 
 
@@ -332,7 +337,7 @@ def _candidates() -> list[Artefact]:
             (CandidateParam("offset_ms", low=2.0, high=10.0, grid=(-10.0, -5.0, -2.0, 0.0, 2.0, 5.0, 10.0),
                             signed=True, label="time offset (late when positive)", unit="ms",
                             digits=2),),
-            lambda x, c: delay(x, int(round(c["offset_ms"] * 1e-3 * c["fs_hz"]))),
+            lambda x, c: delay(x, int(round(c["offset_ms"] * 1e-3 * c["fs_hz"])), c.get("edge", "hold")),
             f"{TARGETS[t].words} recorded {{offset_ms}} late against {other}: a clock offset "
             "between the acquisition's channels", "acquisition clock offset", amplitude="offset_ms"))
     for t, (unit, grid) in _CLIP.items():
@@ -409,10 +414,12 @@ def _check(name: str, values: dict[str, float]) -> Artefact:
     return a
 
 
-def apply(src: Path, dst: Path, artefacts: dict[str, dict[str, float]], seed: int) -> Path:
+def apply(src: Path, dst: Path, artefacts: dict[str, dict[str, float]], seed: int, edge: str = "hold") -> Path:
     """Copy the recording ``src`` (a ``measurements.h5``) to ``dst`` with the artefacts
     {candidate name: {param: value}} applied in the given order to their targets' channels
-    (float32 stored as float32); random draws from ``seed`` (:func:`rng_for`). Returns ``dst``."""
+    (float32 stored as float32); random draws from ``seed`` (:func:`rng_for`); ``edge``: how a
+    time offset fills the samples its shift leaves (:func:`delay`: "hold", as the candidates'
+    responses, or "mirror", as a machine's recording). Returns ``dst``."""
     src, dst = Path(src), Path(dst)
     checked = [(_check(n, v), v) for n, v in artefacts.items()]
     dst.parent.mkdir(parents=True, exist_ok=True)
@@ -432,7 +439,7 @@ def apply(src: Path, dst: Path, artefacts: dict[str, dict[str, float]], seed: in
                                             f"artefact {art.name} acts on it")
                     ds = g[channel]
                     fs = float(ds.attrs.get("fs_hz", g.attrs.get("fs_hz", np.nan)))
-                    ctx = {**values, "fs_hz": fs, "rng": rng,
+                    ctx = {**values, "fs_hz": fs, "rng": rng, "edge": edge,
                            "hours": float(g.attrs.get("hours", g.parent.attrs.get("hours", 0.0)))}
                     if domain == "phase1":
                         ctx["angle"] = shaft_angle(g["speed"][...], fs)
