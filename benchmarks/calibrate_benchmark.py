@@ -93,7 +93,9 @@ def case_table(entries: list[dict]) -> str:
             "|---|---|---|---|---|---|---|---|---|---|"]
     for e in entries:
         ax = e["scenario"]["axis"]
-        added = ", ".join([*e["effects"], *e["artefacts"]]) or "–"
+        inactive = e.get("inactive_artefacts", [])
+        added = ", ".join([*e["effects"], *(a + (" (changes no sample)" if a in inactive else "")
+                                            for a in e["artefacts"])]) or "–"
         r_ok = sum(v["within"] for v in e["routine"].values())
         p_out = [k.split(".")[1] for k, v in e["parameters"].items() if not v["inside"]]
         p_ok = len(e["parameters"]) - len(p_out)

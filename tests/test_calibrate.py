@@ -697,6 +697,37 @@ def test_an_effect_the_calibration_absorbed_counts_as_found():
     assert not several["correct"]
 
 
+def test_an_artefact_that_changes_no_sample_is_not_scored_and_twin_checks_finding_is_named_first(tmp_path):
+    """A converter range above every peak clips nothing (calibrate-benchmark case 11: ±15 m/s² on
+    an IMU that peaks at 10.6): `changes` says so and the case is scored without it; a clipping
+    `twin diagnose` names from `twin check`'s finding counts as named first, and in a null case
+    as something named that is not there."""
+    import h5py
+
+    from analysis.diagnosis.artefacts import apply, changes
+    from analysis.diagnosis.attribution import EXPLAINED, NO_GAP
+    from twin.harness.calibration.benchmark import score_diagnosis
+
+    src = tmp_path / "measurements.h5"
+    with h5py.File(src, "w") as f:
+        g = f.create_group("phase2/s0000/r0000")
+        g.create_dataset("imu_acc", data=np.linspace(-10.6, 10.6, 300).reshape(100, 3))
+    assert not changes(src, apply(src, tmp_path / "a.h5", {"clipping:imu_acc": {"range": 15.0}}, 1),
+                       "clipping:imu_acc")
+    assert changes(src, apply(src, tmp_path / "b.h5", {"clipping:imu_acc": {"range": 10.0}}, 1), "clipping:imu_acc")
+    base = {"heldout_gap_before": 1.0, "heldout_gap_critical": 2.0}
+    nothing = {**base, "added": [], "verdict": NO_GAP}
+    assert score_diagnosis("artefact", {}, {}, nothing)["correct"]  # its only artefact changed nothing
+    found = {**base, "verdict": NO_GAP, "added": [], "found_by_check": [
+        {"effect": "clipping:imu_acc", "params": {"range": 25.0}, "channel": "imu_acc"}]}
+    row = score_diagnosis("artefact", {}, {"clipping:imu_acc": {"range": 25.0}}, found)
+    assert row["correct"] and row["nothing_else"] and row["added"] == ["clipping:imu_acc"]
+    assert not score_diagnosis("null", {}, {}, found)["correct"]
+    cogging = {**found, "verdict": EXPLAINED, "added": [{"effect": "cogging", "params": {"torque_Nm": 0.04}}]}
+    row = score_diagnosis("artefact", {}, {"clipping:imu_acc": {"range": 25.0}}, cogging)
+    assert row["correct"] and not row["nothing_else"] and row["added"] == ["clipping:imu_acc", "cogging"]
+
+
 def test_a_flagged_channel_keeps_its_defaults():
     """Nothing is fitted to a channel `twin check` flags: a clipped torque keeps the drive's
     parameters fitted on it and the torque's noise at the twin's defaults, named."""

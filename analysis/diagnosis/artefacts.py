@@ -450,6 +450,18 @@ def apply(src: Path, dst: Path, artefacts: dict[str, dict[str, float]], seed: in
     return dst
 
 
+def changes(src: Path, dst: Path, name: str) -> bool:
+    """Whether the recording ``dst`` differs from ``src`` on any channel of the target of the
+    artefact ``name`` (an artefact that acts: a converter range above every peak clips nothing)."""
+    art = lookup(name)
+    with h5py.File(src, "r") as a, h5py.File(dst, "r") as b:
+        for domain, channel in art.target.channels:
+            for g in _groups(a, domain):
+                if channel in g and not np.array_equal(g[channel][...], b[g.name][channel][...]):
+                    return True
+    return False
+
+
 def _groups(f: h5py.File, domain: str) -> list[h5py.Group]:
     """Phase I captures or Phase II runs, in name order."""
     if domain not in f:

@@ -177,7 +177,8 @@ def absorbed_effects(effects: dict, parameters: dict) -> list[str]:
 
 
 def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, absorbed: list[str] = ()) -> dict:
-    """The diagnosis of a case of ``kind`` against what was added (``effects``, ``artefacts``):
+    """The diagnosis of a case of ``kind`` against what was added (``effects``, ``artefacts``: those
+    that change the recording):
     its verdict and figures, ``correct`` by the kind's rule (:data:`CASE_KINDS`; an effect
     ``absorbed`` by the calibration, :func:`absorbed_effects`, counts as found) and
     ``nothing_else`` (every added candidate is something that was added, or makes the same
@@ -200,7 +201,7 @@ def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, absorb
            "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated"),
            "nothing_else": all(any(names(n, v, a) for n, v in values.items()) for a in added),
            "absorbed": list(absorbed)}
-    if kind == "null":
+    if kind == "null" or not values:  # nothing added, or an artefact that changed no sample
         row["correct"] = res["verdict"] == NO_GAP and not added
     elif kind in ("effect", "artefact"):
         name, v = next(iter(values.items()))
@@ -255,7 +256,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     options, statistics or rules changed, goes on from the calibration with the same key instead of
     calibrating again (the diagnosis's own cache, in the case's directory too, keeps the twin
     simulations it had finished)."""
-    from analysis.diagnosis.artefacts import apply
+    from analysis.diagnosis.artefacts import apply, changes
     from analysis.ingest import run_import
     from analysis.ingest.check import check_record, require_clean_recording
     from twin.harness.calibration import calibrate
@@ -275,7 +276,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
     earlier = json.loads(marker.read_text()) if key is not None and marker.exists() else {}
     if key is not None and earlier.get("key") == cal_key:
         rec = json.loads((d / "axis.calibration.json").read_text())
-        t_sim = earlier["simulate_export_import_s"]
+        t_sim, inactive = earlier["simulate_export_import_s"], earlier.get("inactive_artefacts", [])
         step(f"calibrated by an earlier run ({marker}, the same key): taken, not calibrated again")
     else:
         shutil.rmtree(d, ignore_errors=True)
@@ -283,11 +284,17 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         step(f"simulating the axis (lead {s.axis.lead_mm:g} mm, {s.axis.carriage_mass_kg:g} kg; {added})")
         t0 = time.perf_counter()
         simulate_campaign(machine, d / "twin", workers=1)
+        inactive = []
         if artefacts:
             h5 = d / "twin" / "measurements.h5"
             # a clock offset's first (last) samples show the motion before (after) the window,
             # not a held value (which twin check calls a dropout)
-            apply(h5, h5.with_name("measurements.artefacts.h5"), artefacts, s.seed, edge="mirror").replace(h5)
+            done = apply(h5, h5.with_name("measurements.artefacts.h5"), artefacts, s.seed, edge="mirror")
+            # one that changes no sample (a converter range above every peak) is not in the recording
+            inactive = [n for n in artefacts if not changes(h5, done, n)]
+            done.replace(h5)
+            if inactive:
+                step(f"{', '.join(inactive)} changes no sample of this recording: not scored as added")
         spec = export(d / "twin", d / "lab", phase1_format=f1, phase2_format=f2)
         run_import(spec, output=d / "campaign")
         t_sim = time.perf_counter() - t0
@@ -297,9 +304,10 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         rec = calibrate(d / "campaign", d / "axis.toml", workers=workers,
                         progress=lambda t: step(f"calibrate: {t}"), check=check)
         if key is not None:
-            write_json(marker, {"key": cal_key, "simulate_export_import_s": t_sim})
+            write_json(marker, {"key": cal_key, "simulate_export_import_s": t_sim, "inactive_artefacts": inactive})
     cal = load(d / "axis.toml")
-    entry = {"case": i, "kind": kind, "effects": effects, "artefacts": artefacts,
+    active = {n: v for n, v in artefacts.items() if n not in inactive}
+    entry = {"case": i, "kind": kind, "effects": effects, "artefacts": artefacts, "inactive_artefacts": inactive,
              "formats": [f1, f2], "scenario": json.loads(s.to_json()),
              "simulate_export_import_s": t_sim, "calibrate_s": rec["seconds"],
              "calibrate_estimated_s": rec.get("estimated_s"), **score_case(machine, cal, rec)}
@@ -314,7 +322,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         except Exception as exc:  # noqa: BLE001 - one case's failure is a figure, not the end
             entry["diagnosis_error"] = f"{type(exc).__name__}: {exc}"
         else:
-            entry["diagnosis"] = {**score_diagnosis(kind, effects, artefacts, res,
+            entry["diagnosis"] = {**score_diagnosis(kind, effects, active, res,
                                                     absorbed_effects(effects, entry["parameters"])),
                                   "seconds": time.perf_counter() - t1}
     r_ok = sum(v["within"] for v in entry["routine"].values())
@@ -343,7 +351,7 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
     from twin.harness.diagnosis.runner import run_diagnosis
 
     d = out / f"case-{entry['case']:03d}"
-    added = [*entry["effects"], *entry["artefacts"]]
+    added = [*entry["effects"], *(a for a in entry["artefacts"] if a not in entry.get("inactive_artefacts", []))]
     progress(f"case {entry['case']}: the oracle: diagnosing against the axis as drawn ({', '.join(added)} only)")
     t0 = time.perf_counter()
     res = run_diagnosis(d / "campaign", s, d / "oracle", seeds=seeds, workers=workers, plots=False,
