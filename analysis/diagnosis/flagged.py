@@ -6,9 +6,10 @@ be compared with the twin statistic by statistic: its band powers, RMS levels an
 motions computed from it are cut where the machine's signal was largest, by as much as the
 machine's peaks exceed the rail. The twin's own peaks are not the machine's (a calibration that
 could not read the flagged channel keeps its defaults there), so the clipping candidate of the
-library, simulated on the twin, clips a different part of a different signal; on
-calibrate-benchmark case 22 it did not act at all, and other candidates took the flagged
-channel's gap. The check's finding is direct evidence instead, and so the diagnosis
+library, simulated on the twin, clips another part of another signal, and other candidates take
+the flagged channel's gap (calibrate-benchmark case 22 named a cogging and a time offset of the
+IMU for its clipped accelerometer). The check's finding is direct evidence instead, and so the
+diagnosis
 
 1. names the clipping from the finding (:func:`found_by_check`: the artefact ``clipping:<channel>``,
    its range the rail's value, with the findings behind it), before anything is fitted;
