@@ -62,6 +62,12 @@ def test_found_by_check_names_the_clipping_and_leaves_the_channel_out():
     assert set(by) == {"imu_acc", "imu_gyro"}  # a dropout leaves its channel in
     assert by["imu_acc"]["effect"] == "clipping:imu_acc" and by["imu_acc"]["params"] == {"range": 25.0}
     assert by["imu_acc"]["n_findings"] == 2 and by["imu_acc"]["statistics_left_out"] == 3
+    assert by["imu_acc"]["unit"] == "m/s²" and by["imu_gyro"]["unit"] == ""
+    from analysis.diagnosis.wording import check_phrase
+
+    said = check_phrase({"found_by_check": found})
+    assert said.startswith("twin check finds imu_acc clipped at ±25 m/s² (the artefact clipping:imu_acc), 2 findings")
+    assert "imu_gyro clipped at ±4.3, 1 finding (" in said and check_phrase({"found_by_check": []}) is None
     assert by["imu_gyro"]["effect"] is None  # the library has no clipping of the gyroscope: found, not named
     sig = Signature(np.arange(len(regs), dtype=float), regs)
     out = leave_out(sig, ["imu_acc"])

@@ -90,16 +90,19 @@ def found_by_check(check: dict | None, regions: list[Region], artefacts: dict) -
     """The diagnosis's ``found_by_check``: one entry per channel ``check`` finds clipped or flat,
     {"effect": "clipping:<channel>" (None for a flat line, or a channel without that artefact in
     ``artefacts``, {name: Artefact}), "kind": "signal artefact", "channel", "finding" (its kind),
-    "params": {"range": the rail} (clipping), "findings": the first 5 "where: what",
+    "params": {"range": the rail} (clipping), "unit" (the range's, "" when not named), "findings":
+    the first 5 "where: what",
     "n_findings", "statistics_left_out": how many of ``regions`` it reads}."""
     out = []
     for ch, fs in flagged_channels(check).items():
         clipped = [f for f in fs if kind_of(f["what"]) == "clipping"]
         name = f"clipping:{ch}" if clipped else None
         value = rail(clipped) if clipped else None
-        entry = {"effect": name if name in artefacts else None, "kind": "signal artefact", "channel": ch,
+        known = artefacts.get(name)
+        entry = {"effect": name if known is not None else None, "kind": "signal artefact", "channel": ch,
                  "finding": "clipping" if clipped else kind_of(fs[0]["what"]),
                  "params": {"range": value} if value is not None else {},
+                 "unit": next((p.unit for p in known.params if p.name == "range"), "") if known is not None else "",
                  "findings": [f"{f['where']}: {f['what']}" for f in fs[:5]], "n_findings": len(fs),
                  "statistics_left_out": int(sum(reads(ch, r) for r in regions))}
         out.append(entry)

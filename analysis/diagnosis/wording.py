@@ -301,8 +301,8 @@ def check_phrase(result: dict) -> str | None:
         return None
     parts = []
     for f in found:
-        what = (f"{f['channel']} clipped at ±{number(f['params']['range'])}" if f["params"].get("range") is not None
-                else f"{f['channel']} {f['finding']}")
+        what = (f"{f['channel']} clipped at ±{with_unit(number(f['params']['range']), f.get('unit', ''))}"
+                if f["params"].get("range") is not None else f"{f['channel']} {f['finding']}")
         named = f" (the artefact {f['effect']})" if f.get("effect") else ""
         parts.append(f"{what}{named}, {f['n_findings']} finding{'s' if f['n_findings'] != 1 else ''} "
                      f"({f['findings'][0]}), its {f['statistics_left_out']} statistics left out of the comparison")
