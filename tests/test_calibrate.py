@@ -794,6 +794,8 @@ def test_a_clipped_imu_is_calibrated_without_and_named_from_twin_check(round_tri
     assert "found by twin check: twin check finds imu_acc clipped at ±" in said and "left out of the comparison" in said
     page = (tmp_path / "diag" / "report" / "index.html").read_text()
     assert "Found by twin check" in page and "clipping:imu_acc" in page
+    assert "finding, not fitted (its channel is left out of the comparison): clipping:imu_acc at ±" in page
+    assert "Blank cells: statistics of imu_acc left out (twin check flags the channel)." in page
 
 
 def test_calibrate_refuses_a_recording_check_rejects(round_trip, tmp_path):

@@ -270,8 +270,11 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
     regions = [{"region": w.region(r), "calibration": w.gap_number(r["calibration_gap"]),
                 "before": w.gap_number(r["heldout_gap_before"]), "after": w.gap_number(r["heldout_gap_after"])}
                for r in [r for r in result.get("regions", []) if r["significant"]][:15]]
+    found = result.get("found_by_check") or []
+    blank = (f" Blank cells: statistics of {', '.join(f['channel'] for f in found)} left out (twin check flags "
+             "the channel)." if found else "")
     figures = [{"link": q.name, "alt": q.stem.replace("_", " "),
-                "caption": _CAPTIONS.get(q.stem, q.stem.replace("_", " "))} for q in pngs]
+                "caption": _CAPTIONS.get(q.stem, q.stem.replace("_", " ")) + blank} for q in pngs]
     rs = w.resimulation_summary(result)
     if rs is not None:
         before = result.get("verdict_interpolated", verdict)
@@ -293,6 +296,9 @@ def page_context(result: dict, pngs: list[Path]) -> dict:
             "answer": [{"head": h, "text": t} for h, t in w.answer_parts(result)],
             "facts": facts, "subset": w.subset_phrase(result) or "",
             "calibration": calibration_phrase(result), "added": added, "refused": refused,
+            "found": "; ".join(f"{f['effect'] or f['channel'] + ' ' + f['finding']}"
+                               + (f" at ±{w.with_unit(w.number(f['params']['range']), f.get('unit', ''))}"
+                                  if f["params"].get("range") is not None else "") for f in found),
             "ranking": ranking, "left_out": result.get("candidates_left_out", {}),
             "worse": worse, "regions": regions, "figures": figures, "rules": list(RULES)}
 
