@@ -68,6 +68,12 @@ def test_found_by_check_names_the_clipping_and_leaves_the_channel_out():
     said = check_phrase({"found_by_check": found})
     assert said.startswith("twin check finds imu_acc clipped at ±25 m/s² (the artefact clipping:imu_acc), 2 findings")
     assert "imu_gyro clipped at ±4.3, 1 finding (" in said and check_phrase({"found_by_check": []}) is None
+    assert "so it is named from the check's evidence and left out, and the rest" in said
+    flat = found_by_check({"errors": [{"level": "error", "where": "/phase1/c000/torque",
+                                       "what": "flat line: all 100 samples are 0.25"}]}, regs, ARTEFACTS)
+    assert flat[0]["effect"] is None and flat[0]["finding"] == "flat line" and flat[0]["statistics_left_out"] == 2
+    assert check_phrase({"found_by_check": flat}).startswith("twin check finds torque flat line, 1 finding")
+    assert "so it is left out, and the rest" in check_phrase({"found_by_check": flat})
     assert by["imu_gyro"]["effect"] is None  # the library has no clipping of the gyroscope: found, not named
     sig = Signature(np.arange(len(regs), dtype=float), regs)
     out = leave_out(sig, ["imu_acc"])

@@ -306,8 +306,9 @@ def check_phrase(result: dict) -> str | None:
         named = f" (the artefact {f['effect']})" if f.get("effect") else ""
         parts.append(f"{what}{named}, {f['n_findings']} finding{'s' if f['n_findings'] != 1 else ''} "
                      f"({f['findings'][0]}), its {f['statistics_left_out']} statistics left out of the comparison")
+    named = "named from the check's evidence and " if any(f.get("effect") for f in found) else ""
     return ("twin check finds " + "; ".join(parts) + ": a saturated or flat channel cannot be compared with the "
-            "twin, so it is named from the check's evidence and the rest of the recording diagnosed without it.")
+            f"twin, so it is {named}left out, and the rest of the recording diagnosed without it.")
 
 
 def answer_parts(result: dict) -> list[tuple[str, str]]:
