@@ -30,7 +30,7 @@ import numpy as np
 
 from analysis.dataset import DOFS
 from analysis.diagnosis.signature import Region, Signature
-from analysis.ingest.check import finding_channel
+from analysis.ingest.check import findings_by_channel
 
 #: The findings of ``twin check`` after which a channel is left out (the start of their text).
 LEAVES_OUT = ("clipping", "flat line")
@@ -64,11 +64,8 @@ def flagged_channels(check: dict | None) -> dict[str, list[dict]]:
     """{channel: [finding, ...]} of the channels ``check`` (``twin check``'s record:
     :func:`analysis.ingest.check.check_record`, its ``errors`` and ``warnings``) finds clipped or
     flat (:data:`LEAVES_OUT`), in the order found."""
-    out: dict[str, list[dict]] = {}
-    for f in (check or {}).get("errors", []) + (check or {}).get("warnings", []):
-        if kind_of(f["what"]) in LEAVES_OUT:
-            out.setdefault(finding_channel(f["where"]), []).append(f)
-    return out
+    by = {ch: [f for f in fs if kind_of(f["what"]) in LEAVES_OUT] for ch, fs in findings_by_channel(check).items()}
+    return {ch: fs for ch, fs in by.items() if fs}
 
 
 _NUMBER = r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"

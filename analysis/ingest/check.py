@@ -62,6 +62,15 @@ def finding_channel(where: str) -> str:
     return str(where).rstrip("/").rsplit("/", 1)[-1].split("[", 1)[0]
 
 
+def findings_by_channel(check: dict | None) -> dict[str, list[dict]]:
+    """{channel: [finding, ...]} of ``check`` (the record of an analysis: :func:`check_record`, its
+    ``errors`` then ``warnings``), each channel in the order first found (:func:`finding_channel`)."""
+    out: dict[str, list[dict]] = {}
+    for f in (check or {}).get("errors", []) + (check or {}).get("warnings", []):
+        out.setdefault(finding_channel(f["where"]), []).append(f)
+    return out
+
+
 @dataclass
 class CheckReport:
     """What :func:`check_recording` found: ``summary`` (counts, rates, durations, hours span)

@@ -8,7 +8,7 @@ import sys
 from dataclasses import dataclass
 
 from analysis.calibration.drive import VELOCITY_BAND_HZ
-from analysis.ingest.check import finding_channel
+from analysis.ingest.check import findings_by_channel
 
 CALIBRATE_VERSION = 19
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
@@ -142,10 +142,7 @@ def flagged_channels(check: dict | None) -> dict[str, str]:
     """{channel: its first finding, "where: what"} of the channels ``check`` (the record of ``twin
     check``: :func:`analysis.ingest.check.check_record`) flags: a finding whose HDF5 key ends in a
     channel's name flags that channel (one of its axes, ``imu_acc[x]``, the whole channel)."""
-    out: dict[str, str] = {}
-    for f in (check or {}).get("errors", []) + (check or {}).get("warnings", []):
-        out.setdefault(finding_channel(f["where"]), f"{f['where']}: {f['what']}")
-    return out
+    return {ch: f"{fs[0]['where']}: {fs[0]['what']}" for ch, fs in findings_by_channel(check).items()}
 
 
 def flagged_keys(check: dict | None, channels: dict[str, tuple[str, ...]] | None = None) -> dict[str, str]:
