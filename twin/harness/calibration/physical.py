@@ -19,7 +19,7 @@ from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.calibration.sensor_chain import Measured
 from analysis.dataset import open_measurements
 from twin.harness.calibration.sensors import corrected_sensor_values
-from twin.harness.calibration.twin_statistics import _statistics, evaluate
+from twin.harness.calibration.twin_statistics import _statistics, evaluate, fit_scenario
 from twin.harness.calibration.values import (
     CONVERGED_CHI2,
     EXTRA_STATS,
@@ -35,6 +35,7 @@ from twin.harness.calibration.values import (
     MAX_STEPS,
     MIN_SEEN,
     PRIOR_FACTOR,
+    RESTART_SE,
     RUN_CHANNELS,
     SPREAD_SEEDS,
     T90,
@@ -76,22 +77,6 @@ class FitResult:
     estimated_s: float | None = None
     stopped: str | None = None
     covariance: dict | None = None
-
-
-def _fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
-                  n_runs: int) -> dict:
-    """The scenario data of the fit's twin: one Phase I sample of ``n_captures`` at the
-    recording's hours and, with ``session_hours``, one Phase II session of ``n_runs`` runs (the
-    ripple's statistic), no pause, the scenario's seed (common random numbers)."""
-    data = base.model_dump(mode="json")
-    last = max(float(sample_hours), float(session_hours or 0.0))
-    data["campaign"].update(phase2=session_hours is not None, scale=1.0, pauses=[], warmup_hours=0.0,
-                            total_hours=max(last + 1.0, 1.0))
-    data["phase1"].update(sample_hours=[float(sample_hours)], captures_per_sample=int(n_captures))
-    if session_hours is not None:
-        data["phase2"].update(session_hours=[float(session_hours)], runs_per_session=int(n_runs))
-        data["dial_indicator"]["every_n_sessions"] = 0  # no dial test in the fit
-    return data
 
 
 def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float | None,
@@ -148,7 +133,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                 "ripple periods, in its first Phase I sample)")
         else:
             use.append(i)
-    data0 = _fit_scenario(base, hours, len(caps), session_h, len(runs))
+    data0 = fit_scenario(base, hours, len(caps), session_h, len(runs))
     keys = [FITTED[i][0] for i in use]
     start = np.array([float(get_dotted(data0, k)) for k in keys])
     if np.any(start <= 0):
@@ -221,7 +206,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         the budget's deadline (never without a budget)."""
         return deadline is not None and time.perf_counter() + cost_s(n_points) + reserve_s > deadline
     progress(f"layer c: {len(keys)} parameters jointly; one twin evaluation {unit_s:.1f} s: the calibration "
-             f"takes at most {total / 60:.1f} min, and a fit again for every parameter found not told apart"
+             f"takes at most {total / 60:.1f} min, and a fit again for every parameter found not told apart "
+             "and from a second start when the first ends far from the recording"
              + ("" if budget_s is None or total <= budget_s else
                                                        f"; the fit stops at the budget ({budget_s / 60:g} min)"))
     if budget_s is not None and elapsed + least > budget_s:
@@ -344,8 +330,28 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
                      "fitted on from there with it")
         return embed(z), fun_z, j_at
 
+    def second_start(xs: np.ndarray, fun: np.ndarray, J: np.ndarray):
+        """The fit again from the point where each parameter's own statistic alone would meet the
+        recording (a Newton step on each, ``J``'s diagonal, from the solution ``xs`` with its
+        residuals ``fun``), and the solution with the lower squared residuals of the two. On a
+        heavy axis the trucks move the tracking gain, the ringing and the ripple as much as the
+        vertical mode, and the joint steps from the twin's defaults can settle where the mode is
+        off by tens of standard errors."""
+        own = np.diag(J[:free.size])
+        z1 = xs[free] - np.divide(fun[:free.size], own, out=np.zeros(free.size), where=own != 0)
+        x1 = embed(np.clip(z1, lo[free], hi[free]))
+        progress(f"layer c: the fit ended {float(np.max(np.abs(fun))):.1f} standard errors from the recording: "
+                 "fitted again from where each parameter's own statistic would meet it")
+        x2, fun2, J2 = solve(x1, jac(x1, free))
+        better = float(fun2 @ fun2) < float(fun @ fun)
+        progress(f"layer c: squared residuals {float(fun @ fun):.3g} from the first start, {float(fun2 @ fun2):.3g} "
+                 f"from the second: the {'second' if better else 'first'} kept")
+        return (x2, fun2, J2) if better else (xs, fun, J)
+
     if free.size:
         xs, fun, J = solve(x0, j0[np.ix_(rows, free)])
+        if float(np.max(np.abs(fun))) > RESTART_SE and not no_room_for(2 * (free.size + 1) + 1):
+            xs, fun, J = second_start(xs, fun, J)
         # the delta method with the statistics' full covariance: one regression gives J and
         # c_v, and a machine's draw moves them together, so their errors correlate
         J = J * se[rows][:, None]  # d(statistic)/d(log p), the statistics' units

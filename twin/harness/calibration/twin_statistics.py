@@ -36,6 +36,22 @@ def _key(s: Scenario) -> str:
     return hashlib.sha256(f"{CALIBRATE_VERSION}:{s.to_json()}".encode()).hexdigest()[:20]
 
 
+def fit_scenario(base: Scenario, sample_hours: float, n_captures: int, session_hours: float | None,
+                 n_runs: int) -> dict:
+    """The scenario data of the fit's twin: one Phase I sample of ``n_captures`` at the
+    recording's hours and, with ``session_hours``, one Phase II session of ``n_runs`` runs (the
+    ripple's statistic), no pause, the scenario's seed (common random numbers)."""
+    data = base.model_dump(mode="json")
+    last = max(float(sample_hours), float(session_hours or 0.0))
+    data["campaign"].update(phase2=session_hours is not None, scale=1.0, pauses=[], warmup_hours=0.0,
+                            total_hours=max(last + 1.0, 1.0))
+    data["phase1"].update(sample_hours=[float(sample_hours)], captures_per_sample=int(n_captures))
+    if session_hours is not None:
+        data["phase2"].update(session_hours=[float(session_hours)], runs_per_session=int(n_runs))
+        data["dial_indicator"]["every_n_sessions"] = 0  # no dial test in the fit
+    return data
+
+
 def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario) -> tuple[np.ndarray, np.ndarray]:
     """(values (10,), standard errors (10,)) of :data:`STAT_NAMES` over the Phase I ``captures``
     and the Phase II ``runs`` of the open recording ``m`` described by ``s``: the drive

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.ingest.check import findings_by_channel
 
-CALIBRATE_VERSION = 19
+CALIBRATE_VERSION = 20
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -37,6 +37,10 @@ MIN_SEEN = 3.0
 #: must lie within this factor either side of its value; wider, it is not told apart from the
 #: others (kept at its start, the rest fitted again).
 MAX_SPAN = 2.0
+#: A fit whose largest residual at its solution exceeds this many standard errors is started
+#: again from the point each parameter's own statistic alone would give (the couplings between
+#: the statistics can lead the joint steps into a second minimum), and the better kept.
+RESTART_SE = 5.0
 #: Step of the finite differences in log(parameter).
 LOG_STEP = 0.03
 #: Student's t 95th percentile with SPREAD_SEEDS − 1 degrees of freedom: a two-sided 90 %
