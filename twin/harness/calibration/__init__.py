@@ -23,7 +23,11 @@ c. **the drive's physical parameters and the Phase I acceleration, jointly**, fi
    Broyden, "A class of methods for solving nonlinear simultaneous equations", Math. Comp. 19,
    1965: one simulated point a step where a differenced Jacobian costs one a parameter); at the
    solution it is differenced again, and the fit goes on with it while its Gauss–Newton step
-   would still lower the squared residuals (:data:`CONVERGED_CHI2`). The 90 % intervals
+   would still lower the squared residuals (:data:`CONVERGED_CHI2`). A fit that ends more than
+   :data:`RESTART_SE` standard errors from the recording starts again from where each parameter's
+   own statistic alone would meet it (a Newton step on each from the solution), and the better
+   of the two solutions is kept: the statistics the parameters share can hold the joint steps in
+   a second minimum. The 90 % intervals
    come from the Jacobian at the solution and the statistics' errors (delta method: Cov = (JᵀJ)⁻¹
    for residuals in units of their standard error); an error is the recording's own (the scatter
    over its captures), the twin's, and the scatter of the statistic over :data:`SPREAD_SEEDS` twin
