@@ -365,4 +365,5 @@ def test_a_simulation_that_runs_away_is_cached_as_such_and_the_batch_goes_on(tmp
     paths = cache.evaluate([good.to_json(), bad.to_json()], str(tmp_path))
     assert os.path.exists(paths[0]) and cache.unfeaturisable(paths[0]) is None
     assert not os.path.exists(paths[1])
-    assert cache.unfeaturisable(paths[1]).startswith("its simulation ran away (the carriage left the rails'")
+    assert cache.unfeaturisable(paths[1]).startswith(
+        "its simulation ran away (diverged, or the carriage left the rails'")

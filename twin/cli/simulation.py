@@ -34,6 +34,7 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: in
                     scheduler: str | None = None) -> dict:
     from analysis.base.executors import ExecutorError
     from twin.sim.campaign import CampaignDirectoryError, CampaignInterrupted, plan, simulate_campaign
+    from twin.sim.simulate import SimulationDiverged
 
     try:
         s = load(scenario, overrides)
@@ -59,6 +60,10 @@ def _run_simulation(scenario: Path, out: Path, overrides: list[str], workers: in
         except (CampaignDirectoryError, ExecutorError) as exc:
             progress.stop()
             _fail(str(exc))
+        except SimulationDiverged as exc:
+            progress.stop()
+            _fail(f"{scenario}: {exc}; change the scenario (the carriage's mass, the stiffnesses, the loops' "
+                  "bandwidths, or phase1.timestep_s and phase2.timestep_s) and run again")
         except CampaignInterrupted as exc:
             progress.stop()
             _fail(f"interrupted: {exc.done} of {exc.total} units finished and kept in {out / '.parts'}, "

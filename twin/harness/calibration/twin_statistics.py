@@ -25,7 +25,8 @@ from analysis.calibration.drive import (
 from analysis.calibration.sensor_chain import measure_instruments
 from analysis.dataset import open_measurements
 from analysis.ingest.routine import MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
-from twin.harness.calibration.values import CALIBRATE_VERSION
+from twin.harness.calibration.values import CALIBRATE_VERSION, STAT_NAMES
+from twin.sim.geometry import RailRangeError
 from twin.sim.scenario import Scenario, from_dict
 
 # ---------------------------------------------------------------------------------------------
@@ -118,7 +119,9 @@ def _mean_se(x: list[float]) -> tuple[float, float]:
 
 def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
     """Simulate the scenarios (JSON) not yet cached, batched (one rollout per capture for all),
-    and return [values, errors] of :data:`STAT_NAMES` for each (kept in ``cache_dir``)."""
+    and return [values, errors, instruments] of :data:`STAT_NAMES` for each (kept in
+    ``cache_dir``); a scenario whose simulation runs away (diverges, or its carriage leaves the
+    rails) has NaN values and errors, its cached file saying why (``error``)."""
     from threadpoolctl import threadpool_limits
 
     from twin.sim.campaign import simulate_campaigns_batched
@@ -130,10 +133,25 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
         dirs = [Path(cache_dir) / f"tmp-{_key(ss[i])}" for i in todo]
         for d in dirs:
             shutil.rmtree(d, ignore_errors=True)
+        ran_away: dict[int, str] = {}
         with threadpool_limits(1):
-            simulate_campaigns_batched([ss[i] for i in todo], dirs)
+            try:
+                simulate_campaigns_batched([ss[i] for i in todo], dirs)
+            except RailRangeError:
+                # a point of the batch ran away (diverged, or its carriage left the rails: a step
+                # of the fit into an unstable axis): each alone, the runaways without statistics
+                for i, d in zip(todo, dirs, strict=True):
+                    try:
+                        simulate_campaigns_batched([ss[i]], [d])
+                    except RailRangeError as exc:
+                        ran_away[i] = str(exc)
         for i, d in zip(todo, dirs, strict=True):
             s = ss[i]
+            if i in ran_away:  # NaN statistics: the fit's residual there is its largest (1e6)
+                write_json(files[i], {"values": [None] * len(STAT_NAMES), "errors": [None] * len(STAT_NAMES),
+                                      "instruments": {}, "error": ran_away[i]})
+                shutil.rmtree(d, ignore_errors=True)
+                continue
             with open_measurements(d / "measurements.h5") as m:
                 runs = [(a, b) for a in m.phase2_sessions() for b in m.phase2_runs(a)]
                 v, e = _statistics(m, m.phase1_captures(), runs, s)

@@ -97,8 +97,8 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
             try:
                 simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
             except RailRangeError:
-                # a scenario of the batch ran away (its carriage left the rails: a candidate's or a
-                # drawn value that makes the axis unstable): each alone, the runaways cached as such
+                # a scenario of the batch ran away (diverged, or its carriage left the rails: a
+                # candidate's or a drawn value that makes the axis unstable): each alone, the runaways cached as such
                 todo = [i for i in todo if _simulate_alone(ss[i], dirs[i], scenario_jsons[i])]
         for i in todo:
             d = dirs[i]
@@ -123,7 +123,8 @@ def _simulate_alone(s: Scenario, d: Path, scenario_json: str) -> bool:
     try:
         simulate_campaigns_batched([s], [d / "campaign"])
     except RailRangeError as exc:
-        _mark_unfeaturisable(d, f"its simulation ran away (the carriage left the rails' modelled length): {exc}",
+        _mark_unfeaturisable(d, f"its simulation ran away (diverged, or the carriage left the rails' modelled "
+                                f"length): {exc}",
                              scenario_json, keep=False)
         return False
     return True

@@ -19,6 +19,7 @@ from twin.sim.campaign.planning import Unit, plan
 from twin.sim.campaign.units import run_unit, run_unit_batch
 from twin.sim.parts import PartStore
 from twin.sim.scenario import Scenario
+from twin.sim.simulate import SimulationDiverged
 
 
 class CampaignDirectoryError(ValueError):
@@ -155,6 +156,9 @@ def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | P
     for u in units:
         todo = [i for i, st in enumerate(stores) if not st.has(u.kind, u.name)]
         if todo:
-            run_unit_batch([payloads[i] for i in todo], u, [str(outs[i]) for i in todo])
+            try:
+                run_unit_batch([payloads[i] for i in todo], u, [str(outs[i]) for i in todo])
+            except SimulationDiverged as exc:  # its items: positions in ``scenarios``
+                raise SimulationDiverged(exc.args[0], [todo[i] for i in exc.items], exc.t_s) from exc
     for s, out in zip(scenarios, outs, strict=True):
         assemble(s, out, units)

@@ -14,6 +14,7 @@ from twin.sim.parts import PartStore
 from twin.sim.scenario import Scenario, from_dict
 from twin.sim.simulate import (
     Condition,
+    SimulationDiverged,
     Simulator,
     dial_indicator,
     phase1_capture,
@@ -71,7 +72,20 @@ def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
     import json
 
     s = from_dict(json.loads(scenario_json))
-    store = PartStore(out_dir)
+    try:
+        _run_unit(s, scenario_json, unit, PartStore(out_dir))
+    except SimulationDiverged as exc:
+        raise SimulationDiverged(f"{_named(unit, [s])}: {exc}", [0], exc.t_s) from exc
+    return unit.name
+
+
+def _named(unit: Unit, scenarios: list[Scenario]) -> str:
+    """The unit and its campaigns, for an error: 'phase1 unit c000003 of 'x' (seed 7)'."""
+    return f"{unit.kind} unit {unit.name} of " + ", ".join(f"{s.name!r} (seed {s.seed})" for s in scenarios)
+
+
+def _run_unit(s: Scenario, scenario_json: str, unit: Unit, store: PartStore) -> None:
+    """:func:`run_unit`'s simulation of ``unit`` of ``s`` into ``store``."""
     if unit.kind == "phase1":
         sim = _simulator(s, scenario_json, s.phase1.timestep_s)
         cond = condition_at(s, unit.hours)
@@ -91,7 +105,6 @@ def run_unit(scenario_json: str, unit: Unit, out_dir: str) -> str:
                     datasets={"repeats_um": np.asarray(res.repeats_um)})
     else:
         raise ValueError(f"unknown unit kind {unit.kind!r}")
-    return unit.name
 
 
 def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -> str:
@@ -103,8 +116,11 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
     import json
 
     if unit.kind not in ("phase1", "phase2"):
-        for j, d in zip(scenario_jsons, out_dirs, strict=True):
-            run_unit(j, unit, d)
+        for k, (j, d) in enumerate(zip(scenario_jsons, out_dirs, strict=True)):
+            try:
+                run_unit(j, unit, d)
+            except SimulationDiverged as exc:  # its item: this scenario's position
+                raise SimulationDiverged(exc.args[0], [k], exc.t_s) from exc
         return unit.name
     ss = [from_dict(json.loads(j)) for j in scenario_jsons]
     items = []  # (scenario, simulator, condition, command, rng or None, store)
@@ -133,8 +149,12 @@ def run_unit_batch(scenario_jsons: list[str], unit: Unit, out_dirs: list[str]) -
             groups.append([i])
     for g in groups:
         passes = 1 if unit.kind == "phase1" else items[g[0]][0].phase2.rail_passes
-        trajs = run_many([(items[i][1], items[i][2]) for i in g], items[g[0]][3], passes,
-                         contact_guess=unit.kind == "phase2" and passes == 1)
+        try:
+            trajs = run_many([(items[i][1], items[i][2]) for i in g], items[g[0]][3], passes,
+                             contact_guess=unit.kind == "phase2" and passes == 1)
+        except SimulationDiverged as exc:
+            bad = [g[j] for j in exc.items]
+            raise SimulationDiverged(f"{_named(unit, [ss[i] for i in bad])}: {exc}", bad, exc.t_s) from exc
         for i, traj in zip(g, trajs, strict=True):
             s, sim, cond, _, rng, store = items[i]
             if unit.kind == "phase1":

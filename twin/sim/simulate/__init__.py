@@ -32,6 +32,7 @@ from twin.sim.simulate.phase2 import (
 from twin.sim.simulate.simulator import (
     SETTLE_TIME,
     Condition,
+    SimulationDiverged,
     Simulator,
     Trajectory,
     flank_contact_position,
@@ -46,6 +47,7 @@ __all__ = [
     "recirculation_force",
     "stribeck_force",
     "Condition",
+    "SimulationDiverged",
     "Trajectory",
     "Simulator",
     "held_sign",

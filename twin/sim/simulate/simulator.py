@@ -51,6 +51,40 @@ from twin.sim.simulate.world import World, recirculation_force, stribeck_force
 SETTLE_TIME = 0.1  # s of standstill simulated before t = 0 of every rollout
 
 
+class SimulationDiverged(geo.RailRangeError):
+    """A rollout diverged: MuJoCo found a NaN, Inf or huge acceleration and reset the state, so
+    the rows after it are no motion. The axis's parameters are unstable at the model's time step
+    (a stiffness too high for its mass: the semi-implicit Euler step is stable for ω·dt < 2,
+    E. Hairer, C. Lubich and G. Wanner, Geometric Numerical Integration, 2nd ed., 2006, ch. I.5;
+    or a loop too fast). A runaway like a carriage that leaves the rails: the handlers of
+    :class:`~twin.sim.geometry.RailRangeError` take it. ``items``: the positions of the diverged
+    (simulator, condition) pairs in :func:`run_many`'s list (or of the diverged scenarios in a
+    batch of campaigns); ``t_s``: when the first one diverged, s."""
+
+    def __init__(self, message: str, items: list[int], t_s: float):
+        super().__init__(message)
+        self.items, self.t_s = list(items), float(t_s)
+
+    def __reduce__(self):  # across worker processes with its fields
+        return type(self), (self.args[0], self.items, self.t_s)
+
+
+def check_rollout(time_s: np.ndarray, start_s: np.ndarray, dt: float, what: str) -> None:
+    """Raise :class:`SimulationDiverged` when a rollout's time column stops advancing by ``dt``
+    (MuJoCo resets a diverged state, its time with it). ``time_s``: (n_items, n_rows) the time of
+    the state after each step, s; ``start_s``: (n_items,) the initial states' time, s; ``what``:
+    the rollout, for the message."""
+    expected = start_s[:, None] + (np.arange(time_s.shape[1]) + 1) * dt
+    bad = np.abs(time_s - expected) > 0.5 * dt
+    items = np.flatnonzero(bad.any(axis=1))
+    if items.size:
+        first = min(float(expected[j, np.argmax(bad[j])] - dt - start_s[j]) for j in items)
+        raise SimulationDiverged(
+            f"the simulation diverged {first * 1e3:.4g} ms into {what} (MuJoCo found a NaN, Inf or huge "
+            f"acceleration and reset the state): the axis is unstable at the time step of {dt * 1e3:g} ms, a "
+            "stiffness too high for its mass or a loop too fast", [int(j) for j in items], first)
+
+
 @dataclass(frozen=True)
 class Condition:
     """The axis at one moment of a campaign.
@@ -295,11 +329,12 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
     ctrl = np.stack([sim.controls(c, hold, np.full(n_settle, xr[0]))
                      for (sim, c), xr in zip(items, x_rails, strict=True)])
     settled, _ = rollout.rollout(models, datas, np.stack(s0s), ctrl)
+    check_rollout(settled[:, :, 0], np.stack(s0s)[:, 0], first.timestep, "the standstill before the command")
     s0s = list(settled[:, -1, :])
     for s0 in s0s:
         s0[0] = 0.0  # time
     phys = slice(1, 1 + nq + nv)  # qpos and qvel in MuJoCo's full physics state
-    for _ in range(max(passes, 1)):
+    for k in range(max(passes, 1)):
         ctrls = [sim.controls(c, cmd, xr) for (sim, c), xr in zip(items, x_rails, strict=True)]
         # Rollout row k is the state after step k; with the initial state before it, row k
         # is the state at t_k, the one step k (its rails, its sensors) sees.
@@ -314,6 +349,8 @@ def run_many(items: list[tuple[Simulator, Condition]], cmd: Profile, passes: int
             ctrl = np.stack(ctrls)
             after, sens = rollout.rollout(models, datas, np.stack(s0s), ctrl)
             state = np.concatenate([np.stack(s0s)[:, None, phys], after[:, :-1, phys]], axis=1)
+        check_rollout(after[:, :, 0], np.zeros(len(items)), first.timestep,
+                      f"the command of {cmd.t.size * first.timestep:.4g} s (pass {k + 1} of {max(passes, 1)})")
         x_rails = [st[:, sim.index.x] for st, (sim, _) in zip(state, items, strict=True)]
     # The accelerometers read the acceleration of step k that the integrator applies,
     # (v_{k+1} − v_k)/dt, not MuJoCo's explicit qacc (see accelerometer_implicit_correction).
