@@ -342,8 +342,11 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         x1 = embed(np.clip(z1, lo[free], hi[free]))
         progress(f"layer c: the fit ended {float(np.max(np.abs(fun))):.1f} standard errors from the recording: "
                  "fitted again from where each parameter's own statistic would meet it")
+        n_stopped = len(stopped)
         x2, fun2, J2 = solve(x1, jac(x1, free))
         better = float(fun2 @ fun2) < float(fun @ fun)
+        if not better:
+            del stopped[n_stopped:]  # the deadline cut the second fit, not the solution kept
         progress(f"layer c: squared residuals {float(fun @ fun):.3g} from the first start, {float(fun2 @ fun2):.3g} "
                  f"from the second: the {'second' if better else 'first'} kept")
         return (x2, fun2, J2) if better else (xs, fun, J)
