@@ -334,9 +334,9 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         """The fit again from the point where each parameter's own statistic alone would meet the
         recording (a Newton step on each, ``J``'s diagonal, from the solution ``xs`` with its
         residuals ``fun``), and the solution with the lower squared residuals of the two. On a
-        heavy axis the trucks move the tracking gain, the ringing and the ripple as much as the
-        vertical mode, and the joint steps from the twin's defaults can settle where the mode is
-        off by tens of standard errors."""
+        heavy axis the vertical trucks also move the tracking gain, the ringing and the ripple,
+        and the joint steps from the twin's defaults can settle where the vertical mode is off by
+        tens of standard errors."""
         own = np.diag(J[:free.size])
         z1 = xs[free] - np.divide(fun[:free.size], own, out=np.zeros(free.size), where=own != 0)
         x1 = embed(np.clip(z1, lo[free], hi[free]))
