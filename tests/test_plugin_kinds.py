@@ -350,10 +350,11 @@ def test_a_simulation_that_runs_away_is_cached_as_such_and_the_batch_goes_on(tmp
     cached as unfeaturisable with the reason (the calibrate benchmark's case 9 failed its whole
     diagnosis on one)."""
     from twin.harness.diagnosis import cache
+    from twin.sim.campaign import runner
     from twin.sim.geometry import RailRangeError
     from twin.sim.scenario import load
 
-    real = cache.simulate_campaigns_batched
+    real = runner.simulate_campaigns_batched
     good, bad = load("quick"), load("quick").model_copy(update={"seed": 99})
 
     def batched(scenarios, outs):
@@ -361,7 +362,7 @@ def test_a_simulation_that_runs_away_is_cached_as_such_and_the_batch_goes_on(tmp
             raise RailRangeError("rail coordinate outside the stored profiles [-0.15, 0.465] m: [-120, 89]")
         return real(scenarios, outs)
 
-    monkeypatch.setattr(cache, "simulate_campaigns_batched", batched)
+    monkeypatch.setattr(runner, "simulate_campaigns_batched", batched)
     paths = cache.evaluate([good.to_json(), bad.to_json()], str(tmp_path))
     assert os.path.exists(paths[0]) and cache.unfeaturisable(paths[0]) is None
     assert not os.path.exists(paths[1])

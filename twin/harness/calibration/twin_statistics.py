@@ -26,7 +26,6 @@ from analysis.calibration.sensor_chain import measure_instruments
 from analysis.dataset import open_measurements
 from analysis.ingest.routine import MEASURED_RAMP, SPEED_SMOOTH_S, fit_moves
 from twin.harness.calibration.values import CALIBRATE_VERSION, STAT_NAMES
-from twin.sim.geometry import RailRangeError
 from twin.sim.scenario import Scenario, from_dict
 
 # ---------------------------------------------------------------------------------------------
@@ -124,7 +123,7 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
     rails) has NaN values and errors, its cached file saying why (``error``)."""
     from threadpoolctl import threadpool_limits
 
-    from twin.sim.campaign import simulate_campaigns_batched
+    from twin.sim.campaign import simulate_campaigns_runaways
 
     ss = [from_dict(json.loads(p)) for p in payloads]
     files = [Path(cache_dir) / f"{_key(s)}.json" for s in ss]
@@ -133,18 +132,8 @@ def evaluate(payloads: list[str], cache_dir: str) -> list[list[list[float]]]:
         dirs = [Path(cache_dir) / f"tmp-{_key(ss[i])}" for i in todo]
         for d in dirs:
             shutil.rmtree(d, ignore_errors=True)
-        ran_away: dict[int, str] = {}
-        with threadpool_limits(1):
-            try:
-                simulate_campaigns_batched([ss[i] for i in todo], dirs)
-            except RailRangeError:
-                # a point of the batch ran away (diverged, or its carriage left the rails: a step
-                # of the fit into an unstable axis): each alone, the runaways without statistics
-                for i, d in zip(todo, dirs, strict=True):
-                    try:
-                        simulate_campaigns_batched([ss[i]], [d])
-                    except RailRangeError as exc:
-                        ran_away[i] = str(exc)
+        with threadpool_limits(1):  # a point that runs away (a step of the fit into an unstable axis)
+            ran_away = {todo[k]: why for k, why in simulate_campaigns_runaways([ss[i] for i in todo], dirs).items()}
         for i, d in zip(todo, dirs, strict=True):
             s = ss[i]
             if i in ran_away:  # NaN statistics: the fit's residual there is its largest (1e6)

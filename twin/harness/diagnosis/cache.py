@@ -23,8 +23,7 @@ from analysis.dataset import DatasetError
 from analysis.diagnosis import layout
 from analysis.diagnosis.signature import PARTS, SIGNATURE_VERSION, Region, Signature, SignatureError, signature
 from analysis.phase1.features import FeatureError
-from twin.sim.campaign import simulate_campaigns_batched
-from twin.sim.geometry import RailRangeError
+from twin.sim.campaign import simulate_campaigns_runaways
 from twin.sim.scenario import Scenario, from_dict
 
 #: Twin seeds of the spread unless told otherwise.
@@ -94,12 +93,13 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
     todo = [i for i, d in enumerate(dirs) if not (d / "signature.npz").exists()]
     with threadpool_limits(1):
         if todo:
-            try:
-                simulate_campaigns_batched([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
-            except RailRangeError:
-                # a scenario of the batch ran away (diverged, or its carriage left the rails: a
-                # candidate's or a drawn value that makes the axis unstable): each alone, the runaways cached as such
-                todo = [i for i in todo if _simulate_alone(ss[i], dirs[i], scenario_jsons[i])]
+            # a scenario that runs away (a candidate's or a drawn value that makes the axis
+            # unstable) is cached as such
+            ran_away = simulate_campaigns_runaways([ss[i] for i in todo], [dirs[i] / "campaign" for i in todo])
+            for k, why in ran_away.items():
+                _mark_unfeaturisable(dirs[todo[k]], "its simulation ran away (diverged, or the carriage left the "
+                                     f"rails' modelled length): {why}", scenario_jsons[todo[k]], keep=False)
+            todo = [i for k, i in enumerate(todo) if k not in ran_away]
         for i in todo:
             d = dirs[i]
             try:
@@ -115,19 +115,6 @@ def evaluate(scenario_jsons: list[str], cache_dir: str, keep: bool | list[bool] 
             if not keeps[i]:
                 shutil.rmtree(d / "campaign", ignore_errors=True)
     return [str(d / "signature.npz") for d in dirs]
-
-
-def _simulate_alone(s: Scenario, d: Path, scenario_json: str) -> bool:
-    """Simulate ``s`` into ``d/campaign``; False (and ``d`` marked :data:`UNFEATURISABLE` with the
-    reason) when its simulation runs away."""
-    try:
-        simulate_campaigns_batched([s], [d / "campaign"])
-    except RailRangeError as exc:
-        _mark_unfeaturisable(d, f"its simulation ran away (diverged, or the carriage left the rails' modelled "
-                                f"length): {exc}",
-                             scenario_json, keep=False)
-        return False
-    return True
 
 
 def _mark_unfeaturisable(d: Path, why: str, scenario_json: str, keep: bool) -> None:

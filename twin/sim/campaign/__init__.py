@@ -22,6 +22,7 @@ from twin.sim.campaign.runner import (
     CampaignInterrupted,
     simulate_campaign,
     simulate_campaigns_batched,
+    simulate_campaigns_runaways,
 )
 from twin.sim.campaign.seeds import KIND_DIAL, KIND_ORIGIN, KIND_PHASE1, KIND_PHASE2, KIND_WORLD, rng_for
 from twin.sim.campaign.state import (
@@ -66,4 +67,5 @@ __all__ = [
     "CampaignInterrupted",
     "simulate_campaign",
     "simulate_campaigns_batched",
+    "simulate_campaigns_runaways",
 ]

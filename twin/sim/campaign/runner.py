@@ -1,7 +1,8 @@
 """The resumable, parallel runner of a campaign: every unit not yet stored simulated on an executor
 (this process, local processes or Dask) while the files are assembled (:func:`simulate_campaign`),
 or several campaigns of one plan with batched rollouts in this process
-(:func:`simulate_campaigns_batched`); the claim of an output directory by one scenario.
+(:func:`simulate_campaigns_batched`; :func:`simulate_campaigns_runaways` goes on past the ones
+that run away); the claim of an output directory by one scenario.
 
 Resuming: each finished unit is stored as its own part file (atomic rename, see
 :class:`twin.sim.parts.PartStore`); a rerun skips the parts that exist and assembles
@@ -17,6 +18,7 @@ from analysis.base.files import write_json
 from twin.sim.campaign.assembly import ASSEMBLY_ORDER, _Assembler, assemble
 from twin.sim.campaign.planning import Unit, plan
 from twin.sim.campaign.units import run_unit, run_unit_batch
+from twin.sim.geometry import RailRangeError
 from twin.sim.parts import PartStore
 from twin.sim.scenario import Scenario
 from twin.sim.simulate import SimulationDiverged
@@ -162,3 +164,24 @@ def simulate_campaigns_batched(scenarios: list[Scenario], out_dirs: list[str | P
                 raise SimulationDiverged(exc.args[0], [todo[i] for i in exc.items], exc.t_s) from exc
     for s, out in zip(scenarios, outs, strict=True):
         assemble(s, out, units)
+
+
+def simulate_campaigns_runaways(scenarios: list[Scenario], out_dirs: list[str | Path]) -> dict[int, str]:
+    """:func:`simulate_campaigns_batched`, and when a campaign of the batch runs away (a
+    :class:`~twin.sim.geometry.RailRangeError`: its simulation diverged,
+    :class:`~twin.sim.simulate.SimulationDiverged`, or its carriage left the rails: an unstable
+    set of parameters) each campaign alone. Returns {position in ``scenarios``: why} of those
+    that ran away (their directories may hold parts of the units before); the others are
+    simulated."""
+    try:
+        simulate_campaigns_batched(scenarios, out_dirs)
+        return {}
+    except RailRangeError:
+        pass
+    ran_away: dict[int, str] = {}
+    for i, (s, d) in enumerate(zip(scenarios, out_dirs, strict=True)):
+        try:
+            simulate_campaigns_batched([s], [d])
+        except RailRangeError as exc:
+            ran_away[i] = str(exc)
+    return ran_away
