@@ -31,7 +31,6 @@ from twin.harness.calibration.values import (
     FITTED,
     LOG_STEP,
     MAX_JACOBIANS,
-    MAX_SPAN,
     MAX_STEPS,
     MIN_SEEN,
     PRIOR_FACTOR,
@@ -414,29 +413,29 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             return cov, sd, np.sqrt(sd ** 2 + (a ** 2) @ np.diag(prior)), a, prior, kept
 
         cov, sd, sd_all, a, prior, kept = marginal(J)
-        # Jointly not told apart: a parameter whose 90 % interval spans more than MAX_SPAN either
-        # side is kept at its start, the widest first, and the others fitted again without it.
-        # Its interval counts what it owes to the parameters kept at their start (their prior
-        # span through -J_ff^-1 J_fk): a statistic that moves with a kept parameter as much as
-        # with its own does not tell the two apart either.
-        while free.size and not T90 * float(np.max(sd_all)) <= math.log(MAX_SPAN):
-            w = int(np.argmax(sd_all))
+        # Not told apart: a parameter whose 90 % interval is wider than its prior span says less
+        # than the default: kept at its start, the widest against its prior first, the others
+        # fitted again. The interval counts what it owes to the parameters kept at their start
+        # (their prior span through -J_ff^-1 J_fk).
+        def over_prior(sds: np.ndarray) -> np.ndarray:
+            return T90 * sds / np.array([math.log(PRIOR_FACTOR[keys[j]]) for j in free])
+        while free.size and not float(np.max(over_prior(sd_all))) <= 1.0:
+            w = int(np.argmax(over_prior(sd_all)))
             j = int(free[w])
-            stat_name = FITTED[use[j]][1].replace("_", " ")
-            if T90 * float(sd[w]) <= math.log(MAX_SPAN):
+            stat_name, prior_says = FITTED[use[j]][1].replace("_", " "), f"over its prior's {PRIOR_FACTOR[keys[j]]:g}"
+            if over_prior(sd)[w] <= 1.0:
                 moved = [keys[k].split(".")[-1] for k in kept[np.argsort(-np.abs(a[w]))][:2]]
                 skipped[keys[j]] = (f"not told apart from {', '.join(moved)} (kept at the twin's default): "
                                     f"its statistic, the recording's {stat_name}, moves with them as well, and "
                                     f"their span would put its 90 % interval at a factor "
-                                    f"{math.exp(min(T90 * float(sd_all[w]), 50.0)):.3g} either side: kept at "
-                                    f"{start[j]:.6g}")
+                                    f"{math.exp(min(T90 * float(sd_all[w]), 50.0)):.3g} either side, {prior_says}: "
+                                    f"kept at {start[j]:.6g}")
             else:
                 others = [keys[k].split(".")[-1] for k in free if k != j]
-                why = (f"moves with {', '.join(others)} as well" if others else
-                       "does not pin it down")
+                why = f"moves with {', '.join(others)} as well" if others else "does not pin it down"
                 skipped[keys[j]] = (f"not told apart jointly: its 90 % interval would span a factor "
-                                    f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side (its statistic, the "
-                                    f"recording's {stat_name}, {why}): kept at {start[j]:.6g}")
+                                    f"{math.exp(min(T90 * float(sd[w]), 50.0)):.3g} either side, {prior_says} (its "
+                                    f"statistic, the recording's {stat_name}, {why}): kept at {start[j]:.6g}")
             free = np.delete(free, w)
             rows = np.concatenate([free, extra_rows])
             if not free.size:

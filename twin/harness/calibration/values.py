@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.ingest.check import findings_by_channel
 
-CALIBRATE_VERSION = 20
+CALIBRATE_VERSION = 21  # 21: a fitted value is kept at the default only when its interval is wider than its prior span
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -33,10 +33,6 @@ SPREAD_SEEDS = 8
 FIT_SEEDS = 2
 #: Standard errors a parameter's statistic must move for a factor 2 of it to be fitted.
 MIN_SEEN = 3.0
-#: A fitted parameter's 90 % interval, with what it owes to the parameters kept at their start,
-#: must lie within this factor either side of its value; wider, it is not told apart from the
-#: others (kept at its start, the rest fitted again).
-MAX_SPAN = 2.0
 #: A fit whose largest residual at its solution exceeds this many standard errors is started
 #: again from the point each parameter's own statistic alone would give (the couplings between
 #: the statistics can lead the joint steps into a second minimum), and the better kept.
