@@ -422,7 +422,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         while free.size and not float(np.max(over_prior(sd_all))) <= 1.0:
             w = int(np.argmax(over_prior(sd_all)))
             j = int(free[w])
-            stat_name, prior_says = FITTED[use[j]][1].replace("_", " "), f"over its prior's {PRIOR_FACTOR[keys[j]]:g}"
+            stat_name = FITTED[use[j]][1].replace("_", " ")
+            prior_says = f"wider than the factor {PRIOR_FACTOR[keys[j]]:g} of its prior span"
             if over_prior(sd)[w] <= 1.0:
                 moved = [keys[k].split(".")[-1] for k in kept[np.argsort(-np.abs(a[w]))][:2]]
                 skipped[keys[j]] = (f"not told apart from {', '.join(moved)} (kept at the twin's default): "
