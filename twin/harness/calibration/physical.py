@@ -56,15 +56,14 @@ from twin.sim.scenario import Scenario, from_dict
 
 @dataclass
 class FitResult:
-    """Layer (c)'s outcome: the fitted ``values``, the ``skipped``
-    ones and why, the twin ``simulations`` run, the ``seconds`` spent, the ``residual`` (in
-    standard errors) and, for layer (b)'s correction, the instruments the twin's own rests give
-    at each of the spread's seeds (``instruments``: {key: [value per seed]}) for the values it
-    was set to; ``estimated_s``: the whole calibration's longest time as estimated after the
-    first simulations (None when no fit ran); ``stopped``: why the fit stopped before it
-    converged (``--budget-minutes``' deadline), or None; ``covariance``: {``keys``, ``log``: the
-    joint covariance of their log values}, the fitted parameters' and those kept at the default
-    (their prior span), or None."""
+    """Layer (c)'s outcome: the fitted ``values``, the ``skipped`` ones and why, the twin
+    ``simulations`` run, the ``seconds`` spent, the ``residual`` (standard errors) and, for layer
+    (b)'s correction, the instruments the twin's own rests give at each of the spread's seeds
+    (``instruments``: {key: [value per seed]}); ``estimated_s``: the calibration's longest time
+    as estimated after the first simulations (None when no fit ran); ``stopped``: why the fit
+    stopped before it converged (``--budget-minutes``), or None; ``covariance``: {``keys``,
+    ``log``: the joint covariance of the log values of the fitted parameters and of those kept
+    at the default (their prior span)}, or None."""
 
     values: list[Value]
     skipped: dict[str, str]
@@ -190,12 +189,12 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         """Time of ``n_points`` evaluations of ``n_seeds`` seeds each on the workers."""
         return unit_s * math.ceil(n_points * n_seeds / max(1, workers))
 
-    # at most: the first Jacobian, MAX_STEPS steps, the Jacobian at the solution, MAX_JACOBIANS
-    # more with their steps, the spread at the solution; at least (what a fit with intervals
-    # needs): the first Jacobian, one step, the Jacobian at the solution, the spread
+    # at most: the first Jacobian and each parameter's factor 2 either way, MAX_STEPS steps, the
+    # Jacobian at the solution, MAX_JACOBIANS more with their steps, the spread at the solution;
+    # at least (what a fit with intervals needs): the same but one step and no refreshed Jacobian
     reserve_s = cost_s(1, SPREAD_SEEDS) + 2.0  # the spread at the solution, the files
-    full = cost_s((MAX_JACOBIANS + 2) * (len(keys) + 1) + (MAX_JACOBIANS + 1) * MAX_STEPS) + reserve_s
-    least = cost_s(2 * (len(keys) + 1) + 1) + reserve_s
+    full = cost_s((MAX_JACOBIANS + 4) * (len(keys) + 1) + (MAX_JACOBIANS + 1) * MAX_STEPS) + reserve_s
+    least = cost_s(4 * (len(keys) + 1) + 1) + reserve_s
     elapsed = spent_s + (time.perf_counter() - t0)
     total = elapsed + full
     deadline = None if budget_s is None else t0 + budget_s - spent_s
@@ -252,15 +251,18 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         return np.column_stack([(np.nan_to_num((c - target) / se, nan=1e6)[rows] - f0) / LOG_STEP for c in vals])
 
     # A parameter whose statistic moves by less than MIN_SEEN standard errors for a factor 2 of
-    # it is not informed by this recording (e.g. the rails' friction behind a screw of 5 mm
-    # lead): kept at its start, its statistic out of the fit.
+    # it either way (simulated: the slope at the start misjudges a statistic that turns near it)
+    # is not informed by this recording (e.g. the rails' friction behind a screw of 5 mm lead):
+    # kept at its start, its statistic out of the fit.
     all_cols = np.arange(len(keys))
     j0 = jac(x0, all_cols)
-    seen = np.abs(np.diag(j0)) * math.log(2.0) >= MIN_SEEN
+    twice = [x0 + sign * math.log(2.0) * np.eye(len(keys))[j] for j in all_cols for sign in (1.0, -1.0)]
+    values_at(twice)  # one batch
+    moved = np.array([max(abs(resid(p)[j] - resid(x0)[j]) for p in twice[2 * j:2 * j + 2]) for j in all_cols])
+    seen = moved >= MIN_SEEN
     for j in np.flatnonzero(~seen):
-        skipped[keys[j]] = (f"the recording's {FITTED[use[j]][1].replace('_', ' ')} moves by "
-                            f"{abs(j0[j, j]) * math.log(2.0):.2g} standard errors for a factor 2 of it (under "
-                            f"{MIN_SEEN:g}): not informed, kept at {start[j]:.6g}")
+        skipped[keys[j]] = (f"the recording's {FITTED[use[j]][1].replace('_', ' ')} moves by {moved[j]:.2g} standard "
+                            f"errors for a factor 2 of it (under {MIN_SEEN:g}): not informed, kept at {start[j]:.6g}")
     free = np.flatnonzero(seen)
     rows = np.concatenate([free, extra_rows])
 
@@ -330,12 +332,10 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         return embed(z), fun_z, j_at
 
     def second_start(xs: np.ndarray, fun: np.ndarray, J: np.ndarray):
-        """The fit again from the point where each parameter's own statistic alone would meet the
-        recording (a Newton step on each, ``J``'s diagonal, from the solution ``xs`` with its
-        residuals ``fun``), and the solution with the lower squared residuals of the two. On a
-        heavy axis the vertical trucks also move the tracking gain, the ringing and the ripple,
-        and the joint steps from the twin's defaults can settle where the vertical mode is off by
-        tens of standard errors."""
+        """The fit again from where each parameter's own statistic alone would meet the recording
+        (a Newton step on each, ``J``'s diagonal, from the solution ``xs``, residuals ``fun``), and
+        the better of the two solutions. On a heavy axis the vertical trucks also move the tracking
+        gain, the ringing and the ripple: the joint steps can settle far off the vertical mode."""
         own = np.diag(J[:free.size])
         z1 = xs[free] - np.divide(fun[:free.size], own, out=np.zeros(free.size), where=own != 0)
         x1 = embed(np.clip(z1, lo[free], hi[free]))
