@@ -425,8 +425,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             stat_name = FITTED[use[j]][1].replace("_", " ")
             prior_says = f"wider than the factor {PRIOR_FACTOR[keys[j]]:g} of its prior span"
             if over_prior(sd)[w] <= 1.0:
-                moved = [keys[k].split(".")[-1] for k in kept[np.argsort(-np.abs(a[w]))][:2]]
-                skipped[keys[j]] = (f"not told apart from {', '.join(moved)} (kept at the twin's default): "
+                movers = [keys[k].split(".")[-1] for k in kept[np.argsort(-np.abs(a[w]))][:2]]
+                skipped[keys[j]] = (f"not told apart from {', '.join(movers)} (kept at the twin's default): "
                                     f"its statistic, the recording's {stat_name}, moves with them as well, and "
                                     f"their span would put its 90 % interval at a factor "
                                     f"{math.exp(min(T90 * float(sd_all[w]), 50.0)):.3g} either side, {prior_says}: "
