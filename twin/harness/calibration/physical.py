@@ -250,15 +250,15 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         progress(f"layer c: Jacobian at {at} ({sims[0]} evaluations so far)")
         return np.column_stack([(np.nan_to_num((c - target) / se, nan=1e6)[rows] - f0) / LOG_STEP for c in vals])
 
-    # A parameter whose statistic moves by less than MIN_SEEN standard errors for a factor 2 of it
-    # either way (simulated: the slope at the start misjudges a statistic that turns near it) is
-    # not informed (the rails' friction behind a 5 mm lead): kept at its start, its statistic out.
+    # A statistic moving by under MIN_SEEN standard errors for a factor 2 of its parameter either
+    # way (simulated: the slope at the start misjudges one that turns near it): not informed.
     all_cols = np.arange(len(keys))
     j0 = jac(x0, all_cols)
     twice = [x0 + sign * math.log(2.0) * np.eye(len(keys))[j] for j in all_cols for sign in (1.0, -1.0)]
     for side in (0, 1):  # each side a batch the size of a Jacobian's (a batch is one rollout in memory)
         values_at(twice[side::2])
-    moved = np.array([max(abs(resid(p)[j] - resid(x0)[j]) for p in twice[2 * j:2 * j + 2]) for j in all_cols])
+    at_start = resid(x0)
+    moved = np.array([max(abs(resid(p)[j] - at_start[j]) for p in twice[2 * j:2 * j + 2]) for j in all_cols])
     seen = moved >= MIN_SEEN
     for j in np.flatnonzero(~seen):
         skipped[keys[j]] = (f"the recording's {FITTED[use[j]][1].replace('_', ' ')} moves by {moved[j]:.2g} standard "
