@@ -1163,3 +1163,43 @@ def test_a_floor_far_above_its_instruments_kind_is_left_for_the_diagnosis(tmp_pa
     text, _ = scenario_text(rec, defaults=out)
     line = next(ln for ln in text.splitlines() if ln.startswith("imu_gyro_noise_urad_s_per_rthz"))
     assert "# axis description: kept: the recording's floor measures 207 (µrad/s/√Hz)" in line
+
+
+def test_the_fits_twin_reads_a_channel_noisier_than_its_instrument_at_the_recordings_floor(
+        round_trip, tmp_path, monkeypatch):
+    """The round trip with white noise of 0.005 rad/s added to its gyroscope (about 25 times the
+    twin's floor): the written scenario keeps the gyroscope's floor and bandwidth at the
+    scenario's (for `twin diagnose` to name the excess), but the twin layer (c) fits is set to
+    the floor the recording's rests measure, so that the physical parameters are not bent to
+    make up for noise the twin would lack. Layer (c) is replaced by a record of what it was given."""
+    import shutil
+
+    from analysis.diagnosis.artefacts import apply
+    from twin.harness.calibration import physical, run
+    from twin.sim.scenario import load
+
+    tmp, _, _ = round_trip
+    noisy = tmp_path / "noisy"
+    shutil.copytree(tmp / "campaign", noisy, ignore=shutil.ignore_patterns(".twin-check.json", "diagnosis"))
+    h5 = noisy / "measurements.h5"
+    apply(h5, h5.with_name("noisy.h5"), {"noise:imu_gyro": {"rms": 0.005}}, 1).replace(h5)
+    given = {}
+
+    def fit(base, recording, cache, budget_s, workers, scheduler, progress, spent_s, sensors, check):
+        given.update(base=base, sensors=dict(sensors))
+        return physical.FitResult([], {}, 0, 0.0, [], {}, {})
+
+    monkeypatch.setattr(run, "fit_physical", fit)
+    rec = run.calibrate(noisy, tmp_path / "axis.toml", workers=1, progress=lambda s: None)
+    gyro = "sensors.imu_gyro_noise_urad_s_per_rthz"
+    default = load(REPO / "scenarios" / "foreign-16mm.toml", list(SMALL)).sensors.imu_gyro_noise_urad_s_per_rthz
+    measured = given["sensors"][gyro].value
+    assert measured > 3.0 * default  # beyond FLOOR_SPAN: kept out of the written scenario
+    assert given["base"].sensors.imu_gyro_noise_urad_s_per_rthz == pytest.approx(measured, rel=1e-5)
+    assert "sensors.imu_gyro_bandwidth_hz" in given["sensors"]
+    defaults = {d["key"]: d["why"] for d in rec["defaults"]}
+    assert defaults[gyro].startswith(f"the recording's floor measures {measured:.4g}")
+    assert "sensors.imu_gyro_bandwidth_hz" in defaults
+    assert gyro not in {v["key"] for v in rec["values"]}
+    written = load(tmp_path / "axis.toml")
+    assert written.sensors.imu_gyro_noise_urad_s_per_rthz == pytest.approx(default)

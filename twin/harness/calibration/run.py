@@ -58,11 +58,12 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     progress("layer b: the sensor chain from the rests")
     measured, sens_notes = sensor_values(recording, base)
     # a floor far above its instrument's kind is left for the diagnosis to name (with the keys
-    # read on the same spectra), as a channel `twin check` flags is
+    # read on the same spectra), as a channel `twin check` flags is: the written scenario keeps
+    # the scenario's value, but layer (c)'s twin reads the channel at the recording's floor, so
+    # that the physical fit does not bend its parameters to make up for the excess noise
     beyond = floors_beyond_span(measured, base, datasheet_keys(recording))
     for key, why in beyond.items():
-        measured.pop(key, None)
-        progress(f"layer b: {key} kept at the scenario's value: {why}")
+        progress(f"layer b: {key} kept at the scenario's value in the written scenario: {why}")
     data = base.model_dump(mode="json")
     for key, v in measured.items():
         set_dotted(data, key, float(f"{v.value:.6g}"), source="calibrate")
