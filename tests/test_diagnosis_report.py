@@ -299,6 +299,33 @@ def test_region_made_worse_counts_against_the_candidate():
     assert [(r["channel"], r["family"]) for r in res2["worse_regions"]] == [("speed", "band")]
 
 
+def test_a_difference_is_named_only_where_it_moves_the_significant_statistics():
+    """The known limit of the gain's test (docs/gap-diagnosis.md, Known limits). A candidate's
+    held-out gain counts the statistics S significant on the calibration part (Holm): speed at
+    t = 3 on 10 statistics (each within Holm's limit, p = 0.004 against 0.01/10, together 90) is
+    not in S, so 'line', whose response is exactly that pattern, gains nothing and is not named
+    after 'torque'. And a perfect fit of a remainder G on S gains G against χ²_1(0.99) + 6·√G: a
+    remainder under 48.4 is never named (t = 6.3 on one statistic, G = 39.7), one above is
+    (t = 7.75, G = 60.1)."""
+    real, twin, regions, sd = _signatures({"torque": 10.0, "speed": 3.0})
+    torque = _response("torque", sd, {"torque": 1.0, "speed": 0.0}, grid=(0.0, 20.0))
+    line = _response("line", sd, {"torque": 0.0, "speed": 1.0}, grid=(0.0, 20.0))
+    res, _ = at.diagnose(real, twin, [line, torque])
+    assert res["n_significant_calibration"] == 10  # the torque's only
+    assert [a["effect"] for a in res["added"]] == ["torque"] and res["verdict"] == at.EXPLAINED
+    by = {r["effect"]: r for r in res["ranking"]}
+    assert by["line"]["gain"] == pytest.approx(0.0, abs=1e-9) and not by["line"]["significant"]
+    for t, named in ((6.3, False), (7.75, True)):
+        real, twin, regions, sd = _signatures({"torque": t}, n_hours=1)
+        res, _ = at.diagnose(real, twin, [_response("c", sd, {"torque": 1.0}, grid=(0.0, 20.0), n_hours=1)])
+        assert res["n_significant_calibration"] == 1
+        fit = res["ranking"][0]
+        assert fit["params"]["p"] == pytest.approx(t, abs=0.17)  # the fine grid's step: 1/3
+        assert fit["gain"] == pytest.approx(t * t, rel=1e-3)
+        assert fit["gain_threshold"] == pytest.approx(6.635 + 6.0 * fit["params"]["p"], rel=1e-3)
+        assert [a["effect"] for a in res["added"]] == (["c"] if named else []), t
+
+
 # ---------------------------------------------------------------------------------------------
 # An explanation explains where it acts (issue 15, item 4: false attributions)
 
