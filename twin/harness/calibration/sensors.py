@@ -66,8 +66,8 @@ def floors_beyond_span(measured: dict[str, Measured], base: Scenario,
     scenario keys) more than :data:`FLOOR_SPAN` times the scenario ``base``'s
     (:data:`FLOOR_SPAN_DATASHEET` for the keys in ``datasheet``, whose scenario value is the
     instrument's data sheet), and the keys measured on the same spectra (:data:`FLOORS`): a
-    noisier channel than its instrument, left for `twin diagnose` to name rather than taken
-    into the twin."""
+    noisier channel than its instrument, left for `twin diagnose` to name rather than written
+    into the calibrated scenario."""
     from twin.sim.config import get_dotted
 
     data = base.model_dump(mode="json")

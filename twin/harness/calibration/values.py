@@ -94,14 +94,15 @@ SENSOR_KEYS = ("sensors.imu_acc_noise_ug_per_rthz", "sensors.imu_acc_bandwidth_h
                "sensors.imu_gyro_noise_urad_s_per_rthz", "sensors.imu_gyro_bandwidth_hz",
                "sensors.nut_acc_noise_ug_per_rthz", "sensors.torque_noise_Nm")
 #: The noise floors of layer (b), each with the keys measured on the same rests' spectra (its
-#: bandwidth): a floor above FLOOR_SPAN × the scenario's is not taken into the twin, nor those.
+#: bandwidth): a floor above FLOOR_SPAN × the scenario's is not written into the calibrated
+#: scenario, nor those (layer (c)'s twin reads them at the recording's values).
 FLOORS = {"sensors.imu_acc_noise_ug_per_rthz": ("sensors.imu_acc_bandwidth_hz",),
           "sensors.imu_gyro_noise_urad_s_per_rthz": ("sensors.imu_gyro_bandwidth_hz",),
           "sensors.nut_acc_noise_ug_per_rthz": (), "sensors.torque_noise_Nm": ()}
 #: A measured noise floor more than this factor above the scenario's, when the scenario's is
 #: the twin's default (the paper's instruments), is an instrument noisier than its kind, or noise
-#: added on its way (cable, connector, amplifier): kept out of the twin, so that `twin diagnose`
-#: names it. Instruments of a kind differ by less (the calibrate benchmark draws the axes'
+#: added on its way (cable, connector, amplifier): kept out of the written scenario, so that
+#: `twin diagnose` names it. Instruments of a kind differ by less (the calibrate benchmark draws the axes'
 #: floors within a factor 2 of the twin's).
 FLOOR_SPAN = 3.0
 #: The same factor when the scenario's floor is the instrument's own data sheet (the recording's
