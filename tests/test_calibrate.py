@@ -1192,7 +1192,7 @@ def test_the_fits_twin_reads_a_channel_noisier_than_its_instrument_at_the_record
     monkeypatch.setattr(run, "fit_physical", fit)
     rec = run.calibrate(noisy, tmp_path / "axis.toml", workers=1, progress=lambda s: None)
     gyro = "sensors.imu_gyro_noise_urad_s_per_rthz"
-    default = load(REPO / "scenarios" / "foreign-16mm.toml", list(SMALL)).sensors.imu_gyro_noise_urad_s_per_rthz
+    default = _truth(tmp)["sensors"]["imu_gyro_noise_urad_s_per_rthz"]
     measured = given["sensors"][gyro].value
     assert measured > 3.0 * default  # beyond FLOOR_SPAN: kept out of the written scenario
     assert given["base"].sensors.imu_gyro_noise_urad_s_per_rthz == pytest.approx(measured, rel=1e-5)
