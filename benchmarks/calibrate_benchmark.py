@@ -1,12 +1,12 @@
 """The figures of ``twin calibrate-benchmark`` (issue 30, item 3), recorded from its runs.
 
-The benchmark takes about 35 minutes a case on one core beside a second such process (measured:
-cases 0, 1, 12, 13 of version 14): longer
-than a CI run or a working session, so it is run by hand, in parts if need be, and this script
-records what the parts measured::
+A case takes a quarter of an hour to an hour on the 2-core machine (docs/calibration.md gives the
+recorded median): the 24 cases are longer than a CI run or a working session, so they are run by
+hand, in parts, one process at a time on both cores, and this script records what the parts
+measured::
 
-    twin calibrate-benchmark -o OUT_A --cases 24 --diagnose --workers 1            # cases 0, 1, ...
-    twin calibrate-benchmark -o OUT_B --cases 24 --diagnose --workers 1 --first 12  # cases 12, ...
+    twin calibrate-benchmark -o OUT_A --cases 24 --diagnose --workers 2            # cases 0, 1, ...
+    twin calibrate-benchmark -o OUT_B --cases 24 --diagnose --workers 2 --first 12  # cases 12, ...
     .venv/bin/python benchmarks/calibrate_benchmark.py --record OUT_A OUT_B
 
 It keeps every finished case whose entry has the key the current code gives its draw (the
@@ -43,7 +43,7 @@ from twin.harness.calibration.benchmark_summary import CASE_KINDS, summarise  # 
 RESULTS = REPO / "benchmarks" / "results" / "calibrate-benchmark"
 #: The benchmark as the docs state it (the CLI's defaults with ``--diagnose``).
 CASES, SEED, DIAGNOSE, TWIN_SEEDS = 24, 2026, True, 6
-COMMAND = ("twin calibrate-benchmark -o OUT --cases 24 --diagnose --workers 1 [--first K], then "
+COMMAND = ("twin calibrate-benchmark -o OUT --cases 24 --diagnose --workers 2 [--first K], then "
            ".venv/bin/python benchmarks/calibrate_benchmark.py --record OUT [OUT ...]")
 
 
@@ -128,8 +128,8 @@ def figures(entries: list[dict]) -> dict[str, tuple[float | None, str]]:
         "calibrate_s_median": (sm["calibrate_s_median"], text(sm["calibrate_s_median"], "{:.0f}")),
         "case_min_median": (m := None if sm.get("case_s_median") is None else sm["case_s_median"] / 60,
                             f"{text(m, '{:.0f}')} min"),
-        # the CASES cases on two processes of one core each, at that median
-        "all_cases_h": (h := None if m is None else CASES * m / 60 / 2, f"{text(h, '{:.1f}')} hours"),
+        # the CASES cases one after the other, at that median
+        "all_cases_h": (h := None if m is None else CASES * m / 60, f"{text(h, '{:.1f}')} hours"),
     }
     for key, kind in (("null_no_gap", "null"), ("effect_named_first", "effect"),
                       ("artefact_named_first", "artefact"), ("several_all_named", "several"),
