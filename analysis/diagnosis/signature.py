@@ -22,6 +22,9 @@ Phase I sample or Phase II session it comes from. Families:
   and band energies as log10);
 - ``position``: log10 RMS of each error motion (mean of forward and reverse, detrended) in four
   segments of the stroke, per session;
+- ``timing``: how late each nut accelerometer's axial column is against the motor speed's
+  derivative in each Phase I capture, ms (:func:`analysis.diagnosis.timing.acceleration_lag_ms`:
+  a clock offset between the acquisition's channels);
 - ``lag``: log10 of the RMS over the sessions after the first of the shift (µm) of E_XX (the only
   profile that repeats from session to session in a few runs: lead harmonics and ball pass,
   band-passed to 1.5–6 mm) in each stroke segment against the first session, found by
@@ -41,6 +44,7 @@ from scipy import signal
 
 from analysis.calibration.drive import rigid_body_fit
 from analysis.dataset import DOFS, DatasetError, Measurements, open_measurements
+from analysis.diagnosis.timing import acceleration_lag_ms
 from analysis.phase1.features import FEATURE_NAMES, sample_features, summarise_capture, transient_templates
 from analysis.phase2.error_motions import sensor_model, session_error_motions
 from analysis.phase2.imu_runs import segment_run
@@ -52,10 +56,12 @@ PHASE1_BANDS_HZ = (10, 30, 60, 100, 150, 200, 300, 400, 500, 700, 1000, 1500, 20
 PHASE2_CHANNELS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
 PHASE2_BANDS_HZ = (2, 5, 10, 20, 40, 80, 150, 250, 400, 700)
 OPERATING_PHASES = ("steady", "transient", "reversal", "dwell")
+TIMING_CHANNELS = ("acc1_x", "acc2_x")  # the nut accelerometers' axial columns, timed against the speed
+TIMING_BIN = "lag behind the speed (ms)"
 DRAG_TERMS = ("constant drag", "viscous drag")  # the torque's drags over the motion (drag_fit)
 POSITION_SEGMENTS = 4
 LAG_SEARCH_M = 7e-3  # largest shift between sessions searched for, m (origins within ±3 mm)
-SIGNATURE_VERSION = 5  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
+SIGNATURE_VERSION = 6  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
 LAG_DOFS = ("E_XX",)  # the only motion whose profile repeats between sessions of a few runs
 LAG_BAND_M = (1.5e-3, 6e-3)  # wavelengths correlated for the shift, m: lead harmonics 2-4
 _TINY = 1e-30
@@ -188,7 +194,8 @@ def _phase1_capture_stats(c) -> np.ndarray:
         if m.sum() >= 8:
             phase[:, j] = _log_rms(hp[m])
             level[j] = float(np.mean(np.abs(c.torque[m])))
-    return np.concatenate([bands.ravel(), phase.ravel(), level, drag_fit(c.speed, c.torque, fs)])
+    timing = [acceleration_lag_ms(c.speed, np.asarray(acc, float)[:, 0], fs) for acc in (c.acc1, c.acc2)]
+    return np.concatenate([bands.ravel(), phase.ravel(), level, drag_fit(c.speed, c.torque, fs), timing])
 
 
 def _phase1_regions(hours: float) -> list[Region]:
@@ -197,6 +204,7 @@ def _phase1_regions(hours: float) -> list[Region]:
     out += [Region("phase1", ch, "phase", ph, hours) for ch in PHASE1_CHANNELS for ph in OPERATING_PHASES]
     out += [Region("phase1", "torque", "level", ph, hours) for ph in OPERATING_PHASES]
     out += [Region("phase1", "torque", "level", term, hours) for term in DRAG_TERMS]
+    out += [Region("phase1", ch, "timing", TIMING_BIN, hours) for ch in TIMING_CHANNELS]
     return out
 
 

@@ -149,6 +149,8 @@ def region(r: dict) -> str:
         return f"{dom} feature {b}"
     if fam == "position":
         return f"{dom} error motion {ch}, stroke {b}"
+    if fam == "timing":
+        return f"{dom} {ch} lag behind the motor speed"
     if fam == "lag":
         return f"{dom} {ch} shift between sessions, stroke {b}"
     return f"{dom} {ch} {fam} {b}"
