@@ -41,7 +41,7 @@ def test_the_lag_of_an_accelerometer_is_its_clock_offset(offset_ms):
     shift = int(round(offset_ms * 1e-3 * FS))
     late = artefacts.delay(acc, shift, "mirror")
     assert acceleration_lag_ms(speed, late, FS) == pytest.approx(shift / FS * 1e3, abs=0.05)
-    # the sign of the accelerometer's axis does not matter: |correlation|
+    # an accelerometer mounted the other way round: the same delay
     assert acceleration_lag_ms(speed, -late, FS) == pytest.approx(shift / FS * 1e3, abs=0.05)
 
 
@@ -55,7 +55,7 @@ def test_no_motion_no_common_motion_or_too_short_is_nan():
     assert np.isnan(lag_s(acc[:100], acc[:100], FS))  # 10 ms: no bin of 2-40 Hz
 
 
-def test_a_clock_offset_on_the_nut_accelerometers_moves_only_their_timing(small_campaign, tmp_path):
+def test_a_clock_offset_on_the_nut_accelerometers_moves_their_timing_by_the_offset(small_campaign, tmp_path):
     """A twin recording (scenarios/quick.toml) with the accelerometers 6 ms late (the artefact
     ``time_offset:acc``): each sample's timing statistic of both accelerometers moves by 6 ms
     within 0.15 ms (the delay of the cross-spectrum of Welch segments: a little of the shifted
