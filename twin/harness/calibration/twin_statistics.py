@@ -58,9 +58,9 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     statistics of the captures, with the ripple read on the IMU of the runs when there are any
     (:func:`analysis.calibration.drive.imu_ripple`: the ripple shakes the carriage far above the
     other content at its order; in the Phase I torque a component of random phase at the same
-    order hides it), and the routine fit's acceleration (mm/s²) and dwell (s) of Phase I, their
-    errors from the scatter of the ramps' slopes and of the rests (the servo's lag at the start
-    and at the end of a move differ a little: both are fitted through the twin's servo), and the
+    order hides it), and the routine fit's acceleration (mm/s²: :func:`_ramps_mean_se`) and
+    dwell (s) of Phase I, their errors from the scatter of the ramps' slopes and of the rests
+    (both are fitted through the twin's servo), and the
     vertical suspension mode (Hz, :func:`analysis.calibration.drive.suspension_mode`) with its
     scatter over the captures, and, on the IMU of the runs when there are any, the lateral (yaw)
     mode (:func:`analysis.calibration.drive.imu_yaw_mode`), the velocity loop's response (the
@@ -79,16 +79,16 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
         rip = [r for r in rip if np.isfinite(r)]
         mean[3] = float(np.mean(rip)) if rip else float("nan")
         se[3] = float(np.std(rip, ddof=1) / math.sqrt(len(rip))) if len(rip) > 1 else float("nan")
-    slopes, dwells = [], []
+    ups, downs, dwells = [], [], []
     for name in captures:
         c = m.phase1(name)
         moves = fit_moves(np.asarray(c.speed) * s.axis.lead_mm / (2 * math.pi), float(c.fs_hz), MEASURED_RAMP,
                           SPEED_SMOOTH_S)
-        for mv in moves:
-            slopes += [mv[k] for k in ("accel", "decel") if mv[k] is not None]
+        ups += [mv["accel"] for mv in moves if mv["accel"] is not None]
+        downs += [mv["decel"] for mv in moves if mv["decel"] is not None]
         dwells += [b["t_start"] - a["t_stop"] for a, b in zip(moves, moves[1:], strict=False)
                    if a["t_stop"] is not None and b["t_start"] is not None]
-    acc, acc_se = _mean_se(slopes)
+    acc, acc_se = _ramps_mean_se(ups, downs)
     dwell, dwell_se = _mean_se(dwells)
     # vertical mode, lateral mode, the loop's response, the IMU's ringing at the starts and stops
     rows: list[list[float]] = [[], [], [], []]
@@ -108,6 +108,20 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     extra = [_mean_se(row) for row in rows]
     return (np.append(mean, [acc, dwell, *(v for v, _ in extra)]),
             np.append(se, [acc_se, dwell_se, *(e for _, e in extra)]))
+
+
+def _ramps_mean_se(ups: list[float], downs: list[float]) -> tuple[float, float]:
+    """(value, standard error) of the Phase I acceleration statistic, mm/s²: the mean of the
+    rising ramps' slopes and of the falling ramps' slopes, averaged (one kind alone when the
+    other has none), the error combined from each kind's scatter. The servo's lag differs on the
+    way up and on the way down (a short ramp's measured slope differs between the two by several
+    per cent, and not by the same amount in every axis): pooled, that difference would be the
+    statistic's error, and the share of each kind (a move cut by a capture's end) its value."""
+    kinds = [_mean_se(x) for x in (ups, downs) if x]
+    if not kinds:
+        return float("nan"), float("nan")
+    return (float(np.mean([v for v, _ in kinds])),
+            float(math.sqrt(sum(e * e for _, e in kinds)) / len(kinds)))
 
 
 def _mean_se(x: list[float]) -> tuple[float, float]:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.ingest.check import findings_by_channel
 
-CALIBRATE_VERSION = 23  # 22: "not informed" at a factor 2; 23: layer (c) fits at a noisier-than-instrument floor
+CALIBRATE_VERSION = 24  # 23: layer (c) fits at a noisier-than-instrument floor; 24: the rising and falling ramps apart
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
