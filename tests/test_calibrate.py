@@ -86,10 +86,10 @@ def test_routine_fit_of_a_lagged_noisy_speed_is_within_0p1_percent():
 def test_the_acceleration_of_short_ramps_is_read_within_0p2_percent(tmp_path):
     """Phase I ramps of 15 ms (84.1 mm/s at 5435.81 mm/s²) on the calibrate benchmark's case 1
     (a 31-kg carriage on a 4-mm lead): the servo's lag makes the rising ramps' fitted slope about
-    10 % steeper than the falling ones'. The fit's acceleration statistic averages the two kinds and takes its
-    error from each kind's scatter. It moves steeply with the acceleration (2 % more: between
-    1.5 and 4 % more), and its standard error, read through that slope, is under 0.2 % of the
-    acceleration (pooled, the difference between the kinds was the error: over 1 %)."""
+    10 % steeper than the falling ones'. The fit's acceleration statistic averages the two kinds
+    and takes its error from each kind's scatter. It moves steeply with the acceleration (2 %
+    more: between 1.5 and 4 % more), and its standard error, read through that slope, is under
+    0.2 % of the acceleration (pooled, the difference between the kinds was the error: over 1 %)."""
     from analysis.dataset import open_measurements
     from twin.harness.calibration.benchmark import draws
     from twin.harness.calibration.twin_statistics import _statistics, fit_scenario

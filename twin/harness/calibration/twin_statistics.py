@@ -60,9 +60,9 @@ def _statistics(m, captures: list[str], runs: list[tuple[str, str]], s: Scenario
     other content at its order; in the Phase I torque a component of random phase at the same
     order hides it), and the routine fit's acceleration (mm/s²: :func:`_ramps_mean_se`) and
     dwell (s) of Phase I, their errors from the scatter of the ramps' slopes and of the rests
-    (both are fitted through the twin's servo), and the
-    vertical suspension mode (Hz, :func:`analysis.calibration.drive.suspension_mode`) with its
-    scatter over the captures, and, on the IMU of the runs when there are any, the lateral (yaw)
+    (both are fitted through the twin's servo), and the vertical suspension mode (Hz,
+    :func:`analysis.calibration.drive.suspension_mode`) with its scatter over the captures, and,
+    on the IMU of the runs when there are any, the lateral (yaw)
     mode (:func:`analysis.calibration.drive.imu_yaw_mode`), the velocity loop's response (the
     gain from the commanded to the IMU's axial acceleration at 30-60 Hz:
     :func:`analysis.calibration.drive.imu_command_gain`) and the IMU's ringing at the starts and
