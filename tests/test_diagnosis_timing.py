@@ -10,22 +10,21 @@ import pytest
 from analysis.diagnosis import artefacts
 from analysis.diagnosis.signature import TIMING_BIN, TIMING_CHANNELS, signature
 from analysis.diagnosis.timing import acceleration_lag_ms, lag_s
+from twin.sim.drive import command_profile, reciprocating
 
 FS = 10_000.0
+LEAD_M = 0.016
 
 
 def _moves(fs: float = FS, seconds: float = 2.0) -> np.ndarray:
     """A motor speed (rad/s) of back-and-forth trapezoidal moves from rest to rest, as a
-    capture records them: 30-ms ramps to ±150 rad/s, 0.4-s cruises, 0.2-s rests, the first move
-    0.1 s after the start."""
-    t = np.arange(int(seconds * fs)) / fs - 0.1
-    period = 2 * (0.03 + 0.4 + 0.03 + 0.2)
-    speed = np.zeros_like(t)
-    for k, sign in ((0, 1.0), (1, -1.0)):
-        tau = (t - k * period / 2) % period
-        ramp = np.clip(tau / 0.03, 0, 1) * np.clip((0.46 - tau) / 0.03, 0, 1)
-        speed += sign * 150.0 * ramp * (tau < 0.46) * (t >= 0)
-    return speed
+    capture records them (the twin's command, :func:`twin.sim.drive.command_profile`, through a
+    16-mm lead): 30-ms ramps to ±150 rad/s, 0.4-s cruises, 0.2-s rests, the first move 0.1 s
+    after the start."""
+    speed = 150.0 * LEAD_M / (2 * np.pi)  # m/s
+    stroke = speed * (0.4 + 0.03)
+    moves = reciprocating(0.0, stroke, speed, speed / 0.03, 0.2, 2)
+    return command_profile(moves, fs, lead_in=0.1, duration=seconds).v * 2 * np.pi / LEAD_M
 
 
 @pytest.mark.parametrize("offset_ms", [-10.0, -2.0, 0.0, 0.35, 5.0])
@@ -36,7 +35,7 @@ def test_the_lag_of_an_accelerometer_is_its_clock_offset(offset_ms):
     little less of the shifted motion at their ends), whole or fractional samples (0.35 ms is
     3.5 samples, rounded to 4 by the artefact's transform: 0.4 ms)."""
     speed = _moves()
-    acc = np.gradient(speed) * FS * 0.016 / (2 * np.pi)
+    acc = np.gradient(speed) * FS * LEAD_M / (2 * np.pi)
     acc = acc + np.random.default_rng(3).normal(0.0, 0.05, acc.size)
     shift = int(round(offset_ms * 1e-3 * FS))
     late = artefacts.delay(acc, shift, "mirror")
