@@ -12,7 +12,8 @@ Phase I sample or Phase II session it comes from. Families:
   Phase II over the constant-velocity cruises at each speed), channel × band;
 - ``phase``: log10 RMS of the signal high-passed at 20 Hz (Phase I) or 2 Hz (Phase II) within one
   operating phase: steady (cruise), transient (acceleration/deceleration), reversal (±20 ms
-  around a stop or start), dwell (standstill);
+  around a stop or start), dwell (standstill; in Phase I no nearer than 0.15 s to a start, a
+  stop or the capture's ends, where the high-pass spreads the ramps);
 - ``level``: mean |torque| in each Phase I operating phase (N·m); the constant drag (N·m) and
   the viscous drag coefficient (N·m·s/rad) of the motor torque over the motion of each Phase I
   capture (:func:`drag_fit`: with the ramps in, a constant and a viscous drag that give the same
@@ -56,12 +57,19 @@ PHASE1_BANDS_HZ = (10, 30, 60, 100, 150, 200, 300, 400, 500, 700, 1000, 1500, 20
 PHASE2_CHANNELS = ("acc_x", "acc_y", "acc_z", "gyro_x", "gyro_y", "gyro_z")
 PHASE2_BANDS_HZ = (2, 5, 10, 20, 40, 80, 150, 250, 400, 700)
 OPERATING_PHASES = ("steady", "transient", "reversal", "dwell")
+#: Phase I's phase statistics are read on the signals high-passed at this frequency, Hz.
+PHASE1_HIGHPASS_HZ = 20.0
+#: Phase I's dwell is read no nearer than this to a start, a stop or a capture's end, s: the
+#: zero-phase high-pass spreads a ramp of the speed about 3/PHASE1_HIGHPASS_HZ either side (to
+#: 0.3 % of its peak), far above the standstill's own content; a capture that begins just
+#: before a move would otherwise read that spread as its dwell.
+PHASE1_DWELL_GUARD_S = 3.0 / PHASE1_HIGHPASS_HZ
 TIMING_CHANNELS = ("acc1_x", "acc2_x")  # the nut accelerometers' axial columns, timed against the speed
 TIMING_BIN = "lag behind the speed (ms)"
 DRAG_TERMS = ("constant drag", "viscous drag")  # the torque's drags over the motion (drag_fit)
 POSITION_SEGMENTS = 4
 LAG_SEARCH_M = 7e-3  # largest shift between sessions searched for, m (origins within ±3 mm)
-SIGNATURE_VERSION = 6  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
+SIGNATURE_VERSION = 7  # bump when a statistic (or what the cache holds) changes: caches are keyed on it
 LAG_DOFS = ("E_XX",)  # the only motion whose profile repeats between sessions of a few runs
 LAG_BAND_M = (1.5e-3, 6e-3)  # wavelengths correlated for the shift, m: lead harmonics 2-4
 _TINY = 1e-30
@@ -148,16 +156,30 @@ def _highpass(x: np.ndarray, fs: float, fc: float) -> np.ndarray:
     return signal.sosfiltfilt(sos, x, axis=0)
 
 
-def _phase_masks(moving: np.ndarray, steady: np.ndarray, fs: float, window_s: float = 0.02
-                 ) -> dict[str, np.ndarray]:
-    """Boolean (n,) masks of the four operating phases from moving/steady masks."""
+def _near_edges(moving: np.ndarray, fs: float, window_s: float, ends: bool = False) -> np.ndarray:
+    """Boolean (n,): the samples within ``window_s`` s of a start or stop of ``moving`` (n,), and
+    with ``ends`` of either end of the signal too."""
     edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
-    reversal = np.zeros_like(moving)
+    if ends:
+        edges = np.concatenate([[0], edges, [moving.size - 1]])
+    near = np.zeros(moving.shape, bool)
     w = max(1, int(round(window_s * fs)))
     for e in edges:
-        reversal[max(0, e - w):e + w + 1] = True
+        near[max(0, e - w):e + w + 1] = True
+    return near
+
+
+def _phase_masks(moving: np.ndarray, steady: np.ndarray, fs: float, window_s: float = 0.02,
+                 dwell_guard_s: float = 0.0) -> dict[str, np.ndarray]:
+    """Boolean (n,) masks of the four operating phases from moving/steady masks (n,): reversal
+    within ``window_s`` s of a start or stop; dwell standing still, and with ``dwell_guard_s`` no
+    nearer than that to a start, a stop or either end of the signal."""
+    reversal = _near_edges(moving, fs, window_s)
+    dwell = ~moving & ~reversal
+    if dwell_guard_s > 0:
+        dwell &= ~_near_edges(moving, fs, dwell_guard_s, ends=True)
     return {"steady": steady & ~reversal, "transient": moving & ~steady & ~reversal,
-            "reversal": reversal, "dwell": ~moving & ~reversal}
+            "reversal": reversal, "dwell": dwell}
 
 
 def _log_rms(x: np.ndarray) -> np.ndarray:
@@ -185,8 +207,8 @@ def _phase1_capture_stats(c) -> np.ndarray:
     plateau = float(np.percentile(np.abs(c.speed), 99))
     moving = np.abs(c.speed) > 0.02 * plateau
     steady = np.abs(c.speed) >= 0.98 * plateau
-    masks = _phase_masks(moving, steady, fs)
-    hp = _highpass(x, fs, 20.0)
+    masks = _phase_masks(moving, steady, fs, dwell_guard_s=PHASE1_DWELL_GUARD_S)
+    hp = _highpass(x, fs, PHASE1_HIGHPASS_HZ)
     phase = np.full((8, len(OPERATING_PHASES)), np.nan)
     level = np.full(len(OPERATING_PHASES), np.nan)
     for j, name in enumerate(OPERATING_PHASES):
