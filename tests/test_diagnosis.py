@@ -229,7 +229,7 @@ def test_a_stroke_too_short_for_the_position_statistics_leaves_them_out():
     assert np.isnan(_lag(long, wave, short, wave[:short.size], *spans[-1]))  # not reached
 
 
-def _dwell_rms_decades(start_s: float, guard_s: float) -> float:
+def _dwell_rms_decades(start_s: float, guard_s: float, monkeypatch) -> float:
     """The Phase I speed's dwell statistic (log10 RMS, rad/s, high-passed at 20 Hz) of a 4-s
     capture of a reciprocating routine (0.3-s moves at 100 rad/s with 30-ms ramps, 1-s dwells,
     standstill noise 0.01 rad/s RMS) that begins ``start_s`` into it, the dwell read no nearer
@@ -246,18 +246,14 @@ def _dwell_rms_decades(start_s: float, guard_s: float) -> float:
     speed = 100.0 * ramp * sign + np.random.default_rng(7).normal(0.0, 0.01, t.size)
     acc = np.random.default_rng(8).normal(0.0, 0.1, (t.size, 3))
     c = SimpleNamespace(fs_hz=fs, speed=speed, torque=0.01 * speed, acc1=acc, acc2=acc)
-    saved = sig.PHASE1_DWELL_GUARD_S
-    try:
-        sig.PHASE1_DWELL_GUARD_S = guard_s
-        stats = sig._phase1_capture_stats(c)
-    finally:
-        sig.PHASE1_DWELL_GUARD_S = saved
+    monkeypatch.setattr(sig, "PHASE1_DWELL_GUARD_S", guard_s)
+    stats = sig._phase1_capture_stats(c)
     regions = sig._phase1_regions(0.0)
     i = next(k for k, r in enumerate(regions) if (r.channel, r.family, r.bin) == ("speed", "phase", "dwell"))
     return float(stats[i])
 
 
-def test_the_dwell_is_read_clear_of_the_high_pass_spread_of_the_ramps():
+def test_the_dwell_is_read_clear_of_the_high_pass_spread_of_the_ramps(monkeypatch):
     """A capture that begins 50 ms before a move reads the standstill (its 0.01 rad/s RMS: -2.0
     decades) as one that begins in the middle of a dwell does, within 0.005 decade, with the
     dwell kept 0.15 s clear of the motion and of the capture's ends. Read up to the 20-ms
@@ -267,7 +263,7 @@ def test_the_dwell_is_read_clear_of_the_high_pass_spread_of_the_ramps():
     as a gap."""
     from analysis.diagnosis.signature import PHASE1_DWELL_GUARD_S
 
-    mid, early = (_dwell_rms_decades(s, PHASE1_DWELL_GUARD_S) for s in (0.8, 1.25))
+    mid, early = (_dwell_rms_decades(s, PHASE1_DWELL_GUARD_S, monkeypatch) for s in (0.8, 1.25))
     assert abs(mid + 2.0) < 0.005 and abs(early + 2.0) < 0.005, (mid, early)
-    old_mid, old_early = (_dwell_rms_decades(s, 0.0) for s in (0.8, 1.25))
+    old_mid, old_early = (_dwell_rms_decades(s, 0.0, monkeypatch) for s in (0.8, 1.25))
     assert old_mid > -1.0 and abs(old_early - old_mid) > 0.02, (old_mid, old_early)
