@@ -222,6 +222,19 @@ REVERSAL_WINDOW_S = 0.02
 REVERSAL_HIGHPASS_HZ = 2.0
 
 
+def near_edges(moving: np.ndarray, fs: float, window_s: float, ends: bool = False) -> np.ndarray:
+    """Boolean (n,): the samples within ``window_s`` s (at least one sample) of a start or stop
+    of ``moving`` (n,) sampled at ``fs`` Hz, and with ``ends`` of either end of the signal too."""
+    edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
+    if ends:
+        edges = np.concatenate([[0], edges, [moving.size - 1]])
+    near = np.zeros(moving.shape, bool)
+    w = max(1, int(round(window_s * fs)))
+    for e in edges:
+        near[max(0, e - w):e + w + 1] = True
+    return near
+
+
 def imu_reversal(run) -> float:
     """Log10 of the RMS (m/s²) of the IMU's axial acceleration, high-passed at
     :data:`REVERSAL_HIGHPASS_HZ` (zero phase), within ±:data:`REVERSAL_WINDOW_S` of every start
@@ -232,14 +245,9 @@ def imu_reversal(run) -> float:
     fs, acc, x = _axial_on_command(run)
     if acc.size < 64:
         return float("nan")
-    moving = np.abs(np.gradient(x, 1.0 / fs)) > 1e-4
-    edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
-    if edges.size == 0:
+    near = near_edges(np.abs(np.gradient(x, 1.0 / fs)) > 1e-4, fs, REVERSAL_WINDOW_S)
+    if not near.any():
         return float("nan")
-    w = max(1, int(round(REVERSAL_WINDOW_S * fs)))
-    near = np.zeros(acc.size, bool)
-    for e in edges:
-        near[max(0, e - w):e + w + 1] = True
     sos = signal.butter(4, REVERSAL_HIGHPASS_HZ, "highpass", fs=fs, output="sos")
     hp = signal.sosfiltfilt(sos, acc)
     return float(np.log10(np.sqrt(np.mean(hp[near] ** 2)) + 1e-15))

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
-from analysis.calibration.drive import rigid_body_fit
+from analysis.calibration.drive import near_edges, rigid_body_fit
 from analysis.dataset import DOFS, DatasetError, Measurements, open_measurements
 from analysis.diagnosis.timing import acceleration_lag_ms
 from analysis.phase1.features import FEATURE_NAMES, sample_features, summarise_capture, transient_templates
@@ -156,28 +156,15 @@ def _highpass(x: np.ndarray, fs: float, fc: float) -> np.ndarray:
     return signal.sosfiltfilt(sos, x, axis=0)
 
 
-def _near_edges(moving: np.ndarray, fs: float, window_s: float, ends: bool = False) -> np.ndarray:
-    """Boolean (n,): the samples within ``window_s`` s of a start or stop of ``moving`` (n,), and
-    with ``ends`` of either end of the signal too."""
-    edges = np.flatnonzero(np.diff(moving.astype(np.int8)) != 0)
-    if ends:
-        edges = np.concatenate([[0], edges, [moving.size - 1]])
-    near = np.zeros(moving.shape, bool)
-    w = max(1, int(round(window_s * fs)))
-    for e in edges:
-        near[max(0, e - w):e + w + 1] = True
-    return near
-
-
 def _phase_masks(moving: np.ndarray, steady: np.ndarray, fs: float, window_s: float = 0.02,
                  dwell_guard_s: float = 0.0) -> dict[str, np.ndarray]:
     """Boolean (n,) masks of the four operating phases from moving/steady masks (n,): reversal
     within ``window_s`` s of a start or stop; dwell standing still, and with ``dwell_guard_s`` no
     nearer than that to a start, a stop or either end of the signal."""
-    reversal = _near_edges(moving, fs, window_s)
+    reversal = near_edges(moving, fs, window_s)
     dwell = ~moving & ~reversal
     if dwell_guard_s > 0:
-        dwell &= ~_near_edges(moving, fs, dwell_guard_s, ends=True)
+        dwell &= ~near_edges(moving, fs, dwell_guard_s, ends=True)
     return {"steady": steady & ~reversal, "transient": moving & ~steady & ~reversal,
             "reversal": reversal, "dwell": dwell}
 
