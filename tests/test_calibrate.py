@@ -92,7 +92,7 @@ def test_the_acceleration_of_short_ramps_is_read_within_0p2_percent(tmp_path):
     0.2 % of the acceleration (pooled, the difference between the kinds was the error: over 1 %)."""
     from analysis.dataset import open_measurements
     from twin.harness.calibration.benchmark import draws
-    from twin.harness.calibration.twin_statistics import _statistics, fit_scenario
+    from twin.harness.calibration.twin_statistics import _statistics, fit_scenario, vertical_band_hz
     from twin.harness.calibration.values import STAT_NAMES
     from twin.sim.campaign import simulate_campaign
     from twin.sim.scenario import from_dict
@@ -106,7 +106,7 @@ def test_the_acceleration_of_short_ramps_is_read_within_0p2_percent(tmp_path):
         s = from_dict(fit_scenario(from_dict(d), 10.0, 4, None, 0))
         simulate_campaign(s, tmp_path / f"{accel:g}", workers=1)
         with open_measurements(tmp_path / f"{accel:g}" / "measurements.h5") as m:
-            values, errors = _statistics(m, m.phase1_captures(), [], s)
+            values, errors = _statistics(m, m.phase1_captures(), [], s, vertical_band_hz(s))
         return float(values[i]), float(errors[i])
 
     a0, se0 = statistic(base["phase1"]["accel_mm_s2"])
@@ -184,14 +184,14 @@ def test_floor_from_the_settled_half_of_short_rests_that_ring():
     assert settled([(0, 100), (200, 302)]) == [(50, 100), (251, 302)]
 
 
-def _foreign_capture(**axis) -> tuple[dict, float]:
-    """One 1-s Phase I capture of `foreign-16mm` (seed 0, 100 h) with ``axis`` keys changed:
-    (the capture's channels, its rate in Hz)."""
+def _foreign_capture(base: dict | None = None, **axis) -> tuple[dict, float]:
+    """One 1-s Phase I capture of ``base`` (scenario data; by default `foreign-16mm`'s) at seed 0,
+    100 h, with ``axis`` keys changed: (the capture's channels, its rate in Hz)."""
     from twin.sim.campaign import KIND_PHASE1, condition_at, make_world, rng_for
     from twin.sim.scenario import from_dict, load
     from twin.sim.simulate import Simulator, phase1_capture
 
-    d = load("foreign-16mm").model_dump(mode="json")
+    d = json.loads(json.dumps(base)) if base is not None else load("foreign-16mm").model_dump(mode="json")
     d["phase1"]["capture_s"] = 1.0
     d["axis"].update(axis)
     s = from_dict(d)
@@ -200,82 +200,88 @@ def _foreign_capture(**axis) -> tuple[dict, float]:
 
 
 @pytest.mark.quoted
-def test_suspension_mode_follows_the_trucks(quote):
-    """The suspension modes read on the twin's nut accelerometers follow the trucks: the vertical
-    one moves as √k (the vertical stiffness halved: the frequency / √2 within 3 %), the lateral
-    one at least as much (/ 1.37–1.7: as the mode softens the motion's content below it pulls
-    the centroid down; the fit through the twin reads the same statistic, so it needs only a
-    steep, smooth response); neither moves with what it must not see (a nut 4× softer, a
-    velocity loop at half its bandwidth, a mains line at 150 Hz: < 0.5 %). The axial mode's broad hump moves with both
-    of those alike: the nut's spring is not told apart."""
+def test_suspension_modes_follow_the_trucks(quote):
+    """The suspension modes read on the twin's nut accelerometers follow the trucks. The pitch on
+    the vertical trucks (calibrate-benchmark case 1's 31-kg axis, in the band fixed around its
+    frequency predicted at the start: ``vertical_band_hz``) stands far above its band, lies within
+    5 % of the prediction and moves as √k (the vertical stiffness × 0.8 and × 1.25: the frequency
+    × √0.8 and × √1.25 within 2 %); where the pitch is weak (`foreign-16mm`'s 180-kg carriage
+    with the trucks × 0.6) it does not stand 3 times above its band, and the calibration reads the
+    centroid instead (``vertical_statistic``). The lateral mode moves at least as much as √k (the
+    lateral stiffness halved: / 1.37–1.7: as the mode softens the motion's content below it
+    pulls the centroid down; the fit through the twin reads the same statistic, so it needs only
+    a steep, smooth response). Neither moves with what it must not see (a velocity loop at half
+    its bandwidth, a mains line at 150 Hz: < 0.5 %; a nut 4× softer: < 0.5 % on the lateral, < 1 %
+    on the pitch, which the nut's axial spring at its height stiffens a little). The axial mode's
+    broad hump moves with both of those alike: the nut's spring is not told apart."""
     from scipy import signal
 
-    from analysis.calibration.drive import suspension_mode
+    from analysis.calibration.drive import suspension_mode, vertical_mode
+    from twin.harness.calibration.benchmark import draws
+    from twin.harness.calibration.twin_statistics import PITCH_BAND_FACTOR, PITCH_MIN_STANDING, vertical_band_hz
     from twin.sim.scenario import load
 
-    def modes(line_m_s2: float = 0.0, **axis) -> tuple[float, float, float]:
-        """(vertical mode Hz, lateral mode Hz, the x axis's mean PSD over 100-400 Hz); with a
-        150-Hz line of ``line_m_s2`` on every column (mains pickup)."""
-        c, fs = _foreign_capture(**axis)
+    def line_on(c: dict, fs: float, line_m_s2: float) -> dict:
         t = np.arange(len(c["acc1"]))[:, None] / fs
-        for k in ("acc1", "acc2"):
-            c[k] = c[k] + line_m_s2 * np.sin(2 * np.pi * 150.0 * t + 0.3)
-        f, p = signal.welch(c["acc1"][:, 0], fs, nperseg=2048)
-        hump = float(np.mean(p[(f >= 100) & (f <= 400)]))
-        return (*(suspension_mode([c["acc1"], c["acc2"]], fs, col) for col in (2, 1)), hump)
+        return {k: c[k] + line_m_s2 * np.sin(2 * np.pi * 150.0 * t + 0.3) for k in ("acc1", "acc2")} | {
+            k: v for k, v in c.items() if k not in ("acc1", "acc2")}
 
+    light = draws(2, 2026)[0][1]
+    band = vertical_band_hz(light)
+    predicted = math.sqrt(band[0] * band[0] * PITCH_BAND_FACTOR ** 2)
+
+    def pitch(line_m_s2: float = 0.0, **axis) -> tuple[float, float]:
+        c, fs = _foreign_capture(light.model_dump(mode="json"), **axis)
+        c = line_on(c, fs, line_m_s2)
+        return vertical_mode([c["acc1"], c["acc2"]], fs, *band)
+
+    def lateral(line_m_s2: float = 0.0, **axis) -> tuple[float, float]:
+        """(lateral mode Hz, the x axis's mean PSD over 100-400 Hz) on `foreign-16mm`."""
+        c, fs = _foreign_capture(**axis)
+        c = line_on(c, fs, line_m_s2)
+        f, p = signal.welch(c["acc1"][:, 0], fs, nperseg=2048)
+        return suspension_mode([c["acc1"], c["acc2"]], fs, 1), float(np.mean(p[(f >= 100) & (f <= 400)]))
+
+    lax = light.axis
+    (z0, stands), (z_soft, _), (z_stiff, _) = (
+        pitch(truck_stiffness_vertical_N_per_um=lax.truck_stiffness_vertical_N_per_um * k) for k in (1.0, 0.8, 1.25))
+    z_nut, z_loop, z_line = (pitch(nut_stiffness_N_per_um=lax.nut_stiffness_N_per_um / 4)[0],
+                             pitch(velocity_bandwidth_hz=lax.velocity_bandwidth_hz / 2)[0], pitch(0.1)[0])
     ax = load("foreign-16mm").axis
-    kv, kl = ax.truck_stiffness_vertical_N_per_um, ax.truck_stiffness_lateral_N_per_um
-    z0, y0, x0 = modes()
-    z_soft, _, _ = modes(truck_stiffness_vertical_N_per_um=kv / 2)
-    _, y_soft, _ = modes(truck_stiffness_lateral_N_per_um=kl / 2)
-    z_nut, y_nut, x_nut = modes(nut_stiffness_N_per_um=ax.nut_stiffness_N_per_um / 4)
-    z_loop, y_loop, x_loop = modes(velocity_bandwidth_hz=ax.velocity_bandwidth_hz / 2)
-    z_line, y_line, _ = modes(line_m_s2=0.1)
-    print(f"vertical mode {z0:.1f} Hz, {z_soft:.1f} Hz with the vertical stiffness halved; lateral {y0:.1f} Hz, "
-          f"{y_soft:.1f} Hz halved; a nut 4x softer {z_nut:.1f}/{y_nut:.1f} Hz, the velocity loop at half "
-          f"{z_loop:.1f}/{y_loop:.1f} Hz; the axial hump (x, 100-400 Hz) x{x_nut / x0:.2f} for the nut's 1/4, "
-          f"x{x_loop / x0:.2f} for the velocity loop's 1/2; with a 0.1 m/s^2 line at 150 Hz "
-          f"{z_line:.1f}/{y_line:.1f} Hz")
-    for name, v in (("vertical_mode_hz", z0), ("vertical_mode_soft_hz", z_soft), ("lateral_mode_hz", y0),
-                    ("lateral_mode_soft_hz", y_soft)):
+    weak = vertical_mode(*(lambda c, fs: ([c["acc1"], c["acc2"]], fs))(
+        *_foreign_capture(truck_stiffness_vertical_N_per_um=ax.truck_stiffness_vertical_N_per_um * 0.6)),
+        *vertical_band_hz(load("foreign-16mm")))[1]
+    kl = ax.truck_stiffness_lateral_N_per_um
+    (y0, x0), (y_soft, _) = lateral(), lateral(truck_stiffness_lateral_N_per_um=kl / 2)
+    (y_nut, x_nut), (y_loop, x_loop) = (lateral(nut_stiffness_N_per_um=ax.nut_stiffness_N_per_um / 4),
+                                        lateral(velocity_bandwidth_hz=ax.velocity_bandwidth_hz / 2))
+    y_line, _ = lateral(0.1)
+    print(f"pitch {z0:.1f} Hz (predicted {predicted:.1f}, stands x{stands:.1f}), {z_soft:.1f} / {z_stiff:.1f} Hz "
+          f"for the vertical trucks x0.8 / x1.25; a nut 4x softer {z_nut:.1f}, the velocity loop at half "
+          f"{z_loop:.1f}, a 0.1 m/s^2 line at 150 Hz {z_line:.1f}; foreign-16mm's pitch with the trucks x0.6 "
+          f"stands x{weak:.1f}. Lateral {y0:.1f} Hz, {y_soft:.1f} Hz halved; a nut 4x softer {y_nut:.1f}, the loop "
+          f"at half {y_loop:.1f}, the line {y_line:.1f}; the axial hump (x, 100-400 Hz) x{x_nut / x0:.2f} for the "
+          f"nut's 1/4, x{x_loop / x0:.2f} for the velocity loop's 1/2")
+    for name, v in (("vertical_mode_hz", z0), ("vertical_mode_predicted_hz", predicted),
+                    ("vertical_mode_soft_hz", z_soft), ("vertical_mode_stiff_hz", z_stiff),
+                    ("lateral_mode_hz", y0), ("lateral_mode_soft_hz", y_soft)):
         quote(name, v, f"{v:.1f} Hz")
+    quote("vertical_mode_stands", stands, f"{stands:.0f}")
+    quote("vertical_weak_stands", weak, f"{weak:.1f}")
     quote("lateral_mode_ratio", y0 / y_soft, f"{y0 / y_soft:.2f}")
     quote("hump_nut_ratio", x_nut / x0, f"×{x_nut / x0:.2f}")
     quote("hump_loop_ratio", x_loop / x0, f"×{x_loop / x0:.2f}")
-    assert z0 / z_soft == pytest.approx(math.sqrt(2), rel=0.03)
+    assert stands > 3 * PITCH_MIN_STANDING and z0 == pytest.approx(predicted, rel=0.05)
+    assert z_soft / z0 == pytest.approx(math.sqrt(0.8), rel=0.02)
+    assert z_stiff / z0 == pytest.approx(math.sqrt(1.25), rel=0.02)
+    assert weak < PITCH_MIN_STANDING
     assert 1.37 <= y0 / y_soft <= 1.7
-    for z, y in ((z_nut, y_nut), (z_loop, y_loop), (z_line, y_line)):
+    for z, y in ((z_loop, y_loop), (z_line, y_line)):
         assert z == pytest.approx(z0, rel=0.005) and y == pytest.approx(y0, rel=0.005)
+    assert z_nut == pytest.approx(z0, rel=0.01) and y_nut == pytest.approx(y0, rel=0.005)  # the nut's height
     # the axial mode: the nut's spring and the velocity loop both move its hump by 1.3x or more
     # (why the nut's stiffness is not fitted)
     assert min(abs(math.log(x_nut / x0)), abs(math.log(x_loop / x0))) > math.log(1.3)
-
-
-@pytest.mark.quoted
-def test_speed_overshoot_follows_the_velocity_loop(quote):
-    """The motor speed's overshoot at the ramps' ends falls as the velocity loop's bandwidth
-    rises (× 1.5: at least 10 %) and moves far less with the position loop (× 1.5: under a
-    quarter of that)."""
-    from analysis.calibration.drive import speed_overshoot
-    from twin.sim.scenario import load
-
-    ax = load("foreign-16mm").axis
-
-    def over(**axis) -> float:
-        c, fs = _foreign_capture(**axis)
-        return speed_overshoot(np.asarray(c["speed"], float), fs)
-
-    o0 = over()
-    o_vel = over(velocity_bandwidth_hz=1.5 * ax.velocity_bandwidth_hz)
-    o_pos = over(position_bandwidth_hz=1.5 * ax.position_bandwidth_hz)
-    print(f"speed overshoot {100 * o0:.3f} %; velocity loop x1.5 {100 * o_vel:.3f} %; position loop x1.5 "
-          f"{100 * o_pos:.3f} %")
-    for name, v in (("overshoot_pct", o0), ("overshoot_velocity_fast_pct", o_vel),
-                    ("overshoot_position_fast_pct", o_pos)):
-        quote(name, 100 * v, f"{100 * v:.3f} %")
-    assert o_vel < 0.9 * o0
-    assert abs(o_pos - o0) < 0.25 * abs(o_vel - o0)
 
 
 @pytest.mark.quoted
@@ -438,7 +444,8 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
     text = (tmp / "axis.toml").read_text()
     assert "carriage_mass_kg" in text and "# fitted: fitted jointly to the torque's inertia" in text
     assert "nut_stiffness_N_per_um" in text and "twin default: the recording cannot inform it: the axial mode" in text
-    assert "# fitted: fitted jointly to the vertical suspension mode of the nut accelerometers" in text
+    # foreign-16mm's 180-kg carriage: its pitch does not stand out in every capture
+    assert "# fitted: fitted jointly to the centroid of the vertical spectrum (its pitch does not stand out)" in text
     assert "[calibration]" in text
     assert "axis.drag_viscous_Nm_s_per_rad" in cal.stdout  # the table of values, on stdout
     said = " ".join(cal.stderr.split())
@@ -962,7 +969,7 @@ def _linear_twin(tmp_path_factory, tmp_path, monkeypatch, clock: list[float] | N
             return np.append(own + scatter, [ringing] + [np.nan] * (len(EXTRA_STATS) - 1))
         return np.append(a @ (logp - p0) + scatter, [np.nan] * len(EXTRA_STATS))  # no extra statistic
 
-    def evaluate(payloads, cache_dir):
+    def evaluate(payloads, cache_dir, vertical_band=None):
         out = []
         for p in payloads:
             data = json.loads(p)
@@ -1085,8 +1092,8 @@ def test_a_statistic_that_hardly_moves_near_the_default_is_judged_at_a_factor_2(
         tmp_path_factory, tmp_path, monkeypatch):
     """Layer (c) on a stand-in whose vertical trucks' statistic hardly moves near the default
     (0.05·d + 4·d³ in the log deviation d: its slope there times log 2 is about 2 standard errors,
-    under the 3 of "not informed") and moves by tens of standard errors at a factor 2, as the nut
-    accelerometers' vertical mode does between 300 and 600 N/µm: the twin simulated at a factor
+    under the 3 of "not informed") and moves by tens of standard errors at a factor 2, as a
+    mixture of two peaks does where one takes over from the other: the twin simulated at a factor
     2 either way finds it informed, and the fit finds the machine's trucks (1.42 × the default)
     within 5 %, inside the interval; judged on the slope it was kept at the default."""
     def turning(d: np.ndarray, vert: int, loop: int):

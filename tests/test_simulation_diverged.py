@@ -77,11 +77,11 @@ def test_a_calibration_point_that_diverges_has_no_statistics_and_its_batch_goes_
     from twin.harness.calibration.values import STAT_NAMES
 
     good, bad = _small("steady", 1), _small("light", 2, LIGHT)
-    rows = evaluate([good.to_json(), bad.to_json()], str(tmp_path / "cache"))
+    rows = evaluate([good.to_json(), bad.to_json()], str(tmp_path / "cache"), None)
     inertia = STAT_NAMES.index("inertia")
     assert math.isfinite(rows[0][0][inertia]) and rows[0][0][inertia] > 0
     assert np.all(np.isnan(rows[1][0])) and np.all(np.isnan(rows[1][1]))
     cached = [json.loads(p.read_text()) for p in (tmp_path / "cache").glob("*.json")]
     errors = [c["error"] for c in cached if "error" in c]
     assert len(cached) == 2 and len(errors) == 1 and "'light' (seed 2): the simulation diverged" in errors[0]
-    assert np.all(np.isnan(evaluate([bad.to_json()], str(tmp_path / "cache"))[0][0]))  # from the cache
+    assert np.all(np.isnan(evaluate([bad.to_json()], str(tmp_path / "cache"), None)[0][0]))  # from the cache

@@ -27,6 +27,10 @@ twin needs. A spectral line (mains pickup, a fixed-frequency disturbance) would 
 towards itself: the spectrum is read with fine bins (1-s segments), where a line is a few bins
 wide and a mode tens, and a running median over :data:`LINE_WIDTH_HZ` removes the line and keeps
 the mode (Tukey's running median: J. W. Tukey, "Exploratory Data Analysis", 1977, ch. 7).
+On the vertical channel that centroid mixes the carriage's two vertical modes (its pitch and its
+bounce on the trucks), the axial motion leaking into z and the excitation's lines: where the
+pitch stands out, the vertical trucks are read on it instead (:func:`vertical_mode`), the
+strongest peak in a band the caller fixes around it (:func:`mode_peak`).
 
 The velocity loop's bandwidth shows in the motor speed's overshoot where a ramp ends: a
 proportional-integral loop lets the speed overshoot the new set point by an amount that falls
@@ -156,28 +160,69 @@ MODE_MIN_S = 0.25
 LINE_WIDTH_HZ = 9.0
 
 
-def mode_centroid(signals: list[np.ndarray], fs: float, low_hz: float, high_hz: float) -> float:
-    """Frequency (Hz) of the resonance in ``signals`` (each (n,), any unit, sampled at ``fs`` Hz):
-    the centroid Σ f·P(f)² / Σ P(f)² over ``low_hz`` to ``high_hz`` (capped at 0.45·``fs``) of
-    their summed Welch PSD P (Hann segments of :data:`MODE_SEGMENT_S`, or the shortest signal),
-    after a running median over :data:`LINE_WIDTH_HZ` that removes narrow lines. NaN when the
-    band is empty, a signal is shorter than :data:`MODE_MIN_S` or the band holds no power."""
+def _mode_psd(signals: list[np.ndarray], fs: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(frequencies (m,) Hz, the summed Welch PSD (m,) of ``signals``) for :func:`mode_centroid`
+    and :func:`mode_peak`: Hann segments of :data:`MODE_SEGMENT_S` (or the shortest signal), a
+    running median over :data:`LINE_WIDTH_HZ` that removes narrow lines. None when a signal is
+    shorter than :data:`MODE_MIN_S`."""
     from scipy import ndimage
 
-    hi = min(high_hz, 0.45 * fs)
-    if not signals or hi <= low_hz or min(len(x) for x in signals) < MODE_MIN_S * fs:
-        return float("nan")
+    if not signals or min(len(x) for x in signals) < MODE_MIN_S * fs:
+        return None
     nper = min(int(round(MODE_SEGMENT_S * fs)), min(len(x) for x in signals))
     psd = None
     for x in signals:
         f, p = signal.welch(np.asarray(x, float), fs, nperseg=nper)
         psd = p if psd is None else psd + p
     bins = int(round(LINE_WIDTH_HZ * nper / fs)) | 1
-    psd = ndimage.median_filter(psd, size=bins, mode="nearest")
-    band = (f >= low_hz) & (f <= hi)
-    w = psd[band] ** 2
+    return f, ndimage.median_filter(psd, size=bins, mode="nearest")
+
+
+def _centroid(f: np.ndarray, psd: np.ndarray, sel: np.ndarray) -> float:
+    w = psd[sel] ** 2
     total = float(np.sum(w))
-    return float(np.sum(f[band] * w) / total) if total > 0 else float("nan")
+    return float(np.sum(f[sel] * w) / total) if total > 0 else float("nan")
+
+
+def mode_centroid(signals: list[np.ndarray], fs: float, low_hz: float, high_hz: float) -> float:
+    """Frequency (Hz) of the resonance in ``signals`` (each (n,), any unit, sampled at ``fs`` Hz):
+    the centroid Σ f·P(f)² / Σ P(f)² over ``low_hz`` to ``high_hz`` (capped at 0.45·``fs``) of
+    their summed PSD P (:func:`_mode_psd`). NaN when the band is empty, a signal is shorter than
+    :data:`MODE_MIN_S` or the band holds no power."""
+    hi = min(high_hz, 0.45 * fs)
+    spec = _mode_psd(signals, fs) if hi > low_hz else None
+    if spec is None:
+        return float("nan")
+    f, psd = spec
+    return _centroid(f, psd, (f >= low_hz) & (f <= hi))
+
+
+#: Half width of the window around the highest bin :func:`mode_peak` takes its centroid over,
+#: as a fraction of that bin's frequency.
+PEAK_WINDOW = 0.10
+
+
+def mode_peak(signals: list[np.ndarray], fs: float, low_hz: float, high_hz: float) -> tuple[float, float]:
+    """(frequency Hz, how far it stands) of the strongest resonance of ``signals`` (each (n,), any
+    unit, sampled at ``fs`` Hz) between ``low_hz`` and ``high_hz`` (capped at 0.45·``fs``): the
+    highest bin of their summed PSD P (:func:`_mode_psd`) in that band, then the centroid
+    Σ f·P² / Σ P² within ±:data:`PEAK_WINDOW` of it (it moves smoothly with the mode, where the
+    highest bin jumps from bin to bin; over a wide band the other peaks and the broadband content
+    would pull it). How far it stands: that bin's P over the band's median P, 0 when the bin is
+    the band's first or last (the mode, or another's skirt, lies beyond the band). (NaN, 0) when
+    the band is empty, a signal is shorter than :data:`MODE_MIN_S` or the band holds no power."""
+    hi = min(high_hz, 0.45 * fs)
+    spec = _mode_psd(signals, fs) if hi > low_hz else None
+    if spec is None:
+        return float("nan"), 0.0
+    f, psd = spec
+    band = np.flatnonzero((f >= low_hz) & (f <= hi))
+    if band.size < 3 or not np.any(psd[band] > 0):
+        return float("nan"), 0.0
+    k = int(np.argmax(psd[band]))
+    stands = float(psd[band[k]] / np.median(psd[band])) if 0 < k < band.size - 1 else 0.0
+    peak = f[band[k]]
+    return _centroid(f, psd, np.abs(f - peak) <= PEAK_WINDOW * peak), stands
 
 
 def suspension_mode(acc: list[np.ndarray], fs: float, column: int) -> float:
@@ -185,6 +230,19 @@ def suspension_mode(acc: list[np.ndarray], fs: float, column: int) -> float:
     (n, 3) m/s², columns x axial, y lateral, z vertical) in ``column`` (1: lateral, 2:
     vertical): :func:`mode_centroid` over :data:`MODE_BAND_HZ`."""
     return mode_centroid([np.asarray(a, float)[:, column] for a in acc], fs, *MODE_BAND_HZ)
+
+
+def vertical_mode(acc: list[np.ndarray], fs: float, low_hz: float, high_hz: float) -> tuple[float, float]:
+    """(frequency Hz, how far it stands: :func:`mode_peak`) of the carriage's pitch on the trucks'
+    springs seen by the nut accelerometers ``acc`` (each (n, 3) m/s², columns x, y, z; the z
+    column), looked for between ``low_hz`` and ``high_hz``. Four trucks of vertical stiffness
+    k_v spaced a apart along the axis carry two vertical modes (S. S. Rao, "Mechanical
+    Vibrations", ch. 5: a rigid bar on two springs): the pitch, (1/2π)·√(k_v·a²/I_yy), rocked by
+    the screw's push at the nut's height at every ramp, and the bounce, (1/2π)·√(4·k_v/m), shaken
+    by the rails' waviness; both move as √k_v. The caller fixes the band around the pitch and
+    below the bounce: over a wide band the bounce, the axial motion leaking into z and lines of
+    the excitation would be read instead."""
+    return mode_peak([np.asarray(a, float)[:, 2] for a in acc], fs, low_hz, high_hz)
 
 
 #: The speed is low-passed (zero phase) at this frequency before its overshoot is read, Hz.

@@ -8,8 +8,9 @@ b. **the sensor chain**, measured from the rests (:mod:`analysis.calibration.sen
 c. **the drive's physical parameters and the Phase I acceleration, jointly**, fitted by indirect
    inference (C. Gouriéroux, A. Monfort and E. Renault, "Indirect inference", J. Appl. Econometrics
    8, 1993): the auxiliary statistics of :mod:`analysis.calibration.drive` (the torque's rigid-body
-   fit J and c_v, the drag over the cruise, the ripple at its order, the carriage's vertical and
-   lateral suspension modes on the nut accelerometers, the gain from the commanded to the IMU's
+   fit J and c_v, the drag over the cruise, the ripple at its order, the carriage's pitch (where it
+   stands out, else the vertical spectrum's centroid) and lateral suspension mode on the nut
+   accelerometers, the gain from the commanded to the IMU's
    axial acceleration at 30-60 Hz in the Phase II runs, and one statistic more than there are
    parameters: the IMU's ringing at the starts and stops, which moves with the velocity loop and
    the vertical trucks and tells apart second solutions of the others) and the routine fit's

@@ -19,7 +19,7 @@ from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.calibration.sensor_chain import Measured
 from analysis.dataset import open_measurements
 from twin.harness.calibration.sensors import corrected_sensor_values
-from twin.harness.calibration.twin_statistics import _statistics, evaluate, fit_scenario
+from twin.harness.calibration.twin_statistics import _statistics, evaluate, fit_scenario, vertical_statistic
 from twin.harness.calibration.values import (
     CONVERGED_CHI2,
     EXTRA_STATS,
@@ -113,7 +113,8 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             progress(f"layer c: the Phase II runs left out: twin check flags {run_flag} ({flags[run_flag]}); "
                      "the ripple, the lateral mode and the velocity loop read on Phase I")
         session_h = m.session_hours(sessions[0]) if runs else None
-        real, real_se = _statistics(m, caps, runs, base)
+        band = vertical_statistic(m, caps, base)  # fixed for every evaluation
+        real, real_se = _statistics(m, caps, runs, base, band)
     skipped: dict[str, str] = {}
     use = []
     flagged = flagged_keys(check, FIT_CHANNELS if runs else FIT_CHANNELS_PHASE1)
@@ -167,7 +168,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         n = len(payloads)
         size = max(1, -(-n // max(1, workers)))
         batches = [payloads[k:k + size] for k in range(0, n, size)]
-        results = run_tasks(evaluate, [(b, str(cache)) for b in batches], workers, scheduler)
+        results = run_tasks(evaluate, [(b, str(cache), band) for b in batches], workers, scheduler)
         sims[0] += n
         return [r for res in results for r in res]
 
@@ -273,7 +274,6 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
 
     lo, hi = x0 - math.log(10.0), x0 + math.log(10.0)
     xs, fun, sd = x0, np.zeros(0), np.zeros(0)
-
     stopped: list[str] = []
 
     def solve(start_at: np.ndarray, j_start: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -484,7 +484,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     for jj, j in enumerate(free):
         k, x, i = keys[j], xs[j], use[j]
         stat = FITTED[i][1]
-        note = fit_note(stat, len(caps), hours, len(runs), session_h, run_flag)
+        note = fit_note(stat, len(caps), hours, len(runs), session_h, run_flag, band)
         w = T90 * sd[jj]
         low, high = (float(np.exp(x - w)), float(np.exp(x + w))) if np.isfinite(w) else (None, None)
         values.append(Value(k, float(np.exp(x)), "fitted", low, high, note + widened))

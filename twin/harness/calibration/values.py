@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.ingest.check import findings_by_channel
 
-CALIBRATE_VERSION = 24  # 23: layer (c) fits at a noisier-than-instrument floor; 24: the rising and falling ramps apart
+CALIBRATE_VERSION = 25  # 24: the rising and falling ramps apart; 25: the trucks read on the pitch where it stands
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -72,7 +72,7 @@ STAT_NAMES = ("inertia", "cruise_drag", "viscous_drag", "ripple", "accel", "dwel
 #: ``FITTED[i]``'s): fitted too, with no parameter of their own (the fit is least squares over
 #: more statistics than parameters). The IMU's ringing at the starts and stops moves with the
 #: velocity loop and the vertical trucks: beside the loop's tracking gain it tells a second
-#: solution of the gain and the vertical mode (a stiff truck's mode hidden by the nut's) apart.
+#: solution of the gain and the vertical trucks apart.
 EXTRA_STATS = STAT_NAMES[len(FITTED):]
 
 #: Parameters the twin has and the recording does not inform in this version, and why.
@@ -160,11 +160,17 @@ def flagged_keys(check: dict | None, channels: dict[str, tuple[str, ...]] | None
 
 
 def fit_note(stat: str, captures: int, hours: float, runs: int, session_h: float | None,
-             run_flag: str | None = None) -> str:
+             run_flag: str | None = None, pitch_band: tuple[float, float] | None = None) -> str:
     """How a layer (c) value was fitted, for the TOML: its statistic ``stat`` (:data:`STAT_NAMES`)
     on ``captures`` Phase I captures at ``hours`` and ``runs`` Phase II runs at ``session_h``;
-    ``run_flag``: the channel `twin check` flags for which the runs were left out."""
+    ``run_flag``: the channel `twin check` flags for which the runs were left out;
+    ``pitch_band``: the band (Hz) the vertical trucks' pitch was read in, None: the centroid."""
     without = f" (the Phase II runs left out: twin check flags {run_flag})" if run_flag else ""
+    if stat == "vertical_mode":
+        how = (f"the carriage's pitch on its trucks (the vertical spectrum's peak within {pitch_band[0]:.0f}-"
+               f"{pitch_band[1]:.0f} Hz)" if pitch_band else
+               "the centroid of the vertical spectrum (its pitch does not stand out)")
+        return f"fitted jointly to {how} of the nut accelerometers in {captures} Phase I captures at {hours:g} h"
     if stat in ("accel", "dwell"):
         return f"fitted through the twin's servo to the moves of {captures} Phase I captures"
     if stat == "loop_response" and runs:
