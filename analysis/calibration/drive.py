@@ -184,17 +184,26 @@ def _centroid(f: np.ndarray, psd: np.ndarray, sel: np.ndarray) -> float:
     return float(np.sum(f[sel] * w) / total) if total > 0 else float("nan")
 
 
+def _band_psd(signals: list[np.ndarray], fs: float, low_hz: float, high_hz: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(frequencies, PSD (:func:`_mode_psd`), the indices of the band ``low_hz`` to ``high_hz``
+    capped at 0.45·``fs``), or None when the band or a signal is too short or it holds no power."""
+    hi = min(high_hz, 0.45 * fs)
+    spec = _mode_psd(signals, fs) if hi > low_hz else None
+    if spec is None:
+        return None
+    f, psd = spec
+    band = np.flatnonzero((f >= low_hz) & (f <= hi))
+    return (f, psd, band) if band.size and np.any(psd[band] > 0) else None
+
+
 def mode_centroid(signals: list[np.ndarray], fs: float, low_hz: float, high_hz: float) -> float:
     """Frequency (Hz) of the resonance in ``signals`` (each (n,), any unit, sampled at ``fs`` Hz):
     the centroid Σ f·P(f)² / Σ P(f)² over ``low_hz`` to ``high_hz`` (capped at 0.45·``fs``) of
     their summed PSD P (:func:`_mode_psd`). NaN when the band is empty, a signal is shorter than
     :data:`MODE_MIN_S` or the band holds no power."""
-    hi = min(high_hz, 0.45 * fs)
-    spec = _mode_psd(signals, fs) if hi > low_hz else None
-    if spec is None:
-        return float("nan")
-    f, psd = spec
-    return _centroid(f, psd, (f >= low_hz) & (f <= hi))
+    spec = _band_psd(signals, fs, low_hz, high_hz)
+    return float("nan") if spec is None else _centroid(spec[0], spec[1], spec[2])
 
 
 #: Half width of the window around the highest bin :func:`mode_peak` takes its centroid over,
@@ -211,14 +220,10 @@ def mode_peak(signals: list[np.ndarray], fs: float, low_hz: float, high_hz: floa
     would pull it). How far it stands: that bin's P over the band's median P, 0 when the bin is
     the band's first or last (the mode, or another's skirt, lies beyond the band). (NaN, 0) when
     the band is empty, a signal is shorter than :data:`MODE_MIN_S` or the band holds no power."""
-    hi = min(high_hz, 0.45 * fs)
-    spec = _mode_psd(signals, fs) if hi > low_hz else None
-    if spec is None:
+    spec = _band_psd(signals, fs, low_hz, high_hz)
+    if spec is None or spec[2].size < 3:
         return float("nan"), 0.0
-    f, psd = spec
-    band = np.flatnonzero((f >= low_hz) & (f <= hi))
-    if band.size < 3 or not np.any(psd[band] > 0):
-        return float("nan"), 0.0
+    f, psd, band = spec
     k = int(np.argmax(psd[band]))
     stands = float(psd[band[k]] / np.median(psd[band])) if 0 < k < band.size - 1 else 0.0
     peak = f[band[k]]

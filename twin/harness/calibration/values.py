@@ -182,9 +182,9 @@ def fit_note(stat: str, captures: int, hours: float, runs: int, session_h: float
                 f"captures{without}")
     if stat == "lateral_mode" and runs:
         return f"fitted jointly to the IMU's yaw mode in {runs} Phase II runs at {session_h:g} h"
-    if stat.endswith("_mode"):
-        return (f"fitted jointly to the {stat.split('_')[0]} suspension mode of the nut accelerometers in "
-                f"{captures} Phase I captures at {hours:g} h" + (without if stat == "lateral_mode" else ""))
+    if stat == "lateral_mode":
+        return (f"fitted jointly to the lateral suspension mode of the nut accelerometers in {captures} "
+                f"Phase I captures at {hours:g} h{without}")
     if stat == "ripple" and runs:
         return (f"fitted jointly to the IMU's axial acceleration at the ripple's order in {runs} Phase II "
                 f"runs at {session_h:g} h")
