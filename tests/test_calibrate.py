@@ -516,6 +516,27 @@ def test_calibrate_benchmark_meets_its_targets(tmp_path):
 
 
 
+def test_the_benchmark_draws_no_effect_its_two_sessions_cannot_show():
+    """A case's recording has two Phase II sessions: an effect that acts only through a draw per
+    session (``random``: the origin's spread) is never drawn; every other effect of the library
+    is, over enough cases, in the upper half of its prior range."""
+    import numpy as np
+
+    from twin.harness.calibration.benchmark import draw_additions
+    from twin.harness.diagnosis.candidates import candidates
+
+    lib = candidates()
+    rng = np.random.default_rng(7)
+    drawn = [draw_additions(rng, "effect")[0] for _ in range(200)]
+    names = {n for d in drawn for n in d}
+    assert names == {n for n, e in lib.items() if not e.random}
+    assert "origin_variability" not in names
+    for d in drawn:
+        for n, values in d.items():
+            for p in lib[n].params:
+                assert p.low <= abs(values[p.name]) <= p.high, (n, p.name, values[p.name])
+
+
 def test_a_case_whose_diagnosis_changed_keeps_its_calibration(monkeypatch):
     """The benchmark's calibration marker (``calibrated.json``) holds :func:`calibration_key`:
     the draw and the benchmark's and the calibration's versions. A change of the diagnosis's
