@@ -37,7 +37,7 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 from record import record, text  # noqa: E402
 
 from analysis.base.files import write_json  # noqa: E402
-from twin.harness.calibration.benchmark import case_key, draws  # noqa: E402
+from twin.harness.calibration.benchmark import case_key, draws, judged_again  # noqa: E402
 from twin.harness.calibration.benchmark_summary import CASE_KINDS, summarise  # noqa: E402
 
 RESULTS = REPO / "benchmarks" / "results" / "calibrate-benchmark"
@@ -62,7 +62,8 @@ def kept_entries(results: Path = RESULTS) -> list[dict]:
 def collect(outs: list[Path], results: Path = RESULTS) -> list[dict]:
     """Copy the finished cases of the runs ``outs`` whose key is the current code's into
     ``results`` (a case recorded twice: the later run's), drop the recorded ones whose key is not,
-    and return all kept entries in case order."""
+    and return all kept entries in case order, each diagnosis judged by the current rule
+    (:func:`twin.harness.calibration.benchmark.judged_again`)."""
     keys = current_keys()
     results.mkdir(parents=True, exist_ok=True)
     for f in sorted(results.glob("case-*.json")):
@@ -70,6 +71,8 @@ def collect(outs: list[Path], results: Path = RESULTS) -> list[dict]:
         if e.get("key") != keys[e["case"]]:
             print(f"{f.relative_to(REPO)}: dropped (measured by another version of the code)")
             f.unlink()
+        else:
+            write_json(f, judged_again(e), nan_as_null=True)
     for out in outs:
         for f in sorted(Path(out).glob("case-*/entry.json")):
             e = json.loads(f.read_text())
@@ -78,7 +81,7 @@ def collect(outs: list[Path], results: Path = RESULTS) -> list[dict]:
             elif e["kind"] != "null" and "oracle" not in e:
                 print(f"{f}: not kept (its oracle was not run yet)")
             else:
-                write_json(results / f"case-{e['case']:03d}.json", e, nan_as_null=True)
+                write_json(results / f"case-{e['case']:03d}.json", judged_again(e), nan_as_null=True)
     return kept_entries(results)
 
 
@@ -105,6 +108,8 @@ def case_table(entries: list[dict]) -> str:
             named, right = f"failed: {e.get('diagnosis_error', '–')[:80]}", "no"
         else:
             named, right = (", ".join(dg["added"]) or "nothing"), ("yes" if dg["correct"] else "no")
+            if dg.get("absorbed"):
+                named += f" ({', '.join(dg['absorbed'])} absorbed by the calibration)"
         oracle = "–" if e["kind"] == "null" else ("yes" if e.get("oracle", {}).get("names_all") else "no")
         axis = f"{ax['lead_mm']:g} mm, {ax['carriage_mass_kg']:g} kg"
         rows.append(f"| {e['case']} | {e['kind']} | {added} | {axis} | {'/'.join(e['formats'])} | "

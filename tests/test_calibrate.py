@@ -739,24 +739,37 @@ def test_calibrate_benchmark_stopped_in_a_diagnosis_goes_on_from_its_calibration
 def test_an_effect_the_calibration_absorbed_counts_as_found():
     """A servo-dynamics effect (both loops slower) whose every key the calibration fitted, each
     holding the machine's value inside its interval, is absorbed: the diagnosis that then names
-    nothing is right; with one of its keys left at the default (or outside its interval) it is
-    not, and naming nothing is wrong."""
-    from analysis.diagnosis.attribution import NO_GAP
-    from twin.harness.calibration.benchmark import absorbed_effects, score_diagnosis
+    nothing is right. With the position loop, which the calibration never fits, left at the
+    default and the velocity loop inside its interval, it is absorbed in part: right only where
+    the diagnosis finds no significant gap. The velocity loop outside its interval (or left at
+    the default) is absorbed in no way, and naming nothing is wrong; a kept case's row is judged
+    again by the same rule."""
+    from analysis.diagnosis.attribution import NO_GAP, UNEXPLAINED
+    from twin.harness.calibration.benchmark import absorbed_effects, judge_diagnosis, score_diagnosis
 
     effects = {"servo_dynamics": {"bandwidth_factor": 0.6}}
-    both = {"axis.velocity_bandwidth_hz": {"source": "fitted", "inside": True},
-            "axis.position_bandwidth_hz": {"source": "fitted", "inside": True}}
-    res = {"added": [], "verdict": NO_GAP, "heldout_gap_before": 1.0, "heldout_gap_critical": 2.0}
-    assert absorbed_effects(effects, both) == ["servo_dynamics"]
-    assert score_diagnosis("effect", effects, {}, res, ["servo_dynamics"])["correct"]
-    for missing in ({"axis.velocity_bandwidth_hz": both["axis.velocity_bandwidth_hz"]},
+    vel = {"axis.velocity_bandwidth_hz": {"source": "fitted", "inside": True}}
+    both = {**vel, "axis.position_bandwidth_hz": {"source": "fitted", "inside": True}}
+    quiet = {"added": [], "verdict": NO_GAP, "heldout_gap_before": 1.0, "heldout_gap_critical": 2.0}
+    gap = {**quiet, "verdict": UNEXPLAINED, "heldout_gap_before": 9.0}
+    for res in (quiet, gap):
+        assert absorbed_effects(effects, both, res["verdict"]) == ["servo_dynamics"]
+        assert score_diagnosis("effect", effects, {}, res, both)["correct"]
+    assert absorbed_effects(effects, vel, NO_GAP) == ["servo_dynamics"]
+    assert score_diagnosis("effect", effects, {}, quiet, vel)["correct"]
+    assert absorbed_effects(effects, vel, UNEXPLAINED) == []
+    assert not score_diagnosis("effect", effects, {}, gap, vel)["correct"]
+    for missing in ({}, {"axis.velocity_bandwidth_hz": {"source": "fitted", "inside": False}},
                     {**both, "axis.position_bandwidth_hz": {"source": "fitted", "inside": False}}):
-        assert absorbed_effects(effects, missing) == []
-        assert not score_diagnosis("effect", effects, {}, res, absorbed_effects(effects, missing))["correct"]
+        assert absorbed_effects(effects, missing, NO_GAP) == []
+        assert not score_diagnosis("effect", effects, {}, quiet, missing)["correct"]
     # the artefact of a case with both is still to be named
-    several = score_diagnosis("several", effects, {"noise:torque": {"rms": 0.05}}, res, ["servo_dynamics"])
+    several = score_diagnosis("several", effects, {"noise:torque": {"rms": 0.05}}, quiet, both)
     assert not several["correct"]
+    # a row kept from an earlier run, judged by the current rule
+    row = {"verdict": NO_GAP, "added": [], "fitted": {}, "absorbed": [], "correct": False}
+    assert judge_diagnosis("effect", effects, {}, row, vel) == {"absorbed": ["servo_dynamics"], "correct": True,
+                                                                 "nothing_else": True}
 
 
 def test_an_artefact_that_changes_no_sample_is_not_scored_and_twin_checks_finding_is_named_first(tmp_path):

@@ -162,57 +162,84 @@ def draw_additions(rng: np.random.Generator, kind: str) -> tuple[dict, dict]:
     return effects, artefacts
 
 
-def absorbed_effects(effects: dict, parameters: dict) -> list[str]:
+def absorbed_effects(effects: dict, parameters: dict, verdict: str | None = None) -> list[str]:
     """The ``effects`` that `twin calibrate` absorbed: an effect every scenario key of which
     (``servo_dynamics``: both loops' bandwidths) the calibration fitted, each holding the
     machine's value (the drawn one changed by the effect: :func:`score_case`) inside its 90 %
     interval. Such an effect is a change of calibrated parameters: the calibrated twin carries
     it, its TOML says by how much, and the diagnosis, which looks for what the calibration left,
-    has nothing to name. ``parameters``: a case entry's, {key: {"source", "inside", ...}}."""
+    has nothing to name. Also absorbed, in part: at least one key fitted inside its interval and
+    the others keys the calibration never fits (not in ``parameters``, and in
+    :data:`twin.harness.calibration.values.NOT_INFORMED`: the position loop), with the diagnosis
+    against the calibrated twin finding no significant gap (``verdict``): what the calibration
+    cannot carry, the recording does not show.
+    ``parameters``: a case entry's, {key: {"source", "inside", ...}}."""
+    from analysis.diagnosis.attribution import NO_GAP
+    from twin.harness.calibration.values import NOT_INFORMED
     from twin.harness.diagnosis.candidates import candidates
 
     lib, out = candidates(), []
     for name in effects:
         keys = [k for prm in getattr(lib.get(name), "params", ()) for k in prm.keys]
-        if keys and all(parameters.get(k, {}).get("source") == "fitted" and parameters[k]["inside"]
-                        for k in keys):
+        held = [k for k in keys if parameters.get(k, {}).get("source") == "fitted" and parameters[k]["inside"]]
+        part = verdict == NO_GAP and bool(held) and all(
+            k in held or (k not in parameters and k in NOT_INFORMED) for k in keys)
+        if keys and (len(held) == len(keys) or part):
             out.append(name)
     return out
 
 
-def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, absorbed: list[str] = ()) -> dict:
-    """The diagnosis of a case of ``kind`` against what was added (``effects``, ``artefacts``: those
-    that change the recording):
-    its verdict and figures, ``correct`` by the kind's rule (:data:`CASE_KINDS`; an effect
-    ``absorbed`` by the calibration, :func:`absorbed_effects`, counts as found) and
-    ``nothing_else`` (every added candidate is something that was added, or makes the same
-    recording)."""
-    from analysis.diagnosis.attribution import NO_GAP
+def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, parameters: dict | None = None) -> dict:
+    """The diagnosis ``res`` of a case of ``kind`` against what was added (``effects``,
+    ``artefacts``: those that change the recording), the case's calibrated ``parameters`` (a case
+    entry's): its verdict and figures, judged by :func:`judge_diagnosis`."""
     from analysis.diagnosis.flagged import named
-    from twin.harness.diagnosis.benchmark import same_answer
 
     added = named(res)  # what twin check found first, then the attribution's
-    values = {**effects, **artefacts}
-
-    def names(name: str, v: dict, a: dict) -> bool:
-        return same_answer(name, v, a["effect"], a["params"])
-
     row = {"verdict": res["verdict"], "heldout_gap": res["heldout_gap_before"],
            "critical": res["heldout_gap_critical"],
            "significant": int(sum(r["significant"] for r in res.get("regions", []))),
            "added": [a["effect"] for a in added], "fitted": {a["effect"]: a["params"] for a in added},
            "heldout_shrink": res.get("heldout_shrink"),
-           "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated"),
-           "nothing_else": all(any(names(n, v, a) for n, v in values.items()) for a in added),
-           "absorbed": list(absorbed)}
+           "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated")}
+    return {**row, **judge_diagnosis(kind, effects, artefacts, row, parameters or {})}
+
+
+def judge_diagnosis(kind: str, effects: dict, artefacts: dict, row: dict, parameters: dict) -> dict:
+    """{"absorbed", "correct", "nothing_else"} of a diagnosis's ``row`` (:func:`score_diagnosis`:
+    what it named, in order, with the fitted values): ``correct`` by the kind's rule
+    (:data:`CASE_KINDS`; an effect ``absorbed`` by the calibration, :func:`absorbed_effects`,
+    counts as found) and ``nothing_else`` (every added candidate is something that was added, or
+    makes the same recording). A kept case is judged again from its row by the current rule."""
+    from analysis.diagnosis.attribution import NO_GAP
+    from twin.harness.diagnosis.benchmark import same_answer
+
+    values = {**effects, **artefacts}
+    added = [{"effect": n, "params": row["fitted"].get(n, {})} for n in row["added"]]
+    absorbed = absorbed_effects(effects, parameters, row["verdict"])
+
+    def names(name: str, v: dict, a: dict) -> bool:
+        return same_answer(name, v, a["effect"], a["params"])
+
     if kind == "null" or not values:  # nothing added, or an artefact that changed no sample
-        row["correct"] = res["verdict"] == NO_GAP and not added
+        correct = row["verdict"] == NO_GAP and not added
     elif kind in ("effect", "artefact"):
         name, v = next(iter(values.items()))
-        row["correct"] = name in absorbed or (bool(added) and names(name, v, added[0]))
+        correct = name in absorbed or (bool(added) and names(name, v, added[0]))
     else:
-        row["correct"] = all(n in absorbed or any(names(n, v, a) for a in added) for n, v in values.items())
-    return row
+        correct = all(n in absorbed or any(names(n, v, a) for a in added) for n, v in values.items())
+    return {"absorbed": absorbed, "correct": correct,
+            "nothing_else": all(any(names(n, v, a) for n, v in values.items()) for a in added)}
+
+
+def judged_again(entry: dict) -> dict:
+    """A case's ``entry`` (kept from an earlier run) with its diagnosis judged by the current
+    rule (:func:`judge_diagnosis`) from the diagnosis it recorded."""
+    if "diagnosis" in entry:
+        active = {n: v for n, v in entry["artefacts"].items() if n not in entry.get("inactive_artefacts", [])}
+        entry["diagnosis"].update(judge_diagnosis(entry["kind"], entry["effects"], active, entry["diagnosis"],
+                                                  entry["parameters"]))
+    return entry
 
 
 def _get(data: dict, key: str):
@@ -326,8 +353,7 @@ def run_case(i: int, s: Scenario, out: Path, workers: int, diagnose: bool, seeds
         except Exception as exc:  # noqa: BLE001 - one case's failure is a figure, not the end
             entry["diagnosis_error"] = f"{type(exc).__name__}: {exc}"
         else:
-            entry["diagnosis"] = {**score_diagnosis(kind, effects, active, res,
-                                                    absorbed_effects(effects, entry["parameters"])),
+            entry["diagnosis"] = {**score_diagnosis(kind, effects, active, res, entry["parameters"]),
                                   "seconds": time.perf_counter() - t1}
     r_ok = sum(v["within"] for v in entry["routine"].values())
     p_ok = sum(v["inside"] for v in entry["parameters"].values())
@@ -437,6 +463,7 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
                 write_json(kept, entry, nan_as_null=True)
         if entry.get("key") == key:
             progress(f"case {i} ({kind}): kept from {source} (the same draw, options and versions)")
+            entry = judged_again(entry)
         elif i < first:
             continue
         else:
@@ -458,5 +485,5 @@ def run_benchmark(out: str | Path, *, cases: int = 24, seed: int = 2026, workers
     return doc
 
 
-__all__ = ["absorbed_effects", "calibration_key", "case_key", "draw_additions", "draw_case", "draws", "run_benchmark",
-           "run_oracle", "score_case", "score_diagnosis"]
+__all__ = ["absorbed_effects", "calibration_key", "case_key", "draw_additions", "draw_case", "draws",
+           "judge_diagnosis", "judged_again", "run_benchmark", "run_oracle", "score_case", "score_diagnosis"]
