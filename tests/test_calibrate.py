@@ -534,7 +534,12 @@ def test_the_benchmark_draws_no_effect_its_two_sessions_cannot_show():
     for d in drawn:
         for n, values in d.items():
             for p in lib[n].params:
-                assert p.low <= abs(values[p.name]) <= p.high, (n, p.name, values[p.name])
+                v = abs(values[p.name])
+                if p.discrete:
+                    assert v in p.grid, (n, p.name, v)
+                    continue
+                mid = math.sqrt(p.low * p.high) if p.log else 0.5 * (p.low + p.high)
+                assert mid <= v <= p.high, (n, p.name, v)
 
 
 def test_a_case_whose_diagnosis_changed_keeps_its_calibration(monkeypatch):

@@ -141,8 +141,7 @@ def draw_additions(rng: np.random.Generator, kind: str) -> tuple[dict, dict]:
     range; an artefact's kind (gain, noise, line, drift, offset, clipping) first, then its
     target. The effects that act only through a draw per Phase II session (``random``: the
     origin's spread between sessions) are not drawn: a case's recording has two sessions, one
-    shift between them, from which no diagnosis can tell a spread (the oracle, the axis as drawn,
-    names nothing for one of ±2.9 mm on top of the twin's ±2 mm); the diagnosis benchmark, with
+    shift between them, from which no diagnosis can tell a spread; the diagnosis benchmark, with
     three sessions, scores them."""
     from analysis.diagnosis.artefacts import ARTEFACTS
     from twin.harness.diagnosis.candidates import candidates
