@@ -231,10 +231,14 @@ def measure_instruments(m, phase1_captures: list[str], phase2_runs: list[tuple[s
                 f"mean density of the six nut axes over the last half of each rest, {band[0]:.3g}–{band[1]:.3g} Hz")
             d = np.concatenate(diffs)
             q = torque_resolution(np.concatenate(tq_all))
-            # white noise per sample: a difference has variance 2σ²; the quantisation's q²/12 removed
+            # white noise per sample: a difference has variance 2σ²; the quantisation's q²/12 removed.
+            # Successive differences of white noise correlate -1/2: the relative error of σ from N of
+            # them is sqrt(3/(4N)), not the independent sqrt(1/(2N)) (Bartlett's formula for the
+            # variance of a sample variance of a correlated series: M. S. Bartlett, J. R. Stat. Soc.
+            # Suppl. 8, 1946; relative error of σ = half that of σ²: sqrt(3/N)/2)
             var = max(float(np.var(d)) / 2 - q * q / 12, 0.0)
             out["sensors.torque_noise_Nm"] = Measured(
-                math.sqrt(var), "N·m", 1 / math.sqrt(2 * max(d.size, 1)),
+                math.sqrt(var), "N·m", math.sqrt(0.75 / max(d.size, 1)),
                 "rms of the sample-to-sample changes at rest / √2, the resolution's share removed")
             out["torque_resolution_Nm"] = Measured(q, "N·m", 0.0, "smallest step between the torque's values")
     return out

@@ -86,6 +86,12 @@ def _calibration_table(record: dict) -> str:
         src = json.dumps(v["source"])
         lines.append(f"{json.dumps(v['key'])} = {{ value = {_fmt(v['value'])}, source = {src}{iv} }}")
     lines.append("defaults = [" + ", ".join(json.dumps(d["key"]) for d in record["defaults"]) + "]")
+    misfit = record.get("misfit")
+    if misfit:  # layer (c) did not match the recording: twin diagnose keeps the calibrated values fixed
+        named = ", ".join(f"{{ statistic = {json.dumps(m['statistic'])}, residual_se = {_fmt(m['residual_se'])} }}"
+                          for m in misfit["statistics"])
+        lines.append(f"misfit = {{ chi2 = {_fmt(misfit['chi2'])}, dof = {int(misfit['dof'])}, "
+                     f"critical = {_fmt(misfit['critical'])}, p = {_fmt(misfit['p'])}, statistics = [{named}] }}")
     cov = record.get("covariance")
     if cov:  # the calibrated values' joint covariance in log space (twin diagnose draws from it)
         rows = ", ".join("[" + ", ".join(f"{x:.6g}" for x in row) + "]" for row in cov["log"])

@@ -53,7 +53,7 @@ Modules: :mod:`.values` (what is fitted, its priors and channels, a calibrated v
 b), :mod:`.physical` (layer c), :mod:`.run` (the verb), :mod:`.benchmark` (the blind round trip).
 """
 
-from twin.harness.calibration.physical import FitResult, fit_physical
+from twin.harness.calibration.physical import fit_physical
 from twin.harness.calibration.run import calibrate
 from twin.harness.calibration.sensors import corrected_sensor_values, sensor_values
 from twin.harness.calibration.values import (
@@ -62,6 +62,7 @@ from twin.harness.calibration.values import (
     NOT_INFORMED,
     PRIOR_FACTOR,
     CalibrationError,
+    FitResult,
     Value,
     flagged_keys,
 )

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from analysis.base.executors import default_processes
 from analysis.base.files import write_json, write_text
+from twin.harness.calibration.misfit import fit_misfit, misfit_sentence
 from twin.harness.calibration.physical import fit_physical
 from twin.harness.calibration.sensors import (
     corrected_sensor_values,
@@ -82,12 +83,17 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     values = [v for v in values if v.key not in flagged]
     defaults.update(flagged)
     covariance = joint_covariance(fit.covariance, [v for v in sens if v.key not in flagged], set(flagged))
+    misfit = fit_misfit(fit.residual, fit.statistics, len(fit.values))
+    if misfit:
+        progress(f"layer c: {misfit_sentence(misfit)}")
     record = {"version": CALIBRATE_VERSION, "recording": str(recording.resolve()), "check": check,
-              "covariance": covariance,
+              "covariance": covariance, "misfit": misfit,
               "values": [v.to_json() for v in values],
               "defaults": [{"key": k, "why": w} for k, w in defaults.items()],
-              "notes": notes + sens_notes + ([fit.stopped] if fit.stopped else []), "simulations": fit.simulations,
-              "fit_seconds": fit.seconds, "residual_se": fit.residual, "estimated_s": fit.estimated_s,
+              "notes": notes + sens_notes + ([fit.stopped] if fit.stopped else [])
+              + ([misfit_sentence(misfit)] if misfit else []), "simulations": fit.simulations,
+              "fit_seconds": fit.seconds, "residual_se": fit.residual, "residual_statistics": fit.statistics,
+              "estimated_s": fit.estimated_s,
               "budget_s": budget_s, "stopped": fit.stopped}
     text, _ = scenario_text(recording, name, calibrated={v.key: (v.value, v.source, v.comment()) for v in values},
                             defaults=defaults, calibration=record)

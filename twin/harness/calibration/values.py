@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.ingest.check import findings_by_channel
 
-CALIBRATE_VERSION = 25  # 24: the rising and falling ramps apart; 25: the trucks read on the pitch where it stands
+CALIBRATE_VERSION = 26  # 25: the trucks read on the pitch; 26: the misfit test, informed through any statistic
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -190,6 +190,31 @@ def fit_note(stat: str, captures: int, hours: float, runs: int, session_h: float
                 f"runs at {session_h:g} h")
     return (f"fitted jointly to the torque's {stat.replace('_', ' ')} of {captures} Phase I captures "
             f"at {hours:g} h" + (without if stat == "ripple" else ""))
+
+
+@dataclass
+class FitResult:
+    """Layer (c)'s outcome: the fitted ``values``, the ``skipped`` ones and why, the twin
+    ``simulations`` run, the ``seconds`` spent, the ``residual`` (standard errors) of the
+    ``statistics`` (:data:`STAT_NAMES`) and, for layer
+    (b)'s correction, the instruments the twin's own rests give at each of the spread's seeds
+    (``instruments``: {key: [value per seed]}); ``estimated_s``: the calibration's longest time
+    as estimated after the first simulations (None when no fit ran); ``stopped``: why the fit
+    stopped before it converged (``--budget-minutes``), or None; ``covariance``: {``keys``,
+    ``log``: the joint covariance of the log values of the fitted parameters and of those kept
+    at the default (their prior span)}, or None."""
+
+    values: list[Value]
+    skipped: dict[str, str]
+    simulations: int
+    seconds: float
+    residual: list[float]
+    statistics: list[str]
+    instruments: dict[str, list[float]]
+    first_sensors: dict[str, float]
+    estimated_s: float | None = None
+    stopped: str | None = None
+    covariance: dict | None = None
 
 
 class _OutOfTime(Exception):

@@ -46,6 +46,7 @@ from analysis.diagnosis.artefacts import ARTEFACTS
 from analysis.diagnosis.flagged import found_by_check, leave_out
 from analysis.diagnosis.gap_report import write_diagnosis_report
 from analysis.diagnosis.signature import PARTS, signature
+from twin.harness.calibration.misfit import misfit_sentence
 from twin.harness.calibration.uncertainty import check_drawable
 from twin.harness.diagnosis.budget import prepare_subset
 from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
@@ -68,7 +69,7 @@ def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> di
     if not cal:
         return None
     check_drawable(cal, f"scenario {nominal.name!r}")
-    values = [{"key": k, **v} for k, v in cal.items() if isinstance(v, dict) and k != "covariance"]
+    values = [{"key": k, **v} for k, v in cal.items() if isinstance(v, dict) and k not in ("covariance", "misfit")]
     names = set(library or []) | (set(PARAMETERS) if library is None and "parameter" in check_kinds(kinds) else set())
     fitted = [v["key"] for v in values if v.get("source") == "fitted"]
     again = sorted(n for n in names if n in PARAMETERS and set(PARAMETERS[n].factor.keys) & set(fitted))
@@ -77,14 +78,18 @@ def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> di
              "--candidate naming none of them): what remains is looked for among the unmodelled effects and "
              "the acquisition's artefacts.")
     cov = cal.get("covariance") or {}
-    if cov:
+    misfit = cal.get("misfit") or None
+    if misfit:
+        words += f" The calibration's fit: {misfit_sentence(misfit)}."
+        cov = {}
+    elif cov:
         words += (f" The twin's spread holds the calibration's uncertainty: each twin seed draws the "
                   f"{len(cov['keys'])} calibrated values with an uncertainty (those kept at the default with "
                   "their prior span) from their joint distribution, so a statistic a calibrated value moves "
                   "within its interval is not a gap.")
     return {"recording": cal.get("recording"), "version": cal.get("version"), "values": values,
             "defaults": list(cal.get("defaults", [])), "candidates_again": again, "candidates": words,
-            "drawn": list(cov.get("keys", []))}
+            "drawn": list(cov.get("keys", [])), "misfit": misfit}
 
 
 def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = DEFAULT_SEEDS,

@@ -1,0 +1,73 @@
+"""Whether layer (c) matched the recording: a chi-squared test of the fit's residuals.
+
+At the solution of a weighted least-squares fit of p parameters to m statistics whose errors are
+independent and Gaussian, the sum of the squared residuals (each in its standard errors) follows a
+chi-squared law with m − p degrees of freedom when the model can produce the data (the
+goodness-of-fit test of W. H. Press et al., "Numerical Recipes", 3rd ed., 2007, §15.1 and §15.2).
+The twin matching the recording's statistics only as far as this says the twin lacks something
+the recording holds: an unmodelled effect or an artefact of its acquisition acts on the
+statistics left unmatched. The fitted values are then bent by it, and their intervals, computed as
+if the fit held, do not hold: ``twin diagnose`` keeps the calibrated values fixed instead of drawing
+its twin seeds from them (:func:`twin.harness.calibration.uncertainty.draw_calibrated`), so the
+mismatch is left as a gap for it to explain.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+#: Significance of the test: a twin that can produce the recording is called a misfit this rarely.
+MISFIT_P = 0.001
+
+#: What each statistic of layer (c) (:data:`twin.harness.calibration.values.STAT_NAMES`) reads.
+STATISTIC_WORDS = {
+    "inertia": "the torque's inertia in the ramps", "cruise_drag": "the torque's drag at cruise",
+    "viscous_drag": "the torque's drag growing with speed", "ripple": "the ripple at its order",
+    "accel": "the moves' acceleration", "dwell": "the moves' dwell",
+    "vertical_mode": "the carriage's vertical mode on the nut accelerometers",
+    "lateral_mode": "the carriage's lateral mode", "loop_response": "the velocity loop's response",
+    "loop_ringing": "the IMU's ringing at the starts and stops",
+}
+
+
+def fit_misfit(residual_se: list[float], statistics: list[str], n_fitted: int) -> dict | None:
+    """The misfit of layer (c), or None when the fit matched the recording.
+
+    ``residual_se``: the residuals at the solution, shape (m,), in standard errors;
+    ``statistics``: their names (:data:`STATISTIC_WORDS`' keys), shape (m,); ``n_fitted``: the
+    parameters fitted (p). The sum of squares is tested against the chi-squared quantile 1 −
+    :data:`MISFIT_P` with max(m − p, 1) degrees of freedom (a fit with as many statistics as
+    parameters should meet them all, and one degree of freedom keeps the test from calling its
+    scatter a misfit). Returns {``chi2``, ``dof``, ``critical``, ``p``, ``statistics``: [{``statistic``,
+    ``residual_se``}] those beyond the two-sided normal limit of :data:`MISFIT_P` (at least the
+    largest), largest first}."""
+    r = np.asarray(residual_se, float)
+    if r.size != len(statistics):
+        raise ValueError(f"{r.size} residuals for {len(statistics)} statistics: expected one residual each")
+    if not r.size:
+        return None
+    dof = max(r.size - int(n_fitted), 1)
+    chi2 = float(r @ r)
+    critical = float(stats.chi2.isf(MISFIT_P, dof))
+    if not chi2 > critical:
+        return None
+    limit = float(stats.norm.isf(MISFIT_P / 2))
+    order = np.argsort(-np.abs(r))
+    named = [int(i) for i in order if abs(r[i]) > limit] or [int(order[0])]
+    return {"chi2": chi2, "dof": dof, "critical": critical, "p": MISFIT_P,
+            "statistics": [{"statistic": statistics[i], "residual_se": float(r[i])} for i in named]}
+
+
+def misfit_sentence(misfit: dict) -> str:
+    """``misfit`` (:func:`fit_misfit`) in words, for the TOML, the JSON and ``twin diagnose``'s page."""
+    worst = ", ".join(f"{STATISTIC_WORDS.get(s['statistic'], s['statistic'])} ({s['residual_se']:+.1f} standard "
+                      "errors)" for s in misfit["statistics"])
+    return (f"the twin could not match the recording: squared residuals {misfit['chi2']:.3g} over {misfit['dof']} "
+            f"degree(s) of freedom, above the chi-squared limit {misfit['critical']:.3g} at p = {misfit['p']:g}; "
+            f"unmatched: {worst}. An effect the twin lacks, or an artefact of the acquisition, acts on them: the "
+            "fitted values are bent by it and their intervals assume a match, so `twin diagnose` keeps the "
+            "calibrated values fixed and leaves the mismatch for it to explain")
+
+
+__all__ = ["MISFIT_P", "STATISTIC_WORDS", "fit_misfit", "misfit_sentence"]
