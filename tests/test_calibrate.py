@@ -446,6 +446,9 @@ def test_round_trip_fits_inside_the_intervals_and_the_routine_within_0p1_percent
     # foreign-16mm's 180-kg carriage: its pitch does not stand out in every capture
     assert "# fitted: fitted jointly to the centroid of the vertical spectrum (its pitch does not stand out)" in text
     assert "[calibration]" in text
+    # the twin can produce this recording: no misfit, the residuals named one a statistic
+    assert rec["misfit"] is None and "misfit" not in text and "could not match" not in cal.stderr
+    assert len(rec["residual_statistics"]) == len(rec["residual_se"]) >= len(fitted)
     assert "axis.drag_viscous_Nm_s_per_rad" in cal.stdout  # the table of values, on stdout
     said = " ".join(cal.stderr.split())
     assert "twin default: axis.nut_stiffness_N_per_um" in said and "next: twin diagnose" in said
