@@ -14,6 +14,28 @@ from twin.harness.calibration.misfit import MISFIT_P, fit_misfit, misfit_sentenc
 NAMES = ["inertia", "cruise_drag", "ripple", "accel", "dwell", "lateral_mode", "loop_response", "loop_ringing"]
 
 
+def _residuals(jac: np.ndarray, errors: np.ndarray) -> np.ndarray:
+    """The least-squares residuals (n, m) of the errors ``errors`` (n, m) fitted by ``jac`` (m, p)."""
+    return errors - errors @ np.linalg.pinv(jac).T @ jac.T
+
+
+def _called(residuals: np.ndarray, n_fitted: int, chi2: np.ndarray | None = None) -> np.ndarray:
+    """Whether each row of ``residuals`` (n, m), of χ² ``chi2`` (n,) (default Σ r²), is a misfit:
+    the test's limit applied to every row at once, checked against :func:`fit_misfit` on the
+    first 50."""
+    chi2 = np.sum(residuals ** 2, axis=1) if chi2 is None else np.asarray(chi2)
+    limit = _limit(max(residuals.shape[1] - n_fitted, 1))
+    for r, c in zip(residuals[:50], chi2[:50], strict=True):
+        assert (fit_misfit(r.tolist(), NAMES, n_fitted, float(c)) is not None) == bool(c > limit)
+    return chi2 > limit
+
+
+def _limit(dof: int) -> float:
+    from scipy import stats
+
+    return float(stats.chi2.isf(MISFIT_P, dof))
+
+
 def test_a_fit_the_twin_can_produce_is_called_a_misfit_at_the_tests_rate():
     """20 000 linear fits of 6 parameters to 8 statistics with standard normal errors (the twin
     can produce the recording): the residuals at each least-squares solution are called a misfit
@@ -22,12 +44,8 @@ def test_a_fit_the_twin_can_produce_is_called_a_misfit_at_the_tests_rate():
     none)."""
     rng = np.random.default_rng(7)
     jac = rng.normal(size=(8, 6))
-    hits = 0
-    for _ in range(20_000):
-        e = rng.standard_normal(8)
-        r = e - jac @ np.linalg.lstsq(jac, e, rcond=None)[0]
-        hits += fit_misfit(r.tolist(), NAMES, 6) is not None
-    assert 0.0003 < hits / 20_000 < 0.002
+    rate = float(np.mean(_called(_residuals(jac, rng.standard_normal((20_000, 8))), 6)))
+    assert 0.0005 < rate < 0.002
     assert MISFIT_P == 0.001
 
 
@@ -44,10 +62,11 @@ def test_a_twin_that_cannot_ring_as_the_recording_does_is_a_misfit_naming_what_i
     assert [(s["statistic"], s["residual_se"]) for s in m["statistics"]] == [
         ("loop_ringing", 32.78), ("inertia", -10.09), ("loop_response", -3.52)]
     said = misfit_sentence(m)
-    assert said.startswith("the twin could not match the recording: squared residuals 1.19e+03 over 2 degree(s) "
-                           "of freedom, above the chi-squared limit 13.8 at p = 0.001; unmatched: the IMU's "
-                           "ringing at the starts and stops (+32.8 standard errors), the torque's inertia in the "
-                           "ramps (-10.1 standard errors), the velocity loop's response (-3.5 standard errors)")
+    assert said.startswith("the twin could not match the recording: χ² 1.19e+03 over 2 degree(s) of freedom (the "
+                           "parameters kept at their start counted over their span), above the limit 13.8 at p = "
+                           "0.001; unmatched: the IMU's ringing at the starts and stops (+32.8 standard errors), the "
+                           "torque's inertia in the ramps (-10.1 standard errors), the velocity loop's response "
+                           "(-3.5 standard errors)")
     one = [0.0] * 7 + [6.0]
     assert fit_misfit(one, NAMES, 6)["statistics"] == [{"statistic": "loop_ringing", "residual_se": 6.0}]
     assert fit_misfit([0.0] * 7 + [2.0], NAMES, 6) is None
@@ -55,6 +74,36 @@ def test_a_twin_that_cannot_ring_as_the_recording_does_is_a_misfit_naming_what_i
     assert fit_misfit([3.0, 0.0], NAMES[:2], 2) is None
     assert fit_misfit([3.5, 0.0], NAMES[:2], 2) is not None
     assert fit_misfit([], [], 0) is None
+
+
+def test_a_parameter_kept_at_its_default_is_counted_over_its_span_not_called_a_misfit():
+    """20 000 linear fits of 5 parameters to 8 statistics whose errors hold, beside their own
+    standard normal ones, a kept parameter's draw over its span (log standard deviation 0.76,
+    the rails' friction's factor 3.5 at 90 %) through a column moving the statistics by 2 to 6
+    standard errors per unit of log: Σ r² calls over 30 % of them a misfit, the χ² with the kept
+    span counted (:func:`profiled_chi2`) 0.1 %. A residual the kept parameter cannot make (the
+    direction no column has) is still one."""
+    from twin.harness.calibration.misfit import profiled_chi2
+
+    rng = np.random.default_rng(11)
+    jac = rng.normal(size=(8, 5))
+    kept = rng.uniform(2.0, 6.0, size=(8, 1)) * rng.choice([-1.0, 1.0], size=(8, 1))
+    var = np.array([0.76 ** 2])
+    errors = rng.standard_normal((20_000, 8)) + np.outer(rng.normal(0.0, 0.76, 20_000), kept[:, 0])
+    r = _residuals(jac, errors)
+    assert float(np.mean(_called(r, 5))) > 0.3
+    profiled = [profiled_chi2(x, jac, kept, var) for x in r[:50]]
+    # the same χ² for every row at once: whitened by C = I + A·P·Aᵀ, projected off the fitted columns
+    low = np.linalg.cholesky(np.eye(8) + var[0] * kept @ kept.T)
+    rw, jw = np.linalg.solve(low, r.T).T, np.linalg.solve(low, jac)
+    chi2 = np.sum(_residuals(jw, rw) ** 2, axis=1)
+    assert chi2[:50] == pytest.approx(profiled, rel=1e-9)
+    assert 0.0005 < float(np.mean(_called(r, 5, chi2))) < 0.002
+    # a residual of 20 standard errors orthogonal to every column: a misfit whatever the span
+    q = np.linalg.qr(np.column_stack([jac, kept]), mode="complete")[0][:, -1]
+    assert fit_misfit((20 * q).tolist(), NAMES, 5, profiled_chi2(20 * q, jac, kept, var))["chi2"] == pytest.approx(
+        400.0, rel=1e-9)
+    assert profiled_chi2(np.zeros(0), np.zeros((0, 0)), np.zeros((0, 0)), np.zeros(0)) == 0.0
 
 
 def test_residuals_and_statistics_of_different_lengths_are_refused():

@@ -17,6 +17,7 @@ from scipy import optimize
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.calibration.sensor_chain import Measured
 from analysis.dataset import open_measurements
+from twin.harness.calibration.misfit import profiled_chi2
 from twin.harness.calibration.sensors import corrected_sensor_values
 from twin.harness.calibration.twin_statistics import _statistics, evaluate, fit_scenario, vertical_statistic
 from twin.harness.calibration.values import (
@@ -453,6 +454,9 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
         sd = sd_all
     else:
         kept = np.arange(len(keys))
+    # the residuals' χ² with the kept parameters' span counted: the misfit test's (misfit.py)
+    chi2 = (profiled_chi2(fun, J / se[rows][:, None], j0[np.ix_(rows, kept)], np.diag(prior))
+            if free.size and fun.size else float(fun @ fun))
     widened = ""
     # The joint distribution of log p over the fitted and the kept parameters (the fitted ones'
     # part scaled so a Gaussian's 90 % range is the stated interval): what `twin diagnose` draws
@@ -480,6 +484,6 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
             inst.setdefault(k, []).append(float(v))
     return FitResult(values, skipped, sims[0], time.perf_counter() - t0, [float(r) for r in fun],
                      [STAT_NAMES[stat_idx[r]] for r in rows][:len(fun)], inst, first, total,
-                     stopped[0] if stopped else None, covariance)
+                     stopped[0] if stopped else None, covariance, chi2)
 
 

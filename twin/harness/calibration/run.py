@@ -83,7 +83,7 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     values = [v for v in values if v.key not in flagged]
     defaults.update(flagged)
     covariance = joint_covariance(fit.covariance, [v for v in sens if v.key not in flagged], set(flagged))
-    misfit = fit_misfit(fit.residual, fit.statistics, len(fit.values))
+    misfit = fit_misfit(fit.residual, fit.statistics, len(fit.values), fit.chi2)
     if misfit:
         progress(f"layer c: {misfit_sentence(misfit)}")
     record = {"version": CALIBRATE_VERSION, "recording": str(recording.resolve()), "check": check,

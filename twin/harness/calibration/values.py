@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.ingest.check import findings_by_channel
 
-CALIBRATE_VERSION = 26  # 25: the trucks read on the pitch; 26: the misfit test, informed through any statistic
+CALIBRATE_VERSION = 27  # 26: the misfit test, informed through any statistic; 27: the kept span in the misfit test
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
@@ -202,7 +202,8 @@ class FitResult:
     as estimated after the first simulations (None when no fit ran); ``stopped``: why the fit
     stopped before it converged (``--budget-minutes``), or None; ``covariance``: {``keys``,
     ``log``: the joint covariance of the log values of the fitted parameters and of those kept
-    at the default (their prior span)}, or None."""
+    at the default (their prior span)}, or None; ``chi2``: the residuals' χ² with the kept
+    parameters' span counted (:func:`twin.harness.calibration.misfit.profiled_chi2`)."""
 
     values: list[Value]
     skipped: dict[str, str]
@@ -215,6 +216,7 @@ class FitResult:
     estimated_s: float | None = None
     stopped: str | None = None
     covariance: dict | None = None
+    chi2: float | None = None
 
 
 class _OutOfTime(Exception):
