@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from analysis.calibration.drive import VELOCITY_BAND_HZ
 from analysis.ingest.check import findings_by_channel
 
-CALIBRATE_VERSION = 27  # 26: the misfit test, informed through any statistic; 27: the kept span in the misfit test
+CALIBRATE_VERSION = 26  # 25: the trucks read on the pitch; 26: the misfit test, informed through any statistic
 #: Phase I captures of the first sample the fit uses (the twin simulates as many).
 FIT_CAPTURES = 4
 #: Phase II runs of the first session the fit uses for the ripple (the twin simulates as many).
