@@ -6,9 +6,8 @@ chi-squared law with m − p degrees of freedom when the model can produce the d
 goodness-of-fit test of W. H. Press et al., "Numerical Recipes", 3rd ed., 2007, §15.1 and §15.2);
 the parameters kept at their start (not informed, not told apart) are uncertain by their assumed
 span, and their share of the residuals is counted as an error of the statistics
-(:func:`profiled_chi2`).
-The twin matching the recording's statistics only as far as this says the twin lacks something
-the recording holds: an unmodelled effect or an artefact of its acquisition acts on the
+(:func:`profiled_chi2`). A twin that matches the recording's statistics worse than this lacks
+something the recording holds: an unmodelled effect or an artefact of its acquisition acts on the
 statistics left unmatched. The fitted values are then bent by it, and their intervals, computed as
 if the fit held, do not hold: ``twin diagnose`` keeps the calibrated values fixed instead of drawing
 its twin seeds from them (:func:`twin.harness.calibration.uncertainty.draw_calibrated`), so the

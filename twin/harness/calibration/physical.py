@@ -239,6 +239,7 @@ def fit_physical(base: Scenario, recording: Path, cache: Path, budget_s: float |
     for side in (0, 1):  # each side a batch the size of a Jacobian's (a batch is one rollout in memory)
         values_at(twice[side::2])
     at_start = resid(x0)
+
     def shift(p: np.ndarray) -> float:
         """The largest move from the start of a statistic the twin gives at both points (1e6: none)."""
         r = resid(p)

@@ -196,14 +196,14 @@ def fit_note(stat: str, captures: int, hours: float, runs: int, session_h: float
 class FitResult:
     """Layer (c)'s outcome: the fitted ``values``, the ``skipped`` ones and why, the twin
     ``simulations`` run, the ``seconds`` spent, the ``residual`` (standard errors) of the
-    ``statistics`` (:data:`STAT_NAMES`) and, for layer
-    (b)'s correction, the instruments the twin's own rests give at each of the spread's seeds
-    (``instruments``: {key: [value per seed]}); ``estimated_s``: the calibration's longest time
-    as estimated after the first simulations (None when no fit ran); ``stopped``: why the fit
-    stopped before it converged (``--budget-minutes``), or None; ``covariance``: {``keys``,
-    ``log``: the joint covariance of the log values of the fitted parameters and of those kept
-    at the default (their prior span)}, or None; ``chi2``: the residuals' χ² with the kept
-    parameters' span counted (:func:`twin.harness.calibration.misfit.profiled_chi2`)."""
+    ``statistics`` (:data:`STAT_NAMES`) and, for layer (b)'s correction, the instruments the twin's
+    own rests give at each of the spread's seeds (``instruments``: {key: [value per seed]});
+    ``estimated_s``: the calibration's longest time as estimated after the first simulations
+    (None when no fit ran); ``stopped``: why the fit stopped before it converged
+    (``--budget-minutes``), or None; ``covariance``: {``keys``, ``log``: the joint covariance of
+    the log values of the fitted parameters and of those kept at the default (their prior span)},
+    or None; ``chi2``: the residuals' χ² with the kept parameters' span counted
+    (:func:`twin.harness.calibration.misfit.profiled_chi2`)."""
 
     values: list[Value]
     skipped: dict[str, str]
