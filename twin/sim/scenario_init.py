@@ -87,7 +87,7 @@ def _calibration_table(record: dict) -> str:
         lines.append(f"{json.dumps(v['key'])} = {{ value = {_fmt(v['value'])}, source = {src}{iv} }}")
     lines.append("defaults = [" + ", ".join(json.dumps(d["key"]) for d in record["defaults"]) + "]")
     misfit = record.get("misfit")
-    if misfit:  # layer (c) did not match the recording: twin diagnose keeps the calibrated values fixed
+    if misfit:  # layer (c) did not match the recording (twin diagnose says so)
         named = ", ".join(f"{{ statistic = {json.dumps(m['statistic'])}, residual_se = {_fmt(m['residual_se'])} }}"
                           for m in misfit["statistics"])
         lines.append(f"misfit = {{ chi2 = {_fmt(misfit['chi2'])}, dof = {int(misfit['dof'])}, "

@@ -8,10 +8,9 @@ the parameters kept at their start (not informed, not told apart) are uncertain 
 span, and their share of the residuals is counted as an error of the statistics
 (:func:`profiled_chi2`). A twin that matches the recording's statistics worse than this lacks
 something the recording holds: an unmodelled effect or an artefact of its acquisition acts on the
-statistics left unmatched. The fitted values are then bent by it, and their intervals, computed as
-if the fit held, do not hold: ``twin diagnose`` keeps the calibrated values fixed instead of drawing
-its twin seeds from them (:func:`twin.harness.calibration.uncertainty.draw_calibrated`), so the
-mismatch is left as a gap for it to explain.
+statistics left unmatched, or a parameter kept at its start lies beyond its assumed span. The
+fitted values are then bent, and their intervals, computed as if the fit held, may not hold:
+the calibration says so (the log, its JSON, the TOML) and ``twin diagnose`` says it on its page.
 """
 
 from __future__ import annotations
@@ -91,9 +90,9 @@ def misfit_sentence(misfit: dict) -> str:
     return (f"the twin could not match the recording: χ² {misfit['chi2']:.3g} over {misfit['dof']} degree(s) of "
             f"freedom (the parameters kept at their start counted over their span), above the limit "
             f"{misfit['critical']:.3g} at p = {misfit['p']:g}; "
-            f"unmatched: {worst}. An effect the twin lacks, or an artefact of the acquisition, acts on them: the "
-            "fitted values are bent by it and their intervals assume a match, so `twin diagnose` keeps the "
-            "calibrated values fixed and leaves the mismatch for it to explain")
+            f"unmatched: {worst}. An effect the twin lacks or an artefact of the acquisition acts on them, or a "
+            "value kept at the twin's default is beyond its assumed span: the fitted values may be bent by it, "
+            "and their intervals assume a match")
 
 
 __all__ = ["MISFIT_P", "STATISTIC_WORDS", "fit_misfit", "misfit_sentence", "profiled_chi2"]

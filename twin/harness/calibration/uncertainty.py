@@ -104,11 +104,9 @@ def draw_calibrated(data: dict, calibration: dict | None, seed: int) -> dict:
     cannot carry (:func:`suspension_step_product` ≥ 2: a light carriage drawn on stiff trucks)
     is drawn again, from the streams [``seed``, :data:`DRAW_STREAM`, 1], [..., 2], ...: the
     distribution is truncated to the twins that can be simulated. Raises ValueError, naming the
-    keys, when none of :data:`MAX_DRAWS` draws is. Unchanged too when the calibration is a misfit
-    (its ``misfit`` entry, :mod:`twin.harness.calibration.misfit`): its intervals assume a fit
-    that did not hold."""
+    keys, when none of :data:`MAX_DRAWS` draws is."""
     cov = (calibration or {}).get("covariance")
-    if not cov or (calibration or {}).get("misfit"):
+    if not cov:
         return data
     keys = list(cov["keys"])
     c = np.asarray(cov["log"], float)

@@ -79,14 +79,14 @@ def calibration_entry(nominal: Scenario, kinds, library: list[str] | None) -> di
              "the acquisition's artefacts.")
     cov = cal.get("covariance") or {}
     misfit = cal.get("misfit") or None
-    if misfit:
-        words += f" The calibration's fit: {misfit_sentence(misfit)}."
-        cov = {}
-    elif cov:
+    if cov:
         words += (f" The twin's spread holds the calibration's uncertainty: each twin seed draws the "
                   f"{len(cov['keys'])} calibrated values with an uncertainty (those kept at the default with "
                   "their prior span) from their joint distribution, so a statistic a calibrated value moves "
                   "within its interval is not a gap.")
+    if misfit:
+        words += (f" The calibration's fit: {misfit_sentence(misfit)}; a gap behind the misfit may be taken in "
+                  "part by the calibrated values, or hidden in their spread.")
     return {"recording": cal.get("recording"), "version": cal.get("version"), "values": values,
             "defaults": list(cal.get("defaults", [])), "candidates_again": again, "candidates": words,
             "drawn": list(cov.get("keys", [])), "misfit": misfit}
