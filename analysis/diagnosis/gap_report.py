@@ -316,7 +316,26 @@ def calibration_phrase(result: dict) -> str:
     measured = ", ".join(v["key"] for v in cal["values"] if v["source"] == "measured")
     return (f"The twin was calibrated to {cal['recording']}: fitted {fitted or 'nothing'}; measured "
             f"{measured or 'nothing'}; left at the twin's default: {', '.join(cal['defaults']) or 'nothing'}. "
-            f"{cal['candidates']}")
+            f"{cal['candidates']}{refit_phrase(result)}")
+
+
+def refit_phrase(result: dict) -> str:
+    """The calibration fitted again with a candidate effect in the twin (the result's ``refit``
+    entries, their sentences, and ``before_refit`` when one explained), for the page; "" when none
+    was tried."""
+    said = " ".join(r["sentence"] for r in result.get("refit") or [])
+    before = result.get("before_refit")
+    if before:
+        said += (f" This diagnosis is against the refitted twin, with {_explaining(result)} "
+                 f"its only candidate; against the twin as first calibrated: {before['verdict']} (held-out gap "
+                 f"{w.gap_number(before['heldout_gap_before'])} for a critical "
+                 f"{w.gap_number(before['heldout_gap_critical'])}; added: {', '.join(before['added']) or 'nothing'}; "
+                 f"refused: {', '.join(before['refused']) or 'nothing'}).")
+    return f" {said}" if said else ""
+
+
+def _explaining(result: dict) -> str:
+    return next(r["effect"] for r in result["refit"] if r.get("explains"))
 
 
 def render_page(result: dict, pngs: list[Path]) -> str:

@@ -214,6 +214,8 @@ def _print_diagnosis(res: dict) -> None:
                       f"{r['domain']} {r['channel']} {r['family']} {r['bin']}"
                       for r in residual.get("top_regions", [])[:3])
                      if residual.get("significant") else ""))
+    for r in res.get("refit") or []:
+        out.print(r["sentence"], markup=False, highlight=False)
     if res.get("worse_regions"):
         out.print("made worse by the added effects (held-out): " + "; ".join(
             f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² "
@@ -249,6 +251,10 @@ def diagnose(
         "diagnose a subset of the recording that fits this time (samples and sessions spread "
         "over its hours, the first captures and runs of each; the costs measured on this "
         "machine at the start): for a campaign-sized recording. Default: the whole recording")),
+    refit_effects: int = typer.Option(1, "--refit-effects", min=0, help=(
+        "against a calibrated scenario, when the gap stays unexplained: the leading physical effects "
+        "the calibration is fitted again with (each in the twin; a layer-c fit and a one-candidate "
+        "diagnosis each; 0: none; not with --budget-minutes)")),
     force: Force = False,
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
@@ -298,7 +304,9 @@ def diagnose(
                                 on_progress=lambda d, n: cb("simulations", d, n), kinds=kind_list,
                                 scheduler=scheduler, resim_seeds=resim_seeds,
                                 on_resim_progress=lambda d, n: cb("re-simulation with the added candidates", d, n),
-                                budget_minutes=budget_minutes, response_seeds=response_seeds, check=checked)
+                                budget_minutes=budget_minutes, response_seeds=response_seeds, check=checked,
+                                refit_effects=refit_effects, progress=lambda t: progress.console.print(
+                                    t, markup=False, highlight=False))
         except (DatasetError, ValueError) as exc:
             progress.stop()
             _fail(str(exc))

@@ -395,15 +395,16 @@ def run_oracle(entry: dict, s: Scenario, out: Path, workers: int, seeds: int,
 
 def case_key(s: Scenario, kind: str, effects: dict, artefacts: dict, *, diagnose: bool, seeds: int) -> str:
     """What makes a case's result: its draw, the options and the versions of the benchmark, of
-    ``twin check``, of the calibration and of the diagnosis's statistics and rules (a case with the
-    same key is not run again)."""
+    ``twin check``, of the calibration and of the diagnosis's statistics, rules and refit (a case
+    with the same key is not run again)."""
     from analysis.diagnosis.attribution import ATTRIBUTION_VERSION
     from analysis.diagnosis.signature import SIGNATURE_VERSION
     from analysis.ingest.check import CHECK_VERSION
     from twin.harness.calibration import CALIBRATE_VERSION
+    from twin.harness.diagnosis.refit import REFIT_VERSION
 
     text = json.dumps([BENCH_VERSION, CALIBRATE_VERSION, CHECK_VERSION, SIGNATURE_VERSION, ATTRIBUTION_VERSION,
-                       s.to_json(), kind, effects, artefacts, bool(diagnose), int(seeds), RESIM_SEEDS,
+                       REFIT_VERSION, s.to_json(), kind, effects, artefacts, bool(diagnose), int(seeds), RESIM_SEEDS,
                        RESPONSE_SEEDS], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 

@@ -37,12 +37,14 @@ from twin.sim.scenario import Scenario, ScenarioError, from_dict, load
 def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: float | None = None,
               workers: int | None = None, scheduler: str | None = None, cache: str | Path | None = None,
               name: str | None = None, progress: Callable[[str], None] = _progress,
-              check: dict | None = None) -> dict:
+              check: dict | None = None, twin_with: Callable[[Scenario], Scenario] | None = None) -> dict:
     """Calibrate the twin to ``recording`` (a campaign directory) and write the scenario to
     ``out_toml`` with the provenance of every value, and ``<out_toml>.calibration.json`` (what
     was measured, fitted and left, the fit's residuals and time). ``check``: the record of ``twin
     check`` on the recording (the CLI refuses errors unless forced): a value whose channel it flags
-    keeps the twin's default (:func:`flagged_keys`). Returns that JSON's content."""
+    keeps the twin's default (:func:`flagged_keys`). ``twin_with``: applied to the twin layer (c)
+    fits (an effect the twin carries while it fits, not written: the diagnosis's refit,
+    :mod:`twin.harness.diagnosis.refit`). Returns that JSON's content."""
     from twin.sim.scenario_init import scenario_text
 
     t0 = time.perf_counter()
@@ -69,7 +71,8 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
     for key, v in measured.items():
         set_dotted(data, key, float(f"{v.value:.6g}"), source="calibrate")
     base_b = from_dict(data)
-    fit = fit_physical(base_b, recording, cache / "fit", budget_s, workers, scheduler, progress,
+    fit = fit_physical(twin_with(base_b) if twin_with else base_b, recording, cache / "fit", budget_s, workers,
+                       scheduler, progress,
                        spent_s=time.perf_counter() - t0, sensors=measured, check=check)
     if fit.first_sensors:
         # the second step: the calibrated twin, set to the first step's floors, measured again
@@ -92,7 +95,8 @@ def calibrate(recording: str | Path, out_toml: str | Path, *, budget_minutes: fl
               "defaults": [{"key": k, "why": w} for k, w in defaults.items()],
               "notes": notes + sens_notes + ([fit.stopped] if fit.stopped else [])
               + ([misfit_sentence(misfit)] if misfit else []), "simulations": fit.simulations,
-              "fit_seconds": fit.seconds, "residual_se": fit.residual, "residual_statistics": fit.statistics,
+              "fit_seconds": fit.seconds, "chi2": fit.chi2, "residual_se": fit.residual,
+              "residual_statistics": fit.statistics,
               "estimated_s": fit.estimated_s,
               "budget_s": budget_s, "stopped": fit.stopped}
     text, _ = scenario_text(recording, name, calibrated={v.key: (v.value, v.source, v.comment()) for v in values},

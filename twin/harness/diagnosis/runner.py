@@ -21,7 +21,10 @@ For a recording and the scenario meant to describe it, :func:`run_diagnosis`
 6. takes ``twin check``'s findings into it (:mod:`analysis.diagnosis.flagged`): a channel the check
    finds clipped or flat is left out of the comparison, and its clipping named from the finding
    (``found_by_check``);
-7. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
+7. when a calibrated twin leaves an unexplained gap, fits the calibration again with the leading
+   physical effect in the twin and diagnoses against that (:mod:`twin.harness.diagnosis.refit`:
+   the calibration may have taken part of the effect);
+8. writes ``OUT/diagnosis.json`` and the report (gap maps before and after) in ``OUT/report``.
 
 Every simulation is a campaign of the scenario, cached by the hash of its scenario under
 ``cache`` (default ``OUT/cache``): a second diagnosis with the same scenario, e.g. every case of
@@ -35,11 +38,12 @@ nor on the number of workers.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from analysis.base.executors import parallel_slots
+from analysis.base.executors import default_processes, parallel_slots
 from analysis.base.files import write_json
 from analysis.diagnosis import attribution
 from analysis.diagnosis.artefacts import ARTEFACTS
@@ -53,6 +57,7 @@ from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS
 from twin.harness.diagnosis.ensemble import build_ensemble, check_layout, check_response_seeds, diagnose_signatures
 from twin.harness.diagnosis.library import check_kinds, library_json, resolve_library
+from twin.harness.diagnosis.refit import REFIT_EFFECTS, merge_refit, refit_candidates, refit_with, with_sentence
 from twin.harness.diagnosis.resimulation import add_resimulation, simulate_with_added
 from twin.sim.scenario import Scenario
 
@@ -100,7 +105,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                   scheduler: str | None = None, resim_seeds: int | None = None,
                   on_resim_progress: Callable[[int, int], None] | None = None,
                   budget_minutes: float | None = None,
-                  response_seeds: int = DEFAULT_RESPONSE_SEEDS, check: dict | None = None) -> dict:
+                  response_seeds: int = DEFAULT_RESPONSE_SEEDS, check: dict | None = None,
+                  refit_effects: int = REFIT_EFFECTS, progress: Callable[[str], None] | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
     twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
@@ -109,7 +115,11 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     (:func:`prepare_subset`; ``subset`` in the result), else of the whole recording.
     ``response_seeds``: the twin seeds each candidate's response is computed with
     (:func:`build_ensemble`). ``check``: ``twin check``'s record of the recording
-    (:func:`analysis.ingest.check.check_record`; None: checked here, every finding)."""
+    (:func:`analysis.ingest.check.check_record`; None: checked here, every finding).
+    ``refit_effects``: the leading physical effects the calibration of a calibrated ``nominal``
+    is fitted again with when the gap stays unexplained (:mod:`twin.harness.diagnosis.refit`; 0:
+    none; not with ``budget_minutes``, whose estimate does not hold them); ``progress``: a line per
+    step of it (default: standard error)."""
     from analysis.ingest.check import cached_check, check_record
 
     check_response_seeds(response_seeds, seeds)
@@ -139,6 +149,24 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
         resim = simulate_with_added(ens, [result["added"]], cache, workers, resim_seeds, scheduler,
                                     on_resim_progress)[0]
     result = add_resimulation(result, real, ens, resim, alpha)
+    say = progress or (lambda t: print(f"diagnose: {t}", file=sys.stderr, flush=True))
+    choices = refit_candidates(result, nominal, refit_effects)
+    if choices and sub is not None:
+        result = {**result, "refit": [with_sentence({"effect": c["effect"], "done": False, "reason": (
+            "--budget-minutes: the refit is not in the budget's estimate (diagnose without a budget to "
+            "fit the calibration again)")}) for c in choices]}
+    elif choices:
+        def again(s: Scenario, library: list[str], out: Path, cache: Path) -> dict:
+            return run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha, cache=cache,
+                                 library=library, plots=False, scheduler=scheduler, resim_seeds=resim_seeds,
+                                 response_seeds=response_seeds, check=check, refit_effects=0)
+
+        refits = [refit_with(c, real_dir, nominal, out / "refit", cache, diagnose=again,
+                             workers=workers or default_processes(), scheduler=scheduler, check=check,
+                             progress=say) for c in choices]
+        for r, _ in refits:
+            say(r["sentence"])
+        result = merge_refit(result, refits)
     result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
               "response_seeds": response_seeds, "calibration": calibration,
               "kinds": sorted({c.kind for c in ens.candidates}),
