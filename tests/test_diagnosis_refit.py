@@ -89,17 +89,26 @@ REFIT = [{"key": MASS, "value": 176.0, "source": "fitted", "low": 172.0, "high":
 
 def test_the_values_a_refit_moved_are_said_against_their_first_interval():
     s = _calibrated()
-    moved = {m["key"]: m for m in moved_values(s, REFIT)}
+    refitted = load(REPO / "scenarios" / "foreign-16mm.toml")  # its trucks: 220 N/µm
+    moved = {m["key"]: m for m in moved_values(s, REFIT, refitted)}
     assert set(moved) == {MASS, TRUCKS}  # the fitted ones
     assert moved[TRUCKS] == {"key": TRUCKS, "calibrated": 440.0, "low": 420.0, "high": 460.0, "refitted": 300.0,
-                             "refit_low": 290.0, "refit_high": 310.0, "outside": True}
+                             "refit_low": 290.0, "refit_high": 310.0, "kept": False, "outside": True}
     assert moved[MASS]["outside"] is False  # 176 inside [170, 190]
+    # a value the first calibration fitted and the refit kept at the twin's default is a move too
+    kept = {m["key"]: m for m in moved_values(s, REFIT[:1], refitted)}
+    assert kept[TRUCKS] == {"key": TRUCKS, "calibrated": 440.0, "low": 420.0, "high": 460.0,
+                            "refitted": refitted.axis.truck_stiffness_vertical_N_per_um, "refit_low": None,
+                            "refit_high": None, "kept": True, "outside": True}
+    assert "axis.truck_stiffness_vertical_N_per_um 440 → 220 (kept at the twin's default)" in with_sentence(
+        {"effect": "base_resonance", "done": True, "params": {"modal_mass_kg": 300.0}, "values": list(kept.values()),
+         "diagnosis": {"verdict": EXPLAINED}, "explains": True})["sentence"]
 
 
 def _refit(explains: bool, verdict: str) -> dict:
     return with_sentence({"effect": "base_resonance", "done": True,
                           "params": {"frequency_hz": 80.0, "modal_mass_kg": 1000.0},
-                          "values": moved_values(_calibrated(), REFIT), "misfit": None,
+                          "values": moved_values(_calibrated(), REFIT, _calibrated()), "misfit": None,
                           "diagnosis": {"verdict": verdict, "heldout_gap_before": 900.0, "heldout_gap_critical": 30.0,
                                         "heldout_gap_after": 12.0 if explains else 500.0, "heldout_shrink": 0.98,
                                         "heldout_shrink_resimulated": 0.97, "added": ["base_resonance"]},
@@ -203,7 +212,7 @@ def test_the_size_kept_is_the_one_whose_diagnosis_explains_not_the_least_chi2(tm
     assert [t["left"] for t in entry["tried"]] == [100.0, 1.5, 197.25]
     assert [t["chi2"] for t in entry["tried"]] == [3.2, 0.19, 0.0013]
     assert sub["heldout_gap_after"] == 60.0 and entry["diagnosis"]["added"] == ["base_resonance"]
-    assert entry["values"][0]["refitted"] == 100.0  # the kept size's calibration
+    assert {v["key"]: v["refitted"] for v in entry["values"]}[TRUCKS] == 100.0  # the kept size's calibration
     # none explains: the least gap left is kept, and the entry says it does not explain
     verdicts[1000.0] = (UNEXPLAINED, [], 5000.0)
     calls.clear()

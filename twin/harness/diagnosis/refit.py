@@ -33,6 +33,7 @@ from pathlib import Path
 from analysis.diagnosis import attribution
 from analysis.diagnosis.artefacts import ARTEFACTS
 from twin.harness.calibration.values import CalibrationError
+from twin.sim.config import get_dotted
 from twin.sim.scenario import Scenario
 
 #: Raised when what a refit does changes (a benchmark's recorded diagnoses are keyed on it).
@@ -87,21 +88,24 @@ def refit_sizes(choice: dict) -> list[dict]:
     return [{**params, amp.name: float(v)} for v in amp.grid if v != amp.off and v != 0.0]
 
 
-def moved_values(nominal: Scenario, values: list[dict]) -> list[dict]:
-    """Each refitted value of ``values`` (a calibration record's: key, value, source, low, high)
-    that was fitted, beside the calibration's of ``nominal``: {key, calibrated, low, high (its 90 %
-    interval), refitted, refit_low, refit_high, outside (the refitted value outside the first
-    interval)}."""
+def moved_values(nominal: Scenario, values: list[dict], refitted: Scenario) -> list[dict]:
+    """The values the first calibration of ``nominal`` fitted and the refit (``values``: its
+    record's, key, value, source, low, high; ``refitted``: its scenario) fitted or kept at the
+    twin's default: {key, calibrated, low, high (its 90 % interval), refitted, refit_low,
+    refit_high (None where kept), kept (the refit kept it at the default: not told apart or not
+    informed with the effect in), outside (the refitted value outside the first interval)}."""
     cal = nominal.calibration or {}
+    data = refitted.model_dump(mode="json")
+    fitted = {v["key"]: v for v in values if v.get("source") == "fitted"}
+    first = [k for k, c in cal.items() if isinstance(c, dict) and c.get("source") == "fitted"]
     rows = []
-    for v in values:
-        if v.get("source") != "fitted":
-            continue
-        c = cal.get(v["key"]) or {}
+    for key in first + [k for k in fitted if k not in first]:
+        c, v = cal.get(key) or {}, fitted.get(key)
         lo, hi = c.get("low"), c.get("high")
-        rows.append({"key": v["key"], "calibrated": c.get("value"), "low": lo, "high": hi, "refitted": v["value"],
-                     "refit_low": v.get("low"), "refit_high": v.get("high"),
-                     "outside": bool(lo is not None and hi is not None and not lo <= v["value"] <= hi)})
+        value = v["value"] if v else float(get_dotted(data, key))
+        rows.append({"key": key, "calibrated": c.get("value"), "low": lo, "high": hi, "refitted": value,
+                     "refit_low": v.get("low") if v else None, "refit_high": v.get("high") if v else None,
+                     "kept": v is None, "outside": bool(lo is not None and hi is not None and not lo <= value <= hi)})
     return rows
 
 
@@ -150,7 +154,8 @@ def refit_with(choice: dict, real_dir: Path, nominal: Scenario, out: Path, cache
         left = sub.get("heldout_gap_after") if sub["verdict"] != attribution.NO_GAP else sub["heldout_gap_before"]
         tried.append({"params": params, "chi2": rec.get("chi2"), "misfit": rec.get("misfit"),
                       "explains": bool(explains), "left": left / max(sub["heldout_gap_critical"], 1e-300),
-                      "values": rec["values"], "result": sub, "added": added})
+                      "values": moved_values(nominal, rec["values"], load(toml)), "result": sub,
+                      "added": added})
     if not tried:
         return with_sentence({"effect": name, "done": False,
                               "reason": "layer c fitted nothing with it in the twin"}), None
@@ -160,7 +165,7 @@ def refit_with(choice: dict, real_dir: Path, nominal: Scenario, out: Path, cache
     sub = best["result"]
     entry = {"effect": name, "done": True, "params": best["params"],
              "tried": [{k: t[k] for k in ("params", "chi2", "misfit", "explains", "left")} for t in tried],
-             "values": moved_values(nominal, best["values"]), "misfit": best["misfit"],
+             "values": best["values"], "misfit": best["misfit"],
              "diagnosis": {k: sub.get(k) for k in ("verdict", "heldout_gap_before", "heldout_gap_critical",
                                                    "heldout_gap_after", "heldout_shrink",
                                                    "heldout_shrink_resimulated")} | {"added": best["added"]},
@@ -193,7 +198,8 @@ def refit_sentence(refit: dict) -> str:
     if not refit.get("done"):
         return f"The calibration was not fitted again with {name}: {refit.get('reason')}."
     moved = [v for v in refit["values"] if v["outside"]]
-    moves = "; ".join(f"{v['key']} {_g(v['calibrated'])} → {_g(v['refitted'])}" for v in moved)
+    moves = "; ".join(f"{v['key']} {_g(v['calibrated'])} → {_g(v['refitted'])}"
+                      + (" (kept at the twin's default)" if v.get("kept") else "") for v in moved)
     d = refit["diagnosis"]
     tail = ("explains the gap" if refit["explains"] else
             f"does not explain the gap ({d['verdict']}, held-out gap {_g(d['heldout_gap_after'])} for "
