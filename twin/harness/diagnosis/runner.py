@@ -106,7 +106,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
                   on_resim_progress: Callable[[int, int], None] | None = None,
                   budget_minutes: float | None = None,
                   response_seeds: int = DEFAULT_RESPONSE_SEEDS, check: dict | None = None,
-                  refit_effects: int = REFIT_EFFECTS, progress: Callable[[str], None] | None = None) -> dict:
+                  refit_effects: int = REFIT_EFFECTS, progress: Callable[[str], None] | None = None,
+                  heldout_t: dict | None = None) -> dict:
     """Diagnose the recording in ``real_dir`` against ``nominal``; writes OUT/diagnosis.json
     (and OUT/report/ with ``plots``) and returns its content. When candidates were added, the
     twin is re-simulated with them for the first ``resim_seeds`` twin seeds (default: all;
@@ -119,7 +120,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     ``refit_effects``: the leading physical effects the calibration of a calibrated ``nominal``
     is fitted again with when the gap stays unexplained (:mod:`twin.harness.diagnosis.refit`; 0:
     none; not with ``budget_minutes``, whose estimate does not hold them); ``progress``: a line per
-    step of it (default: standard error)."""
+    step of it (default: standard error). ``heldout_t``: a dict that receives the held-out t of
+    the gap maps ({"before", "after"}: (n,)), for a caller that draws them."""
     from analysis.ingest.check import cached_check, check_record
 
     check_response_seeds(response_seeds, seeds)
@@ -156,10 +158,15 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
             "--budget-minutes: the refit is not in the budget's estimate (diagnose without a budget to "
             "fit the calibration again)")}) for c in choices]}
     elif choices:
+        ts: dict[int, dict] = {}
+
         def again(s: Scenario, library: list[str], out: Path, cache: Path) -> dict:
-            return run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha, cache=cache,
-                                 library=library, plots=False, scheduler=scheduler, resim_seeds=resim_seeds,
-                                 response_seeds=response_seeds, check=check, refit_effects=0)
+            t: dict = {}
+            res = run_diagnosis(real_dir, s, out, seeds=seeds, workers=workers, alpha=alpha, cache=cache,
+                                library=library, plots=False, scheduler=scheduler, resim_seeds=resim_seeds,
+                                response_seeds=response_seeds, check=check, refit_effects=0, heldout_t=t)
+            ts[id(res)] = t
+            return res
 
         refits = [refit_with(c, real_dir, nominal, out / "refit", cache, diagnose=again,
                              workers=workers or default_processes(), scheduler=scheduler, check=check,
@@ -167,6 +174,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
         for r, _ in refits:
             say(r["sentence"])
         result = merge_refit(result, refits)
+        if result.get("before_refit"):  # the page's gap maps: the diagnosis against the refitted twin
+            t_heldout = next(ts[id(r)] for e, r in refits if e.get("explains") and r is not None)
     result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
               "response_seeds": response_seeds, "calibration": calibration,
               "kinds": sorted({c.kind for c in ens.candidates}),
@@ -177,6 +186,8 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
     if sub is not None:
         result["subset"] = sub
     write_json(out / "diagnosis.json", result, nan_as_null=True)  # kept if the report fails
+    if heldout_t is not None:
+        heldout_t.update(t_heldout)
     if plots:
         write_diagnosis_report(out / "report", result, real["heldout"].regions, t_heldout)
     if sub is not None:
