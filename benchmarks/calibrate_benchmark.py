@@ -110,6 +110,8 @@ def case_table(entries: list[dict]) -> str:
             named, right = (", ".join(dg["added"]) or "nothing"), ("yes" if dg["correct"] else "no")
             if dg.get("absorbed"):
                 named += f" ({', '.join(dg['absorbed'])} absorbed by the calibration)"
+            if dg.get("refitted_with"):
+                named += f" (the calibration fitted again with {dg['refitted_with']} in the twin)"
         oracle = "–" if e["kind"] == "null" else ("yes" if e.get("oracle", {}).get("names_all") else "no")
         axis = f"{ax['lead_mm']:g} mm, {ax['carriage_mass_kg']:g} kg"
         rows.append(f"| {e['case']} | {e['kind']} | {added} | {axis} | {'/'.join(e['formats'])} | "

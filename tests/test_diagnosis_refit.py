@@ -220,3 +220,18 @@ def test_the_size_kept_is_the_one_whose_diagnosis_explains_not_the_least_chi2(tm
                           tmp_path, _calibrated(), tmp_path / "refit2", tmp_path / "cache", diagnose=diagnose,
                           workers=1, scheduler=None, check=None, progress=lambda t: None)
     assert entry["params"]["modal_mass_kg"] == 300.0 and entry["explains"] is False
+
+
+def test_the_calibrate_benchmark_scores_the_diagnosis_against_the_refitted_twin():
+    from twin.harness.calibration.benchmark import score_diagnosis
+
+    first = {"verdict": UNEXPLAINED, "heldout_gap_before": 10292.0, "heldout_gap_critical": 37.6,
+             "heldout_gap_after": 9030.0, "added": [{"effect": "order_line:acc", "params": {"order": 3.0}}],
+             "refused": [{"effect": "base_resonance"}]}
+    sub = {"verdict": EXPLAINED, "heldout_gap_before": 1068.0, "heldout_gap_critical": 9.2,
+           "added": [{"effect": "base_resonance", "params": {"frequency_hz": 80.0, "modal_mass_kg": 1760.0}}]}
+    effects = {"base_resonance": {"frequency_hz": 80.0, "modal_mass_kg": 1353.0}}
+    row = score_diagnosis("effect", effects, {}, merge_refit(first, [(_refit(True, EXPLAINED), sub)]))
+    assert row["correct"] and row["refitted_with"] == "base_resonance" and row["heldout_gap"] == 1068.0
+    unchanged = score_diagnosis("effect", effects, {}, merge_refit(first, [(_refit(False, UNEXPLAINED), sub)]))
+    assert not unchanged["correct"] and unchanged["refitted_with"] is None and unchanged["added"] == ["order_line:acc"]

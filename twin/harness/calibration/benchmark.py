@@ -191,7 +191,9 @@ def absorbed_effects(effects: dict, parameters: dict, verdict: str | None = None
 def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, parameters: dict | None = None) -> dict:
     """The diagnosis ``res`` of a case of ``kind`` against what was added (``effects``,
     ``artefacts``: those that change the recording), the case's calibrated ``parameters`` (a case
-    entry's): its verdict and figures, judged by :func:`judge_diagnosis`."""
+    entry's): its verdict and figures (``refitted_with``: the effect the calibration was fitted
+    again with when that diagnosis is the answer, :mod:`twin.harness.diagnosis.refit`), judged by
+    :func:`judge_diagnosis`."""
     from analysis.diagnosis.flagged import named
 
     added = named(res)  # what twin check found first, then the attribution's
@@ -200,7 +202,9 @@ def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, parame
            "significant": int(sum(r["significant"] for r in res.get("regions", []))),
            "added": [a["effect"] for a in added], "fitted": {a["effect"]: a["params"] for a in added},
            "heldout_shrink": res.get("heldout_shrink"),
-           "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated")}
+           "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated"),
+           "refitted_with": next((r["effect"] for r in res.get("refit", []) if r.get("explains")), None)
+           if res.get("before_refit") else None}
     return {**row, **judge_diagnosis(kind, effects, artefacts, row, parameters or {})}
 
 
