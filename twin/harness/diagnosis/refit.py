@@ -37,7 +37,7 @@ from twin.sim.config import get_dotted
 from twin.sim.scenario import Scenario
 
 #: Raised when what a refit does changes (a benchmark's recorded diagnoses are keyed on it).
-REFIT_VERSION = 1
+REFIT_VERSION = 2  # 2: the benchmark row says refitted_with
 
 #: The leading physical effects the calibration is fitted again with (each costs a calibration per
 #: size of its grid, :func:`refit_sizes`, and a one-candidate diagnosis).
