@@ -14,13 +14,16 @@ refusal may be the calibration's doing) and :func:`refit_with` calibrates the tw
 recording (``twin calibrate``, its three layers) with each in the twin. The effect's size is not
 the diagnosis's: fitted against a twin that took part of it, it is too small (and interpolated
 between the grid's simulations); the calibration is fitted with the effect at each size its grid
-simulates (:func:`refit_sizes`), and the size whose layer-(c) fit matches the recording best
-(least χ², the kept parameters' span counted) is taken: the profile of the fit over the effect's
-size, on its grid (Press et al., Numerical Recipes, 3rd ed., §15.6). The recording is then
-diagnosed against that refitted twin with the effect as the only candidate, its size fitted
-again. The effect explains when that diagnosis adds it and calls the gap explained, or finds
-no significant gap; the calibrated values the refit moved, against their first interval, are
-in the entry.
+simulates (:func:`refit_sizes`), and the recording diagnosed against each refitted twin with the
+effect as the only candidate (its size fitted again). Layer (c) has about as many parameters as
+statistics, so its χ² can come out near zero at more than one size and does not choose; the
+diagnosis's held-out part does: the size kept is the one whose diagnosis explains the gap with
+the least held-out gap left, in units of its critical value (a profile over the effect's size on
+its grid: Press et al., Numerical Recipes, 3rd ed., §15.6). Each refitted twin is judged in its
+own spread, so a refit that keeps a parameter at its default over its prior span (a wider
+spread) is favoured. The effect explains when that diagnosis adds it and calls the gap
+explained, or finds no significant gap; the calibrated values the refit moved, against their
+first interval, are in the entry.
 """
 
 from __future__ import annotations
