@@ -214,8 +214,10 @@ def _print_diagnosis(res: dict) -> None:
                       f"{r['domain']} {r['channel']} {r['family']} {r['bin']}"
                       for r in residual.get("top_regions", [])[:3])
                      if residual.get("significant") else ""))
-    for r in res.get("refit") or []:
-        out.print(r["sentence"], markup=False, highlight=False)
+    if res.get("refit"):
+        from analysis.diagnosis.gap_report import refit_phrase
+
+        out.print(refit_phrase(res).strip(), markup=False, highlight=False)
     if res.get("worse_regions"):
         out.print("made worse by the added effects (held-out): " + "; ".join(
             f"{r['domain']} {r['channel']} {r['family']} {r['bin']} (mean t² "
@@ -253,8 +255,8 @@ def diagnose(
         "machine at the start): for a campaign-sized recording. Default: the whole recording")),
     refit_effects: int = typer.Option(1, "--refit-effects", min=0, help=(
         "against a calibrated scenario, when the gap stays unexplained: the leading physical effects "
-        "the calibration is fitted again with (each in the twin; a layer-c fit and a one-candidate "
-        "diagnosis each; 0: none; not with --budget-minutes)")),
+        "the calibration is fitted again with (each in the twin: a calibration and a one-candidate "
+        "diagnosis per size of its grid; 0: none; not with --budget-minutes)")),
     force: Force = False,
 ) -> None:
     """Where the twin and the recording differ, which candidate explains it (a physical effect
