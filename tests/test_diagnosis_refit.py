@@ -235,3 +235,20 @@ def test_the_calibrate_benchmark_scores_the_diagnosis_against_the_refitted_twin(
     assert row["correct"] and row["refitted_with"] == "base_resonance" and row["heldout_gap"] == 1068.0
     unchanged = score_diagnosis("effect", effects, {}, merge_refit(first, [(_refit(False, UNEXPLAINED), sub)]))
     assert not unchanged["correct"] and unchanged["refitted_with"] is None and unchanged["added"] == ["order_line:acc"]
+
+
+def test_twin_diagnose_prints_the_refit_and_the_first_verdict(capsys):
+    from twin.cli.diagnosis import _print_diagnosis
+
+    entry = _refit(True, EXPLAINED)
+    res = {"verdict": EXPLAINED, "n_significant_calibration": 2, "n_statistics": 700, "alpha": 0.01,
+           "heldout_gap_before": 1068.0, "heldout_gap_critical": 9.2, "heldout_gap_after": 1.5, "heldout_shrink": 0.99,
+           "regions": [], "hours": [], "added": [], "ranking": [], "refused": [],
+           "resimulation": {"done": False, "reason": "not asked for"}, "residual": {"significant": False},
+           "refit": [entry], "before_refit": {"verdict": UNEXPLAINED, "heldout_gap_before": 10292.0,
+                                              "heldout_gap_critical": 37.6, "added": ["order_line:acc"],
+                                              "refused": ["base_resonance"]}}
+    _print_diagnosis(res)
+    said = " ".join(capsys.readouterr().out.split())
+    assert "base_resonance explains the gap. This diagnosis is against the refitted twin" in said
+    assert "against the twin as first calibrated: unexplained gap remains" in said
