@@ -326,7 +326,7 @@ def refit_phrase(result: dict) -> str:
     said = " ".join(r["sentence"] for r in result.get("refit") or [])
     before = result.get("before_refit")
     if before:
-        said += (f" This diagnosis is against the refitted twin, with {_explaining(result)} "
+        said += (f" This diagnosis is against the refitted twin, with {refit_explaining(result)} "
                  f"its only candidate; against the twin as first calibrated: {before['verdict']} (held-out gap "
                  f"{w.gap_number(before['heldout_gap_before'])} for a critical "
                  f"{w.gap_number(before['heldout_gap_critical'])}; added: {', '.join(before['added']) or 'nothing'}; "
@@ -334,8 +334,12 @@ def refit_phrase(result: dict) -> str:
     return f" {said}" if said else ""
 
 
-def _explaining(result: dict) -> str:
-    return next(r["effect"] for r in result["refit"] if r.get("explains"))
+def refit_explaining(result: dict) -> str | None:
+    """The effect whose refit explains a diagnosis's ``result`` (it is the diagnosis against
+    the twin refitted with it: ``before_refit``), or None."""
+    if not result.get("before_refit"):
+        return None
+    return next((r["effect"] for r in result.get("refit") or [] if r.get("explains")), None)
 
 
 def render_page(result: dict, pngs: list[Path]) -> str:

@@ -195,6 +195,7 @@ def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, parame
     again with when that diagnosis is the answer, :mod:`twin.harness.diagnosis.refit`), judged by
     :func:`judge_diagnosis`."""
     from analysis.diagnosis.flagged import named
+    from analysis.diagnosis.gap_report import refit_explaining
 
     added = named(res)  # what twin check found first, then the attribution's
     row = {"verdict": res["verdict"], "heldout_gap": res["heldout_gap_before"],
@@ -203,8 +204,7 @@ def score_diagnosis(kind: str, effects: dict, artefacts: dict, res: dict, parame
            "added": [a["effect"] for a in added], "fitted": {a["effect"]: a["params"] for a in added},
            "heldout_shrink": res.get("heldout_shrink"),
            "heldout_shrink_resimulated": res.get("heldout_shrink_resimulated"),
-           "refitted_with": next((r["effect"] for r in res.get("refit", []) if r.get("explains")), None)
-           if res.get("before_refit") else None}
+           "refitted_with": refit_explaining(res)}
     return {**row, **judge_diagnosis(kind, effects, artefacts, row, parameters or {})}
 
 

@@ -28,13 +28,13 @@ first interval, are in the entry.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from analysis.diagnosis import attribution
 from analysis.diagnosis.artefacts import ARTEFACTS
+from analysis.diagnosis.wording import gap_number, number
 from twin.harness.calibration.values import CalibrationError
 from twin.sim.config import get_dotted
 from twin.sim.scenario import Scenario
@@ -88,7 +88,7 @@ def refit_sizes(choice: dict) -> list[dict]:
     amp = next((p for p in eff.params if p.name == eff.amplitude), None)
     if amp is None or amp.discrete:
         return [params]
-    return [{**params, amp.name: float(v)} for v in amp.grid if v != amp.off and v != 0.0]
+    return [{**params, amp.name: float(v)} for v in amp.grid if v != amp.off]
 
 
 def moved_values(nominal: Scenario, values: list[dict], refitted: Scenario) -> list[dict]:
@@ -151,13 +151,14 @@ def refit_with(choice: dict, real_dir: Path, nominal: Scenario, out: Path, cache
         if not any(v["source"] == "fitted" for v in rec["values"]):
             continue
         progress(f"refit: diagnosing against the twin calibrated with {name} ({_params(params)})")
-        sub = diagnose(load(toml), library=[name], out=Path(out) / name / f"diagnosis-{i}", cache=Path(cache))
+        refitted = load(toml)
+        sub = diagnose(refitted, library=[name], out=Path(out) / name / f"diagnosis-{i}", cache=Path(cache))
         added = [a["effect"] for a in sub.get("added", [])]
         explains = sub["verdict"] == attribution.NO_GAP or (sub["verdict"] == attribution.EXPLAINED and name in added)
         left = sub.get("heldout_gap_after") if sub["verdict"] != attribution.NO_GAP else sub["heldout_gap_before"]
         tried.append({"params": params, "chi2": rec.get("chi2"), "misfit": rec.get("misfit"),
                       "explains": bool(explains), "left": left / max(sub["heldout_gap_critical"], 1e-300),
-                      "values": moved_values(nominal, rec["values"], load(toml)), "result": sub,
+                      "values": moved_values(nominal, rec["values"], refitted), "result": sub,
                       "added": added})
     if not tried:
         return with_sentence({"effect": name, "done": False,
@@ -176,6 +177,12 @@ def refit_with(choice: dict, real_dir: Path, nominal: Scenario, out: Path, cache
     return with_sentence(entry), sub
 
 
+def explaining(refits: list[tuple[dict, dict | None]]) -> tuple[dict, dict] | None:
+    """The first (entry, diagnosis) of ``refits`` (:func:`refit_with`'s) whose refit explains,
+    or None."""
+    return next(((e, sub) for e, sub in refits if e.get("explains") and sub is not None), None)
+
+
 def merge_refit(result: dict, refits: list[tuple[dict, dict | None]]) -> dict:
     """The diagnosis's result after the refits ``refits`` ((entry, its diagnosis) of
     :func:`refit_with`): when one explains, that diagnosis (against the refitted twin, its
@@ -183,7 +190,7 @@ def merge_refit(result: dict, refits: list[tuple[dict, dict | None]]) -> dict:
     diagnosis's verdict, held-out gaps, added and refused candidates) and ``refit`` (every entry);
     else ``result`` with its ``refit`` entries."""
     entries = [e for e, _ in refits]
-    done = next(((e, sub) for e, sub in refits if e.get("explains") and sub is not None), None)
+    done = explaining(refits)
     if done is None:
         return {**result, "refit": entries}
     before = {"verdict": result["verdict"], "heldout_gap_before": result["heldout_gap_before"],
@@ -201,12 +208,12 @@ def refit_sentence(refit: dict) -> str:
     if not refit.get("done"):
         return f"The calibration was not fitted again with {name}: {refit.get('reason')}."
     moved = [v for v in refit["values"] if v["outside"]]
-    moves = "; ".join(f"{v['key']} {_g(v['calibrated'])} → {_g(v['refitted'])}"
+    moves = "; ".join(f"{v['key']} {number(v['calibrated'], 4)} → {number(v['refitted'], 4)}"
                       + (" (kept at the twin's default)" if v.get("kept") else "") for v in moved)
     d = refit["diagnosis"]
     tail = ("explains the gap" if refit["explains"] else
-            f"does not explain the gap ({d['verdict']}, held-out gap {_g(d['heldout_gap_after'])} for "
-            f"a critical {_g(d['heldout_gap_critical'])})")
+            f"does not explain the gap ({d['verdict']}, held-out gap {gap_number(d['heldout_gap_after'])} "
+            f"for a critical {gap_number(d['heldout_gap_critical'])})")
     how = (f"values moved beyond their first interval: {moves}" if moved
            else "no value moved beyond its first interval")
     return (f"With {name} in the twin ({_params(refit['params'])}) and the calibration fitted again ({how}), "
@@ -217,13 +224,9 @@ def with_sentence(entry: dict) -> dict:
     return {**entry, "sentence": refit_sentence(entry)}
 
 
-def _g(v) -> str:
-    return "None" if v is None or (isinstance(v, float) and not math.isfinite(v)) else f"{v:.4g}"
-
-
 def _params(p: dict) -> str:
-    return ", ".join(f"{k} {_g(v)}" for k, v in p.items())
+    return ", ".join(f"{k} {number(v, 4)}" for k, v in p.items())
 
 
-__all__ = ["REFIT_EFFECTS", "REFIT_KINDS", "REFIT_VERSION", "merge_refit", "moved_values", "refit_candidates",
-           "refit_sentence", "refit_sizes", "refit_with", "with_sentence"]
+__all__ = ["REFIT_EFFECTS", "REFIT_KINDS", "REFIT_VERSION", "explaining", "merge_refit", "moved_values",
+           "refit_candidates", "refit_sentence", "refit_sizes", "refit_with", "with_sentence"]

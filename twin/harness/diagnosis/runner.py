@@ -57,7 +57,14 @@ from twin.harness.diagnosis.cache import DEFAULT_RESPONSE_SEEDS, DEFAULT_SEEDS
 from twin.harness.diagnosis.candidates.parameters import PARAMETERS
 from twin.harness.diagnosis.ensemble import build_ensemble, check_layout, check_response_seeds, diagnose_signatures
 from twin.harness.diagnosis.library import check_kinds, library_json, resolve_library
-from twin.harness.diagnosis.refit import REFIT_EFFECTS, merge_refit, refit_candidates, refit_with, with_sentence
+from twin.harness.diagnosis.refit import (
+    REFIT_EFFECTS,
+    explaining,
+    merge_refit,
+    refit_candidates,
+    refit_with,
+    with_sentence,
+)
 from twin.harness.diagnosis.resimulation import add_resimulation, simulate_with_added
 from twin.sim.scenario import Scenario
 
@@ -175,7 +182,7 @@ def run_diagnosis(real_dir: Path, nominal: Scenario, out: Path, *, seeds: int = 
             say(r["sentence"])
         result = merge_refit(result, refits)
         if result.get("before_refit"):  # the page's gap maps: the diagnosis against the refitted twin
-            t_heldout = next(ts[id(r)] for e, r in refits if e.get("explains") and r is not None)
+            t_heldout = ts[id(explaining(refits)[1])]
     result = {"recording": recording, "scenario": nominal.name, "twin_seeds": ens.seeds,
               "response_seeds": response_seeds, "calibration": calibration,
               "kinds": sorted({c.kind for c in ens.candidates}),
